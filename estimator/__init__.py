@@ -1,0 +1,1 @@
+"""Pure numerics: site, model, filter, identification, forecasts (no I/O beyond files)."""

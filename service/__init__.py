@@ -1,0 +1,1 @@
+"""The application: MQTT ingest, storage, online runner, REST API."""

@@ -1,0 +1,1 @@
+"""A virtual building: EnergyPlus plays the real building."""

@@ -1,5 +1,131 @@
+"""The ``zonecast`` command line. Heavy imports happen inside the commands."""
+
+from __future__ import annotations
+
+import datetime as dt
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
 import typer
-app = typer.Typer()
-@app.command()
-def version():
-    print("x")
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="Bilinear RC building models identified from telemetry; 24-hour "
+                       "zone-temperature forecasts.")
+testbed_app = typer.Typer(no_args_is_help=True,
+                          help="The virtual building: EnergyPlus plays the real building.")
+app.add_typer(testbed_app, name="testbed")
+
+Disable = Annotated[Optional[list[str]], typer.Option(
+    "--disable", help="Withhold an effect: reheat, infiltration, gains, gains.ZONE, "
+                      "window_solar, sensor_noise, sensor_bias (repeatable).")]
+Set = Annotated[Optional[list[str]], typer.Option(
+    "--set", help="Set an effect: infiltration=SCALE, shgc=VALUE, sensor_noise=SIGMA, "
+                  "sensor_resolution=DEGC, airflow_noise=REL, gains.ZONE=SCALE, bias.ZONE=DEGC "
+                  "(repeatable).")]
+Seed = Annotated[int, typer.Option(help="Seed of every random draw (occupancy, excitation, noise).")]
+Building = Annotated[str, typer.Option(help="Building config name in configs/buildings, or a path.")]
+
+
+def _fail(exc: Exception) -> None:
+    typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
+    raise typer.Exit(2)
+
+
+def _progress():
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+    return Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
+                    transient=False)
+
+
+def _run_testbed(fn, **kw):
+    from zonecast.testbed.config import load_config
+    from zonecast.testbed.effects import parse_switches
+    try:
+        cfg = load_config(kw.pop("building"))
+        effects = parse_switches(kw.pop("disable"), kw.pop("set_"), list(cfg.zones))
+        with _progress() as prog:
+            task = prog.add_task("virtual building", total=None)
+            res = fn(config=cfg, effects=effects,
+                     progress=lambda s: prog.update(task, description=f"virtual building: {s}"),
+                     **kw)
+    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+        _fail(exc)
+    typer.echo(f"wrote {res.out}/telemetry.csv, site.yaml, truth.csv, building.idf "
+               f"({len(res.telemetry)} steps; EnergyPlus {res.timings['energyplus_s']:.1f} s, "
+               f"total {res.timings['total_s']:.1f} s)")
+    return res
+
+
+@testbed_app.command("campaign")
+def testbed_campaign(out: Annotated[Path, typer.Option(help="Output folder.")],
+                     seed: Seed = 0, building: Building = "office6",
+                     disable: Disable = None, set_: Set = None) -> None:
+    """The paper's data set: 11 non-consecutive weeks (September-June) with 3 excitation
+    weekends, one telemetry file."""
+    from zonecast.testbed.run import run_campaign
+    _run_testbed(run_campaign, out=out, seed=seed, building=building, disable=disable, set_=set_)
+
+
+@testbed_app.command("run")
+def testbed_run(out: Annotated[Path, typer.Option(help="Output folder.")],
+                start: Annotated[str, typer.Option(help="First Monday, YYYY-MM-DD.")],
+                weeks: Annotated[int, typer.Option(min=1, max=50, help="Consecutive weeks.")] = 1,
+                excite: Annotated[Optional[list[str]], typer.Option(
+                    help="Saturday (YYYY-MM-DD) whose weekend runs the excitation experiment "
+                         "(repeatable).")] = None,
+                seed: Seed = 0, building: Building = "office6",
+                disable: Disable = None, set_: Set = None) -> None:
+    """Simulate any span of consecutive weeks."""
+    from zonecast.testbed.run import run_weeks
+    try:
+        first = dt.date.fromisoformat(start)
+        exc = [dt.date.fromisoformat(d) for d in (excite or [])]
+    except ValueError as e:
+        _fail(ValueError(f"dates are YYYY-MM-DD: {e}"))
+    _run_testbed(run_weeks, weeks=[first + dt.timedelta(weeks=i) for i in range(weeks)],
+                 excitation_weekends=exc, out=out, seed=seed, building=building,
+                 disable=disable, set_=set_)
+
+
+@app.command("check")
+def check(site: Annotated[Path, typer.Option(help="site.yaml")],
+          data: Annotated[Path, typer.Option(help="telemetry file, or a folder holding telemetry.csv")]) -> None:
+    """Validate a site description and its telemetry against the data contract."""
+    from zonecast.estimator.site import load_site
+    from zonecast.estimator.telemetry import load_telemetry
+    try:
+        s = load_site(site)
+        tel = load_telemetry(data / "telemetry.csv" if data.is_dir() else data, s)
+    except ValueError as exc:
+        _fail(exc)
+    f = tel.frame
+    typer.echo(f"site {s.building}: {len(s.zones)} zones, {sum(map(len, s.zones.values()))} rooms, "
+               f"{len(s.boxes)} boxes")
+    typer.echo(f"telemetry: {len(f)} steps from {f.index[0]} to {f.index[-1]} in "
+               f"{len(tel.segments)} segment(s); missing readings: {int(f.isna().sum().sum())}")
+    if tel.unused_columns:
+        typer.echo(f"columns not mapped by the site (kept, unused): {', '.join(tel.unused_columns)}")
+
+
+@app.command("demo")
+def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-out"),
+         seed: Seed = 0) -> None:
+    """The main job on embedded defaults: run the virtual building's campaign and write a
+    report with plots."""
+    from zonecast.testbed.report import write_report
+    from zonecast.testbed.run import run_campaign
+    from zonecast.testbed.effects import Effects
+    from zonecast.testbed.config import load_config
+    cfg = load_config("office6")
+    with _progress() as prog:
+        task = prog.add_task("campaign", total=None)
+        res = run_campaign(out / "campaign", seed=seed, effects=Effects(), config=cfg,
+                           progress=lambda s: prog.update(task, description=f"campaign: {s}"))
+        prog.update(task, description="report")
+        path = write_report(res.out, out)
+    typer.echo(f"campaign in {res.out} ({res.timings['total_s']:.1f} s); report: {path}")
+
+
+def main() -> None:  # pragma: no cover - console entry
+    app(sys.argv[1:])

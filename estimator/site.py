@@ -1,0 +1,295 @@
+"""The site description: the input contract every real site must be able to fill.
+
+A site description (``site.yaml``) names the building's EnergyPlus input file, groups
+EnergyPlus zones (rooms) into model zones, lists the VAV boxes with the room each
+serves and the telemetry point measuring its airflow, and maps telemetry columns to
+the model's roles (zone temperatures, supply air temperature, outdoor air temperature,
+weather-station solar irradiance), each with its unit. See docs/data.md.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import re
+from pathlib import Path
+from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+import yaml
+from pydantic import (BaseModel, ConfigDict, Field, ValidationError, field_validator,
+                      model_validator)
+
+from .units import check_unit
+
+SITE_SCHEMA_VERSION = 1
+
+
+class SiteError(ValueError):
+    """A site description is invalid; the message says which field and how to fix it."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Point(_Strict):
+    """A telemetry column and its unit."""
+    point: str = Field(min_length=1, description="telemetry column name")
+    unit: str
+
+
+def _point(v, default_unit: str):
+    if isinstance(v, str):
+        return {"point": v, "unit": default_unit}
+    return v
+
+
+class TemperaturePoint(Point):
+    unit: str = "degC"
+
+    @field_validator("unit")
+    @classmethod
+    def _u(cls, v):
+        return check_unit(v, "temperature")
+
+
+class AirflowPoint(Point):
+    unit: str = "kg/s"
+
+    @field_validator("unit")
+    @classmethod
+    def _u(cls, v):
+        return check_unit(v, "airflow")
+
+
+class IrradiancePoint(Point):
+    unit: str = "W/m2"
+
+    @field_validator("unit")
+    @classmethod
+    def _u(cls, v):
+        return check_unit(v, "irradiance")
+
+
+class Box(_Strict):
+    """A VAV box: the room (EnergyPlus zone) it serves and its airflow point."""
+    room: str
+    airflow: AirflowPoint
+
+    @field_validator("airflow", mode="before")
+    @classmethod
+    def _short(cls, v):
+        return _point(v, "kg/s")
+
+
+class Solar(_Strict):
+    """Weather-station irradiance on the horizontal (GHI, DHI) and normal to the sun (DNI)."""
+    global_horizontal: IrradiancePoint
+    direct_normal: IrradiancePoint
+    diffuse_horizontal: IrradiancePoint
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _short(cls, v):
+        return _point(v, "W/m2")
+
+
+class ZoneSensor(TemperaturePoint):
+    """A temperature sensor of a model zone, optionally naming the room it sits in."""
+    room: str | None = None
+
+
+class Points(_Strict):
+    """Telemetry columns by role. Zone temperature: one or more sensors per model zone."""
+    zone_temperature: dict[str, list[ZoneSensor]]
+    supply_air_temperature: TemperaturePoint
+    outdoor_air_temperature: TemperaturePoint
+    solar: Solar
+
+    @field_validator("zone_temperature", mode="before")
+    @classmethod
+    def _zones(cls, v):
+        if not isinstance(v, dict):
+            raise ValueError("zone_temperature must map each model zone to a point or a list "
+                             "of points")
+        out = {}
+        for zone, pts in v.items():
+            pts = pts if isinstance(pts, list) else [pts]
+            if not pts:
+                raise ValueError(f"zone_temperature[{zone}] lists no sensor")
+            out[zone] = [_point(p, "degC") for p in pts]
+        return out
+
+    @field_validator("supply_air_temperature", "outdoor_air_temperature", mode="before")
+    @classmethod
+    def _short(cls, v):
+        return _point(v, "degC")
+
+
+class Location(_Strict):
+    latitude: float = Field(ge=-90, le=90, description="[deg north]")
+    longitude: float = Field(ge=-180, le=180, description="[deg east]")
+    elevation: float = Field(0.0, description="[m]")
+
+
+class Experiment(_Strict):
+    """A period of excitation experiments (paper section 2-B)."""
+    start: dt.datetime
+    end: dt.datetime
+    kind: str = "excitation"
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.start.tzinfo is None or self.end.tzinfo is None:
+            raise ValueError("experiment start and end need a UTC offset, e.g. "
+                             "2015-04-18T08:00:00-07:00")
+        if self.end <= self.start:
+            raise ValueError(f"experiment end {self.end} is not after its start {self.start}")
+        return self
+
+
+_STEP = re.compile(r"^\s*(\d+)\s*(s|sec|min|h)\s*$")
+
+
+def parse_step(v) -> dt.timedelta:
+    """'15min', '900s', '1h' or a timedelta -> timedelta."""
+    if isinstance(v, dt.timedelta):
+        return v
+    m = _STEP.match(str(v))
+    if not m:
+        raise ValueError(f"step {v!r}: write e.g. '15min', '900s' or '1h'")
+    n, u = int(m.group(1)), m.group(2)
+    return dt.timedelta(seconds=n * {"s": 1, "sec": 1, "min": 60, "h": 3600}[u])
+
+
+class Site(_Strict):
+    """A site description (see docs/data.md).
+
+    Attributes
+    ----------
+    building : identifier of the building (letters, digits, ``-`` and ``_``).
+    idf : the building's EnergyPlus input file, relative to the site file.
+    timezone : IANA time zone; schedules and time-of-week use local time.
+    location : latitude, longitude [deg] and elevation [m].
+    step : the model step (15 min in the paper).
+    zones : model zone -> EnergyPlus zone names (rooms).
+    boxes : VAV box id -> room served and airflow point.
+    points : telemetry columns by role, with units.
+    experiments : excitation experiment periods, if any.
+    """
+
+    schema_version: int = SITE_SCHEMA_VERSION
+    building: str = Field(pattern=r"^[A-Za-z0-9_-]+$")
+    idf: Path
+    timezone: str
+    location: Location
+    step: dt.timedelta = dt.timedelta(minutes=15)
+    zones: dict[str, list[str]]
+    boxes: dict[str, Box]
+    points: Points
+    experiments: list[Experiment] = Field(default_factory=list)
+    base_dir: Path | None = Field(None, exclude=True)
+
+    @field_validator("step", mode="before")
+    @classmethod
+    def _step(cls, v):
+        return parse_step(v)
+
+    @field_validator("timezone")
+    @classmethod
+    def _tz(cls, v):
+        try:
+            ZoneInfo(v)
+        except (ZoneInfoNotFoundError, ValueError):
+            raise ValueError(f"timezone {v!r} is not an IANA time zone (e.g. America/Los_Angeles)")
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        if self.step <= dt.timedelta(0) or (86400 % self.step.total_seconds()):
+            raise ValueError(f"step {self.step} must divide a day")
+        if not self.zones:
+            raise ValueError("zones: name at least one model zone")
+        rooms: dict[str, str] = {}
+        for zone, members in self.zones.items():
+            if not members:
+                raise ValueError(f"zones[{zone}] lists no EnergyPlus zone")
+            for r in members:
+                if r.upper() in rooms:
+                    raise ValueError(f"room {r} is in model zones {rooms[r.upper()]} and {zone}; "
+                                     "a room belongs to one model zone")
+                rooms[r.upper()] = zone
+        for box, spec in self.boxes.items():
+            if spec.room.upper() not in rooms:
+                raise ValueError(f"boxes[{box}].room {spec.room!r} is in no model zone; rooms "
+                                 f"are {sorted(rooms)}")
+        tz_zones = set(self.points.zone_temperature)
+        if tz_zones != set(self.zones):
+            raise ValueError("points.zone_temperature must name exactly the model zones "
+                             f"{sorted(self.zones)}; it names {sorted(tz_zones)}")
+        for zone, sensors in self.points.zone_temperature.items():
+            for s in sensors:
+                if s.room is not None and rooms.get(s.room.upper()) != zone:
+                    raise ValueError(f"points.zone_temperature[{zone}]: sensor {s.point} sits in "
+                                     f"room {s.room}, which is not in model zone {zone}")
+        cols = self.point_units()
+        if len(cols) != len(self._all_points()):
+            dup = sorted({p.point for p in self._all_points()
+                          if sum(q.point == p.point for q in self._all_points()) > 1})
+            raise ValueError(f"points {dup} are mapped to more than one role")
+        return self
+
+    def _all_points(self) -> list[Point]:
+        p = self.points
+        pts: list[Point] = [s for ss in p.zone_temperature.values() for s in ss]
+        pts += [p.supply_air_temperature, p.outdoor_air_temperature, p.solar.global_horizontal,
+                p.solar.direct_normal, p.solar.diffuse_horizontal]
+        pts += [b.airflow for b in self.boxes.values()]
+        return pts
+
+    def point_units(self) -> dict[str, str]:
+        """Every telemetry column the site needs -> its unit."""
+        return {p.point: p.unit for p in self._all_points()}
+
+    @property
+    def zone_names(self) -> list[str]:
+        return list(self.zones)
+
+    @property
+    def tz(self) -> ZoneInfo:
+        return ZoneInfo(self.timezone)
+
+    @property
+    def idf_path(self) -> Path:
+        return self.idf if self.idf.is_absolute() or self.base_dir is None else self.base_dir / self.idf
+
+    def to_yaml(self, path: str | Path) -> None:
+        data = self.model_dump(mode="json", exclude={"base_dir"})
+        data["step"] = f"{int(self.step.total_seconds() // 60)}min"
+        with open(path, "w", encoding="utf-8") as fh:
+            yaml.safe_dump(data, fh, sort_keys=False, allow_unicode=True)
+
+
+def _format_errors(err: ValidationError, source: str) -> str:
+    lines = [f"{source} is not a valid site description:"]
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        lines.append(f"  - {loc}: {e['msg']}")
+    return "\n".join(lines)
+
+
+def load_site(path: str | Path) -> Site:
+    """Read and validate ``site.yaml``; errors name the field and say what to fix."""
+    path = Path(path)
+    if not path.is_file():
+        raise SiteError(f"site description {path} not found")
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh)
+    except yaml.YAMLError as exc:
+        raise SiteError(f"{path} is not valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise SiteError(f"{path} must hold a mapping of fields (building, idf, zones, ...)")
+    try:
+        return Site.model_validate({**data, "base_dir": path.parent.resolve()})
+    except ValidationError as err:
+        raise SiteError(_format_errors(err, str(path))) from None

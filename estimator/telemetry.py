@@ -1,0 +1,202 @@
+"""Telemetry: load, validate and convert a site's recorded points to SI on the model step.
+
+Time convention (docs/data.md): the ``time`` of a row is the start of a step interval.
+Zone temperatures in the row are the readings AT ``time`` (they are outputs y(k) of the
+state x(k)); box airflows, supply and outdoor air temperatures and irradiance are the
+averages over ``[time, time + step)`` (inputs u(k) and disturbances v(k) that drive the
+state from x(k) to x(k+1), paper eq:model_dt). Row k therefore holds y(k), u(k), v(k).
+
+Missing readings stay NaN (the Kalman filter handles partial measurements). Gaps in time
+are allowed and reported as contiguous segments; nothing is silently dropped.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .site import Site
+from .units import to_si
+
+MISSING_TOKENS = {"", "nan", "NaN", "NA", "N/A", "null", "None"}
+
+
+class TelemetryError(ValueError):
+    """Telemetry does not meet the contract; the message names the row, column or value."""
+
+
+def _line(i: int) -> int:
+    """0-based data row -> 1-based line of the CSV file (line 1 is the header)."""
+    return i + 2
+
+
+def _list(items, n=5) -> str:
+    items = list(items)
+    more = f" (and {len(items) - n} more)" if len(items) > n else ""
+    return ", ".join(str(x) for x in items[:n]) + more
+
+
+def parse_times(raw: pd.Series, source: str = "telemetry") -> pd.DatetimeIndex:
+    """ISO-8601 strings with a UTC offset -> tz-aware UTC index; errors name the lines."""
+    text = raw.astype(str).str.strip()
+    parsed = pd.to_datetime(text, format="ISO8601", errors="coerce", utc=True)
+    bad = np.flatnonzero(parsed.isna().to_numpy())
+    if len(bad):
+        raise TelemetryError(f"{source}: column 'time' has values that are not ISO-8601 times at "
+                             f"lines {_list(_line(i) for i in bad)} (first: {text.iloc[bad[0]]!r})")
+    no_offset = ~text.str.contains(r"(?:Z|[+-]\d\d:?\d\d)$", regex=True)
+    if no_offset.any():
+        rows = np.flatnonzero(no_offset.to_numpy())
+        raise TelemetryError(f"{source}: times need a UTC offset (e.g. 2015-04-18T08:00:00-07:00); "
+                             f"lines {_list(_line(i) for i in rows)} have none "
+                             f"(first: {text.iloc[rows[0]]!r})")
+    return pd.DatetimeIndex(parsed).as_unit("ns")
+
+
+def check_time_axis(times: pd.DatetimeIndex, step: dt.timedelta, source: str = "telemetry") -> None:
+    """Times strictly increasing, on the step grid (multiples of ``step`` since the epoch)."""
+    ns = times.as_unit("ns").asi8
+    d = np.diff(ns)
+    dup = np.flatnonzero(d == 0)
+    if len(dup):
+        raise TelemetryError(f"{source}: duplicated time {times[dup[0]].isoformat()} at lines "
+                             f"{_line(dup[0])} and {_line(dup[0] + 1)}; each time may appear once")
+    back = np.flatnonzero(d < 0)
+    if len(back):
+        i = back[0]
+        raise TelemetryError(f"{source}: times go backwards at line {_line(i + 1)} "
+                             f"({times[i + 1].isoformat()} after {times[i].isoformat()}); sort the "
+                             "file by time")
+    step_ns = int(step.total_seconds() * 1e9)
+    off = np.flatnonzero(ns % step_ns)
+    if len(off):
+        raise TelemetryError(f"{source}: time {times[off[0]].isoformat()} at line {_line(off[0])} is "
+                             f"not on the {step} grid; resample to the site's step "
+                             f"({len(off)} rows are off the grid)")
+
+
+def segments_of(times: pd.DatetimeIndex, step: dt.timedelta) -> list[tuple[int, int]]:
+    """Contiguous runs of rows ``[start, stop)`` with no missing step between them."""
+    if len(times) == 0:
+        return []
+    gaps = np.flatnonzero(np.diff(times.as_unit("ns").asi8) != int(step.total_seconds() * 1e9)) + 1
+    bounds = [0, *gaps.tolist(), len(times)]
+    return list(zip(bounds[:-1], bounds[1:]))
+
+
+@dataclass
+class Telemetry:
+    """Validated telemetry in SI units on the site's step.
+
+    Attributes
+    ----------
+    frame : DataFrame indexed by UTC time, one column per site point, SI units
+        (degC, kg/s, W/m2); missing readings are NaN.
+    site : the site description.
+    segments : contiguous row ranges ``[start, stop)``.
+    unused_columns : columns of the file that the site does not map (kept, not used).
+    """
+
+    frame: pd.DataFrame
+    site: Site
+    segments: list[tuple[int, int]]
+    unused_columns: list[str] = field(default_factory=list)
+
+    @property
+    def times(self) -> pd.DatetimeIndex:
+        return self.frame.index
+
+    def local_times(self) -> pd.DatetimeIndex:
+        return self.frame.index.tz_convert(self.site.tz)
+
+    def airflow(self) -> np.ndarray:
+        """u(k): box airflows (N, n_boxes) [kg/s], boxes in site order."""
+        return self.frame[[b.airflow.point for b in self.site.boxes.values()]].to_numpy()
+
+    def weather(self) -> pd.DataFrame:
+        """Outdoor air [degC], supply air [degC] and GHI, DNI, DHI [W/m2]."""
+        p = self.site.points
+        cols = {"Ta": p.outdoor_air_temperature.point, "Ts": p.supply_air_temperature.point,
+                "ghi": p.solar.global_horizontal.point, "dni": p.solar.direct_normal.point,
+                "dhi": p.solar.diffuse_horizontal.point}
+        return pd.DataFrame({k: self.frame[v].to_numpy() for k, v in cols.items()},
+                            index=self.frame.index)
+
+    def zone_sensors(self, zone: str) -> np.ndarray:
+        """Readings (N, n_sensors) [degC] of a model zone's temperature sensors."""
+        return self.frame[[s.point for s in self.site.points.zone_temperature[zone]]].to_numpy()
+
+    def zone_temperature(self, weights: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """ȳ(k): measured zone temperatures (N, n_zones) [degC].
+
+        A zone with several sensors is their weighted mean (equal weights unless
+        ``weights[zone]`` is given, e.g. room air volumes) over the sensors that
+        reported; NaN where none did.
+        """
+        out = np.full((len(self.frame), len(self.site.zones)), np.nan)
+        for j, zone in enumerate(self.site.zones):
+            vals = self.zone_sensors(zone)
+            w = np.ones(vals.shape[1]) if weights is None or zone not in weights \
+                else np.asarray(weights[zone], float)
+            ok = np.isfinite(vals)
+            wsum = (ok * w).sum(axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                out[:, j] = np.where(wsum > 0, np.nansum(vals * w, axis=1) / wsum, np.nan)
+        return out
+
+    def slice(self, start, end) -> "Telemetry":
+        """Rows with start <= time < end (tz-aware bounds)."""
+        sub = self.frame[(self.frame.index >= start) & (self.frame.index < end)]
+        return Telemetry(sub, self.site, segments_of(sub.index, self.site.step),
+                         self.unused_columns)
+
+
+def _numeric(df: pd.DataFrame, col: str, source: str) -> np.ndarray:
+    s = df[col]
+    if s.dtype.kind in "fi":
+        return s.to_numpy(dtype=float)
+    text = s.astype(str).str.strip()
+    missing = text.isin(MISSING_TOKENS) | s.isna()
+    vals = pd.to_numeric(text.where(~missing), errors="coerce")
+    bad = np.flatnonzero((vals.isna() & ~missing).to_numpy())
+    if len(bad):
+        raise TelemetryError(f"{source}: column {col!r} has non-numeric values at lines "
+                             f"{_list(_line(i) for i in bad)} (first: {text.iloc[bad[0]]!r}); "
+                             "leave a cell empty for a missing reading")
+    return vals.to_numpy(dtype=float)
+
+
+def load_telemetry(path: str | Path, site: Site) -> Telemetry:
+    """Read a telemetry file (CSV, or Parquet with pyarrow installed) and validate it
+    against ``site``: a ``time`` column (ISO-8601 with offset, strictly increasing, on the
+    step grid) and every point the site maps, numeric, converted to SI units."""
+    path = Path(path)
+    source = str(path.name)
+    if not path.is_file():
+        raise TelemetryError(f"telemetry file {path} not found")
+    if path.suffix == ".parquet":
+        try:
+            df = pd.read_parquet(path)
+        except ImportError:
+            raise TelemetryError("reading Parquet needs pyarrow: pip install pyarrow, or use CSV")
+    else:
+        df = pd.read_csv(path, dtype=str, keep_default_na=False)
+    if "time" not in df.columns:
+        raise TelemetryError(f"{source}: no 'time' column; the first column must be 'time' "
+                             f"(found {_list(df.columns)})")
+    units = site.point_units()
+    missing = [p for p in units if p not in df.columns]
+    if missing:
+        raise TelemetryError(f"{source}: missing columns for points the site maps: "
+                             f"{_list(missing, 10)}")
+    times = parse_times(df["time"], source)
+    check_time_axis(times, site.step, source)
+    data = {p: to_si(_numeric(df, p, source), u) for p, u in units.items()}
+    frame = pd.DataFrame(data, index=times)
+    frame.index.name = "time"
+    unused = [c for c in df.columns if c != "time" and c not in units]
+    return Telemetry(frame, site, segments_of(times, site.step), unused)

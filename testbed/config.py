@@ -1,0 +1,139 @@
+"""Building configuration of the virtual building (pydantic), read from ``configs/buildings``."""
+
+from __future__ import annotations
+
+import datetime as dt
+from pathlib import Path
+from typing import Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+Layer = tuple[str, float, float, float, float] | tuple[str, float]
+
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs" / "buildings"
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Location(_Strict):
+    latitude: float = Field(ge=-90, le=90)
+    longitude: float = Field(ge=-180, le=180)
+    elevation: float = 0.0
+    timezone: str
+
+
+class Glazing(_Strict):
+    u_factor: float = Field(gt=0, description="[W/(m2 K)]")
+    shgc: float = Field(gt=0, lt=1)
+    visible_transmittance: float = Field(gt=0, lt=1)
+
+
+class Room(_Strict):
+    rect: tuple[float, float, float, float]
+    zone: str
+    kind: str
+    windows: bool
+
+    @field_validator("rect")
+    @classmethod
+    def _ordered(cls, v):
+        if not (v[2] > v[0] and v[3] > v[1]):
+            raise ValueError(f"rect {v} must be [x0, y0, x1, y1] with x1 > x0 and y1 > y0")
+        return v
+
+    @property
+    def floor_area(self) -> float:
+        x0, y0, x1, y1 = self.rect
+        return (x1 - x0) * (y1 - y0)
+
+
+class Kind(_Strict):
+    people_per_m2: float = Field(ge=0)
+    lights_w_m2: float = Field(ge=0)
+    equipment_w_m2: float = Field(ge=0)
+    equipment_base: float = Field(ge=0, le=1)
+    occupancy: Literal["office", "transit", "none"]
+
+
+class Setpoints(_Strict):
+    occupied: float
+    unoccupied: float
+
+
+class Hvac(_Strict):
+    design_airflow_perimeter: float = Field(gt=0)
+    design_airflow_core: float = Field(gt=0)
+    minimum_fraction: float = Field(gt=0, le=1)
+    reheat_max_fraction: float = Field(gt=0, le=1)
+    supply_setpoint: float
+    supply_reset: tuple[float, float, float, float]
+    heating: Setpoints
+    cooling: Setpoints
+    occupied_hours: tuple[int, int]
+    experiment_heating: float
+    experiment_cooling: float
+
+
+class Campaign(_Strict):
+    weeks: list[dt.date]
+    excitation_weekends: list[dt.date]
+
+    @model_validator(mode="after")
+    def _check(self):
+        for w in self.weeks:
+            if w.weekday() != 0:
+                raise ValueError(f"campaign week {w} must start on a Monday")
+        for d in self.excitation_weekends:
+            if d.weekday() != 5:
+                raise ValueError(f"excitation weekend {d} must be a Saturday")
+            if not any(w <= d < w + dt.timedelta(days=7) for w in self.weeks):
+                raise ValueError(f"excitation weekend {d} lies in none of the campaign weeks")
+        return self
+
+
+class BuildingConfig(_Strict):
+    name: str
+    location: Location
+    weather: str
+    floor_to_ceiling: float = Field(gt=0)
+    window_to_wall_ratio: float = Field(ge=0, lt=0.95)
+    glazing: Glazing
+    rooms: dict[str, Room]
+    kinds: dict[str, Kind]
+    constructions: dict[str, list[Layer]]
+    furniture_area_per_floor_area: float = Field(ge=0)
+    hvac: Hvac
+    infiltration_m3s_per_m2_facade: float = Field(ge=0)
+    campaign: Campaign
+
+    @model_validator(mode="after")
+    def _refs(self):
+        for name, room in self.rooms.items():
+            if room.kind not in self.kinds:
+                raise ValueError(f"room {name}: kind {room.kind!r} is not in kinds {sorted(self.kinds)}")
+        need = {"exterior_wall", "interior_wall", "floor", "ceiling", "furniture"}
+        if missing := need - set(self.constructions):
+            raise ValueError(f"constructions lacks {sorted(missing)}")
+        return self
+
+    @property
+    def zones(self) -> dict[str, list[str]]:
+        out: dict[str, list[str]] = {}
+        for name, room in self.rooms.items():
+            out.setdefault(room.zone, []).append(name)
+        return out
+
+
+def load_config(name_or_path: str | Path = "office6") -> BuildingConfig:
+    """Load a building config by name (from ``configs/buildings``) or path."""
+    path = Path(name_or_path)
+    if not path.suffix:
+        path = CONFIG_DIR / f"{name_or_path}.yaml"
+    if not path.is_file():
+        raise FileNotFoundError(f"building config {path} not found; names in {CONFIG_DIR}: "
+                                f"{sorted(p.stem for p in CONFIG_DIR.glob('*.yaml'))}")
+    with open(path, encoding="utf-8") as fh:
+        return BuildingConfig.model_validate(yaml.safe_load(fh))

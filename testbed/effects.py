@@ -1,0 +1,100 @@
+"""Effect switches of the virtual building.
+
+They exist so that later work can withhold an effect from a model and check that the
+diagnosis finds it. Each switch and what it changes is listed in docs/testbed.md.
+"""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+EFFECTS = ("reheat", "infiltration", "gains", "window_solar", "sensor_noise", "sensor_bias")
+
+
+class Effects(BaseModel):
+    """What the virtual building simulates and how its sensors read.
+
+    Attributes
+    ----------
+    reheat : VAV box reheat coils available (False: their availability schedule is off).
+    infiltration : scale of the design infiltration flow [-] (0 disables it).
+    gains : per model zone scale of people, lights and equipment design levels [-].
+    shgc : window solar heat gain coefficient [-], None keeps the building config's.
+    sensor_noise : standard deviation of zone temperature sensor noise [degC].
+    sensor_resolution : temperature sensor resolution [degC] (readings are rounded).
+    sensor_bias : per model zone additive temperature sensor bias [degC].
+    airflow_noise : relative standard deviation of box airflow readings [-].
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    reheat: bool = True
+    infiltration: float = Field(1.0, ge=0)
+    gains: dict[str, float] = Field(default_factory=dict)
+    shgc: float | None = Field(None, gt=0, lt=1)
+    sensor_noise: float = Field(0.1, ge=0)
+    sensor_resolution: float = Field(0.1, ge=0)
+    sensor_bias: dict[str, float] = Field(default_factory=dict)
+    airflow_noise: float = Field(0.0, ge=0)
+
+    def gain_scale(self, zone: str) -> float:
+        return self.gains.get(zone, 1.0)
+
+
+def _num(key: str, value: str) -> float:
+    try:
+        return float(value)
+    except ValueError:
+        raise ValueError(f"--set {key}={value}: the value must be a number") from None
+
+
+def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: list[str]) -> Effects:
+    """Turn ``--disable EFFECT`` and ``--set EFFECT=VALUE`` options into :class:`Effects`.
+
+    ``EFFECT`` is one of reheat, infiltration, gains[.ZONE], window_solar,
+    sensor_noise, sensor_bias; ``--set`` also takes shgc, sensor_resolution,
+    airflow_noise and bias.ZONE.
+    """
+    data: dict = {"gains": {}, "sensor_bias": {}}
+
+    def zone_of(key: str) -> str:
+        zone = key.split(".", 1)[1]
+        if zone not in zones:
+            raise ValueError(f"{key}: unknown model zone {zone!r}; zones are {zones}")
+        return zone
+
+    for item in disable or []:
+        if item == "reheat":
+            data["reheat"] = False
+        elif item == "infiltration":
+            data["infiltration"] = 0.0
+        elif item == "gains":
+            data["gains"] = {z: 0.0 for z in zones}
+        elif item.startswith("gains."):
+            data["gains"][zone_of(item)] = 0.0
+        elif item == "window_solar":
+            data["shgc"] = 0.01
+        elif item == "sensor_noise":
+            data["sensor_noise"] = 0.0
+            data["sensor_resolution"] = 0.0
+        elif item == "sensor_bias":
+            data["sensor_bias"] = {}
+        else:
+            raise ValueError(f"--disable {item}: unknown effect; choose from {list(EFFECTS)} "
+                             f"or gains.ZONE")
+    for item in set_ or []:
+        if "=" not in item:
+            raise ValueError(f"--set {item}: write EFFECT=VALUE, e.g. infiltration=2.0")
+        key, value = item.split("=", 1)
+        if key in ("infiltration", "shgc", "sensor_noise", "sensor_resolution", "airflow_noise"):
+            data[key] = _num(key, value)
+        elif key == "reheat":
+            data["reheat"] = value.lower() in ("1", "true", "on", "yes")
+        elif key.startswith("gains."):
+            data["gains"][zone_of(key)] = _num(key, value)
+        elif key.startswith("bias."):
+            data["sensor_bias"][zone_of(key)] = _num(key, value)
+        else:
+            raise ValueError(f"--set {key}: unknown setting; choose from infiltration, shgc, "
+                             "sensor_noise, sensor_resolution, airflow_noise, reheat, "
+                             "gains.ZONE, bias.ZONE")
+    return Effects.model_validate(data)

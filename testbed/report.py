@@ -75,7 +75,7 @@ def plot_gains(truth: pd.DataFrame, zones, tz, path: Path) -> None:
     """True internal heat per zone on a time-of-week axis: weeks in grey, mean in red."""
     plt = _plt()
     local = pd.DatetimeIndex(truth.index).tz_convert(tz)
-    tow = (local.dayofweek * 96 + local.hour * 4 + local.minute // 15).to_numpy()
+    tow = (local.day_of_week * 96 + local.hour * 4 + local.minute // 15).to_numpy()
     week = (local - pd.to_timedelta(tow * 15, unit="m")).normalize()
     fig, axes = plt.subplots(len(zones), 1, figsize=(10, 1.6 * len(zones)), sharex=True)
     for ax, z in zip(np.atleast_1d(axes), zones):

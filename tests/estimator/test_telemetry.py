@@ -1,0 +1,76 @@
+import numpy as np
+import pandas as pd
+import pytest
+
+from zonecast.estimator.site import load_site
+from zonecast.estimator.telemetry import TelemetryError, load_telemetry
+from zonecast.estimator.units import STANDARD_AIR_DENSITY
+from tests.conftest import telemetry_frame, write_site
+
+
+@pytest.fixture
+def site(tmp_path, site_dict):
+    return load_site(write_site(tmp_path, site_dict))
+
+
+def test_loads_and_converts_to_si(site, telemetry_csv):
+    tel = load_telemetry(telemetry_csv(), site)
+    f = tel.frame
+    assert str(f.index.tz) == "UTC" and f.index[0] == pd.Timestamp("2015-04-18T15:00:00Z")
+    np.testing.assert_allclose(f["TA2"], (70.0 + 0.18 * np.arange(8) - 32) * 5 / 9)
+    np.testing.assert_allclose(f["A1 flow"], (100.0 + np.arange(8)) * 1e-3 * STANDARD_AIR_DENSITY)
+    assert tel.segments == [(0, 8)]
+    assert tel.airflow().shape == (8, 2)
+    # zone A is the mean of its two sensors (21.0 degC and 70 degF = 21.11 degC at k=0)
+    np.testing.assert_allclose(tel.zone_temperature()[0], [(21.0 + (70 - 32) * 5 / 9) / 2, 22.0])
+
+
+def test_missing_cells_stay_nan_and_zone_mean_uses_what_reported(site, telemetry_csv):
+    df = telemetry_frame()
+    df = df.astype({"TA1": object, "TA2": object})
+    df.loc[2, "TA1"] = ""
+    df.loc[3, ["TA1", "TA2"]] = ["NaN", ""]
+    tel = load_telemetry(telemetry_csv(df), site)
+    assert np.isnan(tel.frame["TA1"].iloc[2])
+    y = tel.zone_temperature()
+    assert y[2, 0] == pytest.approx(tel.frame["TA2"].iloc[2])
+    assert np.isnan(y[3, 0]) and np.isfinite(y[3, 1])
+
+
+def test_gaps_make_segments_not_errors(site, telemetry_csv):
+    df = pd.concat([telemetry_frame(4), telemetry_frame(4, "2015-04-25T08:00:00-07:00")])
+    tel = load_telemetry(telemetry_csv(df), site)
+    assert tel.segments == [(0, 4), (4, 8)]
+
+
+def test_unmapped_columns_are_reported_not_dropped_silently(site, telemetry_csv):
+    df = telemetry_frame()
+    df["Chiller kW"] = 1.0
+    assert load_telemetry(telemetry_csv(df), site).unused_columns == ["Chiller kW"]
+
+
+def _drop(df, col):
+    return df.drop(columns=[col])
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda df: _drop(df, "TB"), r"missing columns for points the site maps: TB"),
+    (lambda df: _drop(df, "time"), r"no 'time' column"),
+    (lambda df: df.iloc[[0, 2, 1, 3]], r"times go backwards at line 4"),
+    (lambda df: df.iloc[[0, 1, 1, 2]], r"duplicated time .* at lines 3 and 4"),
+    (lambda df: df.assign(time=[t.replace(":00-07", ":07-07") if i == 5 else t
+                                for i, t in enumerate(df.time)]),
+     r"at line 7 is not on the 0:15:00 grid"),
+    (lambda df: df.assign(OAT=["x" if i == 3 else v for i, v in enumerate(df.OAT)]),
+     r"column 'OAT' has non-numeric values at lines 5 \(first: 'x'\)"),
+    (lambda df: df.assign(time=[t[:19] for t in df.time]), r"need a UTC offset.*lines 2, 3"),
+    (lambda df: df.assign(time=["yesterday"] + list(df.time[1:])), r"not ISO-8601 times at lines 2"),
+])
+def test_bad_files_are_rejected_with_row_and_column(site, telemetry_csv, edit, message):
+    with pytest.raises(TelemetryError, match=message):
+        load_telemetry(telemetry_csv(edit(telemetry_frame())), site)
+
+
+def test_missing_file(site, tmp_path):
+    with pytest.raises(TelemetryError, match="not found"):
+        load_telemetry(tmp_path / "nope.csv", site)

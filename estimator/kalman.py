@@ -35,6 +35,7 @@ __all__ = [
     "Innovation",
     "KalmanInputError",
     "ZoneStateFilter",
+    "air_wall_covariance",
     "default_initial_covariance",
     "default_measurement_noise",
     "default_process_noise",
@@ -397,22 +398,18 @@ def _air_mask(n: int, air_states) -> np.ndarray:
     return mask
 
 
-def default_process_noise(
-    n: int, air_states, *, sigma_air: float = 0.1, sigma_wall: float = 0.01
-) -> np.ndarray:
-    """Diagonal process-noise covariance Q per 15-min step.
+def air_wall_covariance(n: int, air_states, sigma_air: float, sigma_wall: float) -> np.ndarray:
+    """Diagonal covariance with one standard deviation for room air, another for walls.
 
     Parameters
     ----------
     n : int
         Number of states.
     air_states : array_like of int or bool mask
-        States that are room air (the rows touched by B_IG and the HVAC term).
-    sigma_air : float, default 0.1
-        Standard deviation of the unmodelled change of a room-air temperature
-        per step [K]; covers internal-gain and airflow errors.
-    sigma_wall : float, default 0.01
-        Same for wall, floor and ceiling states [K]; heavy elements move slowly.
+        States that are room air (the rows touched by B_IG and the HVAC term);
+        all other states are walls, floors and ceilings.
+    sigma_air, sigma_wall : float
+        Standard deviations for air and wall states [K]; >= 0.
 
     Returns
     -------
@@ -421,8 +418,19 @@ def default_process_noise(
     """
     if sigma_air < 0 or sigma_wall < 0:
         raise KalmanInputError("sigma_air and sigma_wall must be >= 0")
-    mask = _air_mask(n, air_states)
-    return np.diag(np.where(mask, sigma_air**2, sigma_wall**2))
+    return np.diag(np.where(_air_mask(n, air_states), sigma_air**2, sigma_wall**2))
+
+
+def default_process_noise(
+    n: int, air_states, *, sigma_air: float = 0.1, sigma_wall: float = 0.01
+) -> np.ndarray:
+    """Diagonal process-noise covariance Q per 15-min step [K²].
+
+    :func:`air_wall_covariance` with defaults: ``sigma_air`` = 0.1 K, the
+    unmodelled change of a room-air temperature per step (internal-gain, reheat
+    and airflow errors); ``sigma_wall`` = 0.01 K, heavy elements move slowly.
+    """
+    return air_wall_covariance(n, air_states, sigma_air, sigma_wall)
 
 
 def default_measurement_noise(m: int, *, sigma: float = 0.2) -> np.ndarray:
@@ -449,26 +457,12 @@ def default_measurement_noise(m: int, *, sigma: float = 0.2) -> np.ndarray:
 def default_initial_covariance(
     n: int, air_states, *, sigma_air: float = 0.3, sigma_wall: float = 2.0
 ) -> np.ndarray:
-    """Diagonal initial covariance P0 to pair with :func:`initial_state_from_measurement`.
+    """Diagonal initial covariance P0 [K²] to pair with :func:`initial_state_from_measurement`.
 
-    Parameters
-    ----------
-    n : int
-        Number of states.
-    air_states : array_like of int or bool mask
-        States that are room air.
-    sigma_air : float, default 0.3
-        Initial standard deviation of measured room-air states [K].
-    sigma_wall : float, default 2.0
-        Initial standard deviation of unmeasured wall states [K]; walls can sit
-        a few kelvin away from the air (exterior walls in winter, slabs).
-
-    Returns
-    -------
-    numpy.ndarray, shape (n, n)
-        [K²].
+    :func:`air_wall_covariance` with defaults: ``sigma_air`` = 0.3 K for room air
+    started at its measured temperature; ``sigma_wall`` = 2 K for unmeasured walls,
+    which can sit a few kelvin from the air (exterior walls in winter, slabs).
     """
     if sigma_air <= 0 or sigma_wall <= 0:
-        raise KalmanInputError("sigma_air and sigma_wall must be > 0")
-    mask = _air_mask(n, air_states)
-    return np.diag(np.where(mask, sigma_air**2, sigma_wall**2))
+        raise KalmanInputError("sigma_air and sigma_wall must be > 0 (P0 must be positive definite)")
+    return air_wall_covariance(n, air_states, sigma_air, sigma_wall)

@@ -269,7 +269,7 @@ def _local_week_and_bin(times, timezone: str, step) -> tuple[np.ndarray, np.ndar
     idx = _as_times(times)
     minutes = _step_minutes(step)
     local = idx.tz_convert(_check_tz(timezone)).tz_localize(None)  # local wall-clock time
-    minute_of_week = (local.dayofweek * 24 + local.hour) * 60 + local.minute
+    minute_of_week = (local.day_of_week * 24 + local.hour) * 60 + local.minute
     bins = np.asarray(minute_of_week // minutes, dtype=int)
     days = local.to_numpy().astype("datetime64[D]").astype(np.int64)
     weeks = (days + 3) // 7  # 1970-01-01 was a Thursday: Monday-based week number

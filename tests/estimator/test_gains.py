@@ -161,13 +161,13 @@ def test_dst_weeks_map_to_local_bins(start):
         "UTC"
     )
     local = times.tz_convert(TZ)
-    expect = ((local.dayofweek * 24 + local.hour) * 60 + local.minute) // 15
+    expect = ((local.day_of_week * 24 + local.hour) * 60 + local.minute) // 15
     bins = G.time_of_week_bin(times, TZ)
     assert bins.tolist() == list(expect)
     # 10:00 local is bin 40 of the day before and after the transition (Sunday)
     for day in ("2024-03-09", "2024-03-10", "2024-11-02", "2024-11-03"):
         t = pd.DatetimeIndex([pd.Timestamp(f"{day} 10:00", tz=TZ)]).tz_convert("UTC")
-        dow = pd.Timestamp(day).dayofweek
+        dow = pd.Timestamp(day).day_of_week
         assert G.time_of_week_bin(t, TZ)[0] == dow * 96 + 40
     # a pattern that is a function of local time of week is recovered exactly
     f = week_pattern(bins)

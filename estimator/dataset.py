@@ -1,0 +1,111 @@
+"""Telemetry -> the paper's arrays: u(k), v(k), measured ȳ(k), on the model step.
+
+``v = [Ta, Ts, solE, solS, solW, solN]`` (paper section "Building Model"): outdoor and
+supply air temperature [degC] and irradiance on vertical facades facing east, south, west
+and north [W/m2], computed with pvlib from the weather station's GHI, DNI and DHI
+(:func:`zonecast.estimator.solar.facade_irradiance`). Row k holds y(k), u(k), v(k)
+(docs/data.md), so x(k+1) = f(x(k), u(k), v(k)) maps row k to row k+1.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from .solar import facade_irradiance
+from .telemetry import Telemetry, segments_of
+
+#: names of the disturbance vector's entries, paper order
+DISTURBANCES = ("Ta", "Ts", "solE", "solS", "solW", "solN")
+
+
+@dataclass
+class ModelData:
+    """Arrays of a telemetry span in the model's terms.
+
+    Attributes
+    ----------
+    times : DatetimeIndex (UTC), the start of each step
+    u : (N, n_boxes) box airflows [kg/s], site box order
+    v : (N, 6) disturbances [degC, degC, W/m2 x 4]
+    y : (N, n_zones) measured zone temperatures [degC], NaN where no sensor reported
+    zones, boxes : names in column order
+    segments : contiguous row ranges [start, stop)
+    excitation : (N,) True inside an experiment period of the site
+    timezone : IANA name for local time
+    """
+
+    times: pd.DatetimeIndex
+    u: np.ndarray
+    v: np.ndarray
+    y: np.ndarray
+    zones: list[str]
+    boxes: list[str]
+    segments: list[tuple[int, int]]
+    excitation: np.ndarray
+    timezone: str
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    def rows(self, sel) -> "ModelData":
+        """A sub-span by boolean mask or slice; segments are recomputed."""
+        idx = np.arange(len(self))[sel]
+        times = self.times[idx]
+        step = (self.times[1] - self.times[0]) if len(self.times) > 1 else pd.Timedelta("15min")
+        return ModelData(times, self.u[idx], self.v[idx], self.y[idx], self.zones, self.boxes,
+                         segments_of(times, step.to_pytimedelta()), self.excitation[idx],
+                         self.timezone)
+
+    def local_times(self) -> pd.DatetimeIndex:
+        return self.times.tz_convert(self.timezone)
+
+    def missing_inputs(self) -> np.ndarray:
+        """Rows whose u or v has a NaN: the model cannot be stepped over them."""
+        return ~(np.isfinite(self.u).all(axis=1) & np.isfinite(self.v).all(axis=1))
+
+
+def zone_weights(tel: Telemetry, room_volume: Mapping[str, float] | None) -> dict[str, np.ndarray] | None:
+    """Weights of each zone's sensors: the air volume of the room a sensor sits in when the
+    site names it and ``room_volume`` is given (matching C, which averages rooms by air
+    volume), else equal weights."""
+    if room_volume is None:
+        return None
+    vol = {k.upper(): float(v) for k, v in room_volume.items()}
+    out = {}
+    for zone, sensors in tel.site.points.zone_temperature.items():
+        if all(s.room is not None and s.room.upper() in vol for s in sensors):
+            out[zone] = np.array([vol[s.room.upper()] for s in sensors])
+    return out
+
+
+def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *,
+               sky_model: str = "perez", albedo: float = 0.2) -> ModelData:
+    """Build :class:`ModelData` from validated telemetry.
+
+    Parameters
+    ----------
+    tel : validated telemetry
+    room_volume : room (EnergyPlus zone) -> air volume [m3], to weight several sensors of a
+        zone like the model's output matrix C; default equal weights.
+    sky_model, albedo : passed to the facade irradiance model.
+    """
+    site = tel.site
+    w = tel.weather()
+    sol = np.full((len(w), 4), np.nan)
+    ok = w[["ghi", "dni", "dhi"]].notna().all(axis=1).to_numpy()
+    if ok.any():
+        sol[ok] = facade_irradiance(w.index[ok], w.ghi.to_numpy()[ok], w.dni.to_numpy()[ok],
+                                    w.dhi.to_numpy()[ok], site.location.latitude,
+                                    site.location.longitude, site.location.elevation,
+                                    albedo=albedo, sky_model=sky_model,
+                                    interval=pd.Timedelta(site.step), label="start")
+    v = np.column_stack([w.Ta.to_numpy(), w.Ts.to_numpy(), sol])
+    exc = np.zeros(len(w), dtype=bool)
+    for e in site.experiments:
+        exc |= (w.index >= e.start) & (w.index < e.end)
+    return ModelData(tel.times, tel.airflow(), v, tel.zone_temperature(zone_weights(tel, room_volume)),
+                     list(site.zones), list(site.boxes), list(tel.segments), exc, site.timezone)

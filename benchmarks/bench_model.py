@@ -16,14 +16,13 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import platform  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
+import platform
+import sys
+import time
 
-import numpy as np  # noqa: E402
-
-from zonecast.estimator.idf import read_building  # noqa: E402
-from zonecast.estimator.model import build_model  # noqa: E402
+import numpy as np
+from zonecast.estimator.idf import read_building
+from zonecast.estimator.model import build_model
 
 SEED = 20150601
 WEEKS = 11

@@ -21,31 +21,32 @@ import os
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 __all__ = [
+    "Building",
+    "BuildingDescriptionError",
+    "Construction",
+    "EnergyPlusInstall",
     "EnergyPlusNotFoundError",
     "IdfConversionError",
+    "InternalMass",
+    "Layer",
+    "Surface",
+    "Unsupported",
     "UnsupportedVersionError",
-    "BuildingDescriptionError",
-    "EnergyPlusInstall",
+    "Window",
+    "Zone",
+    "building_from_epjson",
     "find_energyplus",
     "load_epjson",
-    "Layer",
-    "Construction",
-    "Zone",
-    "Surface",
-    "Window",
-    "InternalMass",
-    "Unsupported",
-    "Building",
-    "read_building",
-    "building_from_epjson",
     "polygon_area_normal",
+    "read_building",
 ]
 
 ENV_VAR = "ZONECAST_ENERGYPLUS_DIR"
@@ -167,7 +168,7 @@ def find_energyplus(energyplus_dir: str | os.PathLike | None = None) -> EnergyPl
 
 # --------------------------------------------------------------------------- conversion
 def _run(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=600)
+    return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=600, check=False)
 
 
 def _severe_errors(err_file: Path) -> list[str]:
@@ -716,7 +717,7 @@ def _constructions(
     other = {
         name.lower(): typ
         for typ in data
-        if typ.startswith("Material") or typ.startswith("WindowMaterial")
+        if typ.startswith(("Material", "WindowMaterial"))
         for name in data[typ]
     }
     for name, f in data.get("Construction", {}).items():
@@ -774,7 +775,7 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
     """Build a :class:`Building` from epJSON data (see :func:`read_building`)."""
     notes = list(notes or [])
     unsupported: list[Unsupported] = []
-    version = list(data.get("Version", {"": {"version_identifier": "?"}}).values())[0]
+    version = next(iter(data.get("Version", {"": {"version_identifier": "?"}}).values()))
     version_text = str(version.get("version_identifier", "?"))
     bname, bfields = next(iter(data.get("Building", {"Building": {}}).items()))
     north = _num(bfields.get("north_axis"), 0.0)
@@ -825,12 +826,12 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
         tilt, az = _tilt_azimuth(normal)
         stype = _SURFACE_TYPES.get(str(f["surface_type"]).lower(), str(f["surface_type"]))
         cond, obj = _boundary(f)
-        base[name] = dict(
-            name=name, zone=zone, surface_type=stype,
-            construction=construction_of(f["construction_name"], f"surface {name!r}"),
-            gross_area=area, tilt=tilt, azimuth=az, boundary=cond, boundary_object=obj,
-            vertices=verts, sub_area=0.0, normal=normal,
-        )
+        base[name] = {
+            "name": name, "zone": zone, "surface_type": stype,
+            "construction": construction_of(f["construction_name"], f"surface {name!r}"),
+            "gross_area": area, "tilt": tilt, "azimuth": az, "boundary": cond, "boundary_object": obj,
+            "vertices": verts, "sub_area": 0.0, "normal": normal,
+        }
     bkey = {k.lower(): k for k in base}
 
     windows: dict[str, Window] = {}

@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import json
 from collections import OrderedDict
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import numpy as np
 import scipy.linalg as sla
@@ -34,7 +34,7 @@ from .idf import Building
 from .rc.network import DISTURBANCES, ModelOptions, RCStructure, build_structure
 from .rc.parameters import ParameterSet
 
-__all__ = ["BilinearModel", "SimulationResult", "DiscreteBilinear", "write_model_summary"]
+__all__ = ["BilinearModel", "DiscreteBilinear", "SimulationResult", "write_model_summary"]
 
 #: Model step of the paper [s] (eq:model_dt).
 STEP = 900.0
@@ -151,14 +151,14 @@ class BilinearModel:
         params: ParameterSet | Mapping[str, float] | Sequence[float] | None = None,
         options: ModelOptions | None = None,
         **kwargs,
-    ) -> "BilinearModel":
+    ) -> BilinearModel:
         """Build the model from plain data (see :func:`build_model`)."""
         structure = build_structure(building, zones, boxes, options)
         if params is not None and not isinstance(params, ParameterSet):
             params = ParameterSet(list(structure.zones), params)
         return cls(structure, params, **kwargs)
 
-    def with_params(self, values: Mapping[str, float] | Sequence[float] | ParameterSet) -> "BilinearModel":
+    def with_params(self, values: Mapping[str, float] | Sequence[float] | ParameterSet) -> BilinearModel:
         """Same structure, new parameter values (cheap: A = A0 + sum theta_p A_p)."""
         params = values if isinstance(values, ParameterSet) else self.params.copy(values)
         return BilinearModel(

@@ -16,14 +16,14 @@ so the model matrices are affine in each gamma (see ``docs/model.md``).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
 from ..idf import Layer
 
-__all__ = ["NodeLayout", "discretise_layers", "MASSLESS_FACE_CAPACITY", "MIN_RESISTANCE"]
+__all__ = ["MASSLESS_FACE_CAPACITY", "MIN_RESISTANCE", "NodeLayout", "discretise_layers"]
 
 #: Areal capacity given to each face node of a construction without mass [J/(m2 K)]
 #: (about 2 mm of gypsum): keeps the state equation regular; documented in docs/model.md.

@@ -27,8 +27,8 @@ Disturbance order is the paper's: v = [Ta, Ts, solE, solS, solW, solN].
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -37,13 +37,13 @@ from ..idf import Building, Construction, Surface
 from .elements import NodeLayout, discretise_layers
 
 __all__ = [
-    "DISTURBANCES",
     "CP_AIR",
+    "DISTURBANCES",
     "RHO_AIR",
-    "StateLabel",
+    "ModelDefinitionError",
     "ModelOptions",
     "RCStructure",
-    "ModelDefinitionError",
+    "StateLabel",
     "build_structure",
     "facade_of",
 ]

@@ -8,12 +8,12 @@ paper identified for Sutardja Dai Hall are kept as the named reference set
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["ParameterSpec", "PHYSICAL", "PAPER_TABLE1", "ParameterSet"]
+__all__ = ["PAPER_TABLE1", "PHYSICAL", "ParameterSet", "ParameterSpec"]
 
 
 @dataclass(frozen=True)
@@ -80,10 +80,10 @@ PHYSICAL: tuple[ParameterSpec, ...] = (
     ),
 )
 
-_C_IG = dict(
-    symbol="c_IG", description="background heat gain", unit="W/m2", lower=-50.0, upper=100.0,
-    start=5.0, source="idle office equipment and lighting ~2-10 W/m2 (ASHRAE 90.1 / ch. 18)",
-)
+_C_IG = {
+    "symbol": "c_IG", "description": "background heat gain", "unit": "W/m2", "lower": -50.0, "upper": 100.0,
+    "start": 5.0, "source": "idle office equipment and lighting ~2-10 W/m2 (ASHRAE 90.1 / ch. 18)",
+}
 
 #: Paper Table 1 (Sutardja Dai Hall, 4th floor): the identified values.
 PAPER_TABLE1: dict[str, float] = {
@@ -141,7 +141,7 @@ class ParameterSet:
         return len(PHYSICAL)
 
     # values -------------------------------------------------------------------
-    def update(self, values: Mapping[str, float] | Sequence[float]) -> "ParameterSet":
+    def update(self, values: Mapping[str, float] | Sequence[float]) -> ParameterSet:
         """Set values (by name, or a full vector) and check the bounds; returns self."""
         new = self.values.copy()
         if isinstance(values, Mapping):
@@ -170,14 +170,14 @@ class ParameterSet:
         self.values = new
         return self
 
-    def copy(self, values: Mapping[str, float] | Sequence[float] | None = None) -> "ParameterSet":
+    def copy(self, values: Mapping[str, float] | Sequence[float] | None = None) -> ParameterSet:
         out = ParameterSet(self.zones, self.values)
         if values is not None:
             out.update(values)
         return out
 
     @classmethod
-    def paper_table1(cls) -> "ParameterSet":
+    def paper_table1(cls) -> ParameterSet:
         """The paper's identified values for its six zones NW, W, S, E, NE, C."""
         return cls(["NW", "W", "S", "E", "NE", "C"], PAPER_TABLE1)
 

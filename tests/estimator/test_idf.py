@@ -6,7 +6,6 @@ import json
 
 import numpy as np
 import pytest
-
 from zonecast.estimator.idf import (
     Building,
     BuildingDescriptionError,

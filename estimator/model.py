@@ -1,0 +1,476 @@
+"""The bilinear building model: continuous matrices, 15-min discretisation, simulation.
+
+Paper eq:ct_model (continuous) and eq:model_dt (discrete)::
+
+    x(k+1) = A x + B_v v + B_IG (c_IG + f_IG) + sum_j (B_xu_j x + B_vu_j v) u_j
+    y(k)   = C x
+
+Two discretisations are offered (see ``docs/model.md`` for the measured errors):
+
+``"exact"`` (default)
+    Zero-order hold with the step's u: u and v are held over the step and the
+    full bilinear system, which is linear for a fixed u, is integrated exactly
+    with a matrix exponential. Unconditionally stable for any airflow. The
+    exponentials depend on u only and are cached per distinct u.
+``"bilinear"``
+    The paper's fixed-matrix form: the exact step map linearised in u around a
+    nominal airflow (Fréchet derivative of the matrix exponential). Accurate
+    near the nominal flow only: room air relaxes in ~5 min at full airflow, much
+    faster than the 15-min step, so the map is strongly nonlinear in u.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import OrderedDict
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.linalg as sla
+
+from .idf import Building
+from .rc.network import DISTURBANCES, ModelOptions, RCStructure, build_structure
+from .rc.parameters import ParameterSet
+
+__all__ = ["BilinearModel", "DiscreteBilinear", "SimulationResult", "write_model_summary"]
+
+#: Model step of the paper [s] (eq:model_dt).
+STEP = 900.0
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """States and outputs of a simulation.
+
+    Attributes
+    ----------
+    x : ndarray, shape (N + 1, n)
+        States [degC]; ``x[0]`` is the initial state.
+    y : ndarray, shape (N + 1, n_zones)
+        Zone temperatures C x [degC].
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+
+
+@dataclass(frozen=True)
+class DiscreteBilinear:
+    """Fixed matrices of paper eq:model_dt.
+
+    Attributes
+    ----------
+    A : ndarray (n, n)
+    Bv : ndarray (n, 6)
+    B_ig : ndarray (n, n_zones)
+    Bxu : ndarray (n_boxes, n, n)
+    Bvu : ndarray (n_boxes, n, 6)
+    C : ndarray (n_zones, n)
+    u_nominal : ndarray (n_boxes,)
+        Airflow around which the step map was linearised [kg/s].
+    """
+
+    A: np.ndarray
+    Bv: np.ndarray
+    B_ig: np.ndarray
+    Bxu: np.ndarray
+    Bvu: np.ndarray
+    C: np.ndarray
+    u_nominal: np.ndarray
+
+
+class BilinearModel:
+    """Bilinear RC model of a building with its parameters.
+
+    Parameters
+    ----------
+    structure : RCStructure
+        From :func:`zonecast.estimator.rc.network.build_structure` (parameter free).
+    params : ParameterSet, optional
+        Defaults to the physical starting values.
+    step : float
+        Discretisation step [s]; the paper uses 900.
+    method : {"exact", "bilinear"}
+        Default discretisation for :meth:`simulate`.
+    u_nominal : float or array
+        Airflow per box [kg/s] for the ``"bilinear"`` linearisation.
+    cache_size : int, optional
+        Number of per-u step propagators kept; default fits in about 256 MB.
+    """
+
+    def __init__(
+        self,
+        structure: RCStructure,
+        params: ParameterSet | None = None,
+        step: float = STEP,
+        method: str = "exact",
+        u_nominal: float | Sequence[float] = 0.3,
+        cache_size: int | None = None,
+    ):
+        if method not in ("exact", "bilinear"):
+            raise ValueError("method must be 'exact' or 'bilinear'")
+        if step <= 0:
+            raise ValueError("step must be positive [s]")
+        self.structure = structure
+        self.params = params if params is not None else ParameterSet(list(structure.zones))
+        if list(self.params.zones) != list(structure.zones):
+            raise ValueError(
+                f"parameter zones {list(self.params.zones)} differ from model zones "
+                f"{list(structure.zones)}"
+            )
+        self.step = float(step)
+        self.method = method
+        self.u_nominal = np.broadcast_to(
+            np.asarray(u_nominal, dtype=float), (self.n_boxes,)
+        ).copy()
+        self._cache_size = cache_size or max(16, int(2.56e8 // (16 * structure.n**2)))
+        self._cache: OrderedDict[bytes, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+        theta = self.params.physical
+        self.A = structure.A(theta).toarray()
+        self.Bv = structure.Bv(theta).toarray()
+        self.B_ig = structure.B_ig
+        self.C = structure.C
+        self._bxu = structure.Bxu_diag()  # one nonzero per box: (room, room)
+        self._rooms = structure.room_of_box
+        cap = structure.capacity
+        self._k0 = -cap[:, None] * self.A
+        self._k0 = 0.5 * (self._k0 + self._k0.T)  # symmetric by construction; remove round-off
+        self._sq = np.sqrt(cap)
+        self._isq = 1.0 / self._sq
+        self._fixed: DiscreteBilinear | None = None
+
+    def with_params(self, values: Mapping[str, float] | Sequence[float] | ParameterSet) -> BilinearModel:
+        """Same structure, new parameter values (cheap: A = A0 + sum theta_p A_p)."""
+        params = values if isinstance(values, ParameterSet) else self.params.copy(values)
+        return BilinearModel(
+            self.structure, params, self.step, self.method, self.u_nominal, self._cache_size
+        )
+
+    # sizes -----------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        return self.structure.n
+
+    @property
+    def n_boxes(self) -> int:
+        return len(self.structure.boxes)
+
+    @property
+    def n_zones(self) -> int:
+        return len(self.structure.zones)
+
+    # continuous matrices ------------------------------------------------------
+    def Bxu(self, j: int) -> np.ndarray:
+        """Continuous B_xu_j [1/(s kg/s)] (paper eq:ct_model); nonzero only at the room."""
+        out = np.zeros((self.n, self.n))
+        r = self._rooms[j]
+        out[r, r] = self._bxu[j]
+        return out
+
+    def Bvu(self, j: int) -> np.ndarray:
+        """Continuous B_vu_j [1/(s kg/s)]; nonzero only at (room, Ts)."""
+        out = np.zeros((self.n, len(DISTURBANCES)))
+        out[self._rooms[j], 1] = -self._bxu[j]
+        return out
+
+    def system_matrix(self, u: np.ndarray) -> np.ndarray:
+        """A + sum_j u_j B_xu_j [1/s]."""
+        m = self.A.copy()
+        np.add.at(m, (self._rooms, self._rooms), self._bxu * np.asarray(u, dtype=float))
+        return m
+
+    def input_matrix(self, u: np.ndarray) -> np.ndarray:
+        """B_v + sum_j u_j B_vu_j [K/s per unit of v]."""
+        b = self.Bv.copy()
+        np.add.at(b[:, 1], self._rooms, -self._bxu * np.asarray(u, dtype=float))
+        return b
+
+    def derivative(self, x, u, v, f_ig) -> np.ndarray:
+        """dx/dt of paper eq:ct_model [K/s]."""
+        return (
+            self.system_matrix(u) @ x
+            + self.input_matrix(u) @ np.asarray(v, dtype=float)
+            + self.B_ig @ (self.params.c_ig + np.asarray(f_ig, dtype=float))
+        )
+
+    # exact zero-order hold -----------------------------------------------------
+    def _stiffness(self, u: np.ndarray) -> np.ndarray:
+        """Symmetric K(u) = -Cap (A + sum_j u_j B_xu_j) [W/K], stacked over rows of u."""
+        u = np.atleast_2d(u)
+        k = np.broadcast_to(self._k0, (len(u), self.n, self.n)).copy()
+        d = -self.structure.capacity[self._rooms] * self._bxu * u  # c_p u_j [W/K]
+        for j, r in enumerate(self._rooms):
+            k[:, r, r] += d[:, j]
+        return k
+
+    def _propagators(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact Phi = e^{M h} and Gamma = int_0^h e^{M s} ds for rows of u (batched).
+
+        M(u) = -Cap^-1 K(u) with K symmetric, so with S = Cap^-1/2 K Cap^-1/2 = Q L Q^T:
+        e^{M h} = Cap^-1/2 Q e^{-L h} Q^T Cap^1/2 (exact, no series truncation).
+        """
+        s = self._isq[None, :, None] * self._stiffness(u) * self._isq[None, None, :]
+        lam, q = np.linalg.eigh(s)
+        lam = np.maximum(lam, 0.0)
+        h = self.step
+        decay = np.exp(-lam * h)
+        small = lam * h < 1e-8
+        integral = np.where(small, h, -np.expm1(-lam * h) / np.where(small, 1.0, lam))
+        qt_c = np.swapaxes(q, 1, 2) * self._sq[None, None, :]
+        left = self._isq[None, :, None] * q
+        phi = np.matmul(left * decay[:, None, :], qt_c)
+        gam = np.matmul(left * integral[:, None, :], qt_c)
+        return phi, gam
+
+    def _lookup(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = np.ascontiguousarray(u, dtype=float).tobytes()
+        hit = self._cache.get(key)
+        if hit is None:
+            phi, gam = self._propagators(u[None, :])
+            hit = (phi[0], gam[0])
+            self._store(key, hit)
+        else:
+            self._cache.move_to_end(key)
+        return hit
+
+    def _store(self, key: bytes, value) -> None:
+        self._cache[key] = value
+        if len(self._cache) > self._cache_size:
+            self._cache.popitem(last=False)
+
+    def _batch(self) -> int:
+        return max(1, int(2e7 // (self.n * self.n)))  # ~160 MB of float64 per batch
+
+    def _chunk_propagators(self, u: np.ndarray) -> dict[bytes, tuple[np.ndarray, np.ndarray]]:
+        """Propagators of all distinct rows of u (cache first, the rest batched)."""
+        out: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+        todo = []
+        for row in np.unique(np.ascontiguousarray(u, dtype=float), axis=0):
+            key = row.tobytes()
+            hit = self._cache.get(key)
+            if hit is None:
+                todo.append(row)
+            else:
+                out[key] = hit
+        if todo:
+            rows = np.array(todo)
+            phi, gam = self._propagators(rows)
+            for row, p, g in zip(rows, phi, gam):
+                out[row.tobytes()] = (p, g)
+                self._store(row.tobytes(), (p, g))
+        return out
+
+    def step_matrices(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Exact one-step matrices for airflows u held over the step.
+
+        Parameters
+        ----------
+        u : ndarray (n_boxes,)
+            Airflow per box [kg/s].
+
+        Returns
+        -------
+        Phi : ndarray (n, n)
+        Gamma_v : ndarray (n, 6)
+        Gamma_ig : ndarray (n, n_zones)
+            x(k+1) = Phi x + Gamma_v v + Gamma_ig (c_IG + f_IG).
+        """
+        u = np.asarray(u, dtype=float)
+        phi, gam = self._lookup(u)
+        return phi, gam @ self.input_matrix(u), gam @ self.B_ig
+
+    # paper fixed-matrix form -------------------------------------------------
+    def discrete_bilinear(self) -> DiscreteBilinear:
+        """Fixed matrices of paper eq:model_dt, linearised in u around ``u_nominal``."""
+        if self._fixed is not None:
+            return self._fixed
+        n, nv, nz, nb = self.n, len(DISTURBANCES), self.n_zones, self.n_boxes
+        size = n + nv + nz
+        aug = np.zeros((size, size))
+        aug[:n, :n] = self.system_matrix(self.u_nominal)
+        aug[:n, n:n + nv] = self.input_matrix(self.u_nominal)
+        aug[:n, n + nv:] = self.B_ig
+        e0 = sla.expm(aug * self.step)
+        bxu = np.zeros((nb, n, n))
+        bvu = np.zeros((nb, n, nv))
+        for j in range(nb):
+            direction = np.zeros((size, size))
+            r = self._rooms[j]
+            direction[r, r] = self._bxu[j]
+            direction[r, n + 1] = -self._bxu[j]
+            _, d = sla.expm_frechet(aug * self.step, direction * self.step)
+            bxu[j] = d[:n, :n]
+            bvu[j] = d[:n, n:n + nv]
+        a = e0[:n, :n] - np.tensordot(self.u_nominal, bxu, axes=1)
+        bv = e0[:n, n:n + nv] - np.tensordot(self.u_nominal, bvu, axes=1)
+        self._fixed = DiscreteBilinear(a, bv, e0[:n, n + nv:], bxu, bvu, self.C, self.u_nominal)
+        return self._fixed
+
+    # simulation ------------------------------------------------------------------
+    def _check_inputs(self, x0, u, v, f_ig):
+        u = np.atleast_2d(np.asarray(u, dtype=float))
+        v = np.atleast_2d(np.asarray(v, dtype=float))
+        nsteps = len(u)
+        if f_ig is None:
+            f_ig = np.zeros((nsteps, self.n_zones))
+        f_ig = np.atleast_2d(np.asarray(f_ig, dtype=float))
+        x0 = np.asarray(x0, dtype=float)
+        if x0.ndim == 0:
+            x0 = np.full(self.n, float(x0))
+        checks = [
+            ("u", u, (nsteps, self.n_boxes), "kg/s per box"),
+            ("v", v, (nsteps, len(DISTURBANCES)), "Ta, Ts, solE, solS, solW, solN"),
+            ("f_ig", f_ig, (nsteps, self.n_zones), "W/m2 per zone"),
+            ("x0", x0, (self.n,), "degC per state"),
+        ]
+        for name, arr, shape, what in checks:
+            if arr.shape != shape:
+                raise ValueError(f"{name} has shape {arr.shape}; expected {shape} ({what})")
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{name} contains NaN or inf; fill gaps before simulating")
+        return x0, u, v, f_ig
+
+    def simulate(
+        self,
+        x0: np.ndarray | float,
+        u: np.ndarray,
+        v: np.ndarray,
+        f_ig: np.ndarray | None = None,
+        method: str | None = None,
+    ) -> SimulationResult:
+        """Simulate paper eq:model_dt.
+
+        Parameters
+        ----------
+        x0 : ndarray (n,) or float
+            Initial states [degC] (a float sets all states).
+        u : ndarray (N, n_boxes)
+            Airflow per box [kg/s], held over each step.
+        v : ndarray (N, 6)
+            [Ta degC, Ts degC, solE, solS, solW, solN W/m2].
+        f_ig : ndarray (N, n_zones), optional
+            Time-varying internal gains [W/m2]; default zero.
+        method : {"exact", "bilinear"}, optional
+            Default: the model's method.
+
+        Returns
+        -------
+        SimulationResult
+        """
+        x0, u, v, f_ig = self._check_inputs(x0, u, v, f_ig)
+        method = method or self.method
+        nsteps = len(u)
+        xs = np.empty((nsteps + 1, self.n))
+        xs[0] = x0
+        gains = f_ig + self.params.c_ig
+        x = x0
+        if method == "exact":
+            forcing = v @ self.Bv.T + gains @ self.B_ig.T  # parts independent of u
+            ts = v[:, 1]
+            props: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+            for k in range(nsteps):
+                if k % self._batch() == 0:
+                    props = self._chunk_propagators(u[k:k + self._batch()])
+                phi, gam = props[np.ascontiguousarray(u[k]).tobytes()]
+                w = forcing[k].copy()
+                np.add.at(w, self._rooms, -self._bxu * u[k] * ts[k])  # B_vu_j v u_j
+                x = phi @ x + gam @ w
+                xs[k + 1] = x
+        elif method == "bilinear":
+            d = self.discrete_bilinear()
+            lin = v @ d.Bv.T + gains @ d.B_ig.T
+            for k in range(nsteps):
+                m = d.A + np.tensordot(u[k], d.Bxu, axes=1)
+                x = m @ x + lin[k] + np.tensordot(u[k], d.Bvu, axes=1) @ v[k]
+                xs[k + 1] = x
+        else:
+            raise ValueError("method must be 'exact' or 'bilinear'")
+        return SimulationResult(xs, xs @ self.C.T)
+
+    def steady_state(self, u: np.ndarray, v: np.ndarray, f_ig: np.ndarray | None = None) -> np.ndarray:
+        """States [degC] at equilibrium for constant u, v, f_ig (solves dx/dt = 0)."""
+        u = np.asarray(u, dtype=float)
+        v = np.asarray(v, dtype=float)
+        f_ig = np.zeros(self.n_zones) if f_ig is None else np.asarray(f_ig, dtype=float)
+        rhs = self.input_matrix(u) @ v + self.B_ig @ (self.params.c_ig + f_ig)
+        return np.linalg.solve(self.system_matrix(u), -rhs)
+
+    # reporting -----------------------------------------------------------------
+    def summary(self) -> dict:
+        """JSON-ready description: states by kind, rooms, zones, boxes, parameters."""
+        s = self.structure
+        return {
+            "schema_version": 1,
+            "n_states": s.n,
+            "states_by_kind": s.state_counts(),
+            "rooms": s.rooms,
+            "zones": s.zones,
+            "boxes": s.boxes,
+            "disturbances": list(DISTURBANCES),
+            "step_s": self.step,
+            "method": self.method,
+            "parameters": self.params.as_dict(),
+            "exterior_areas_m2": s.areas,
+            "output_weighting": "C: air-volume-weighted mean of each zone's rooms",
+            "notes": s.notes,
+            "state_labels": [str(label) for label in s.labels],
+        }
+
+
+def build_model(
+    building: Building,
+    zones: Mapping[str, Sequence[str]],
+    boxes: Mapping[str, str],
+    params: ParameterSet | Mapping[str, float] | Sequence[float] | None = None,
+    options: ModelOptions | None = None,
+    **kwargs,
+) -> BilinearModel:
+    """Build the bilinear RC model from plain data.
+
+    Parameters
+    ----------
+    building : Building
+        From :func:`zonecast.estimator.idf.read_building`.
+    zones : mapping
+        Model zone -> EnergyPlus zone names (case-insensitive).
+    boxes : mapping
+        VAV box id -> room (EnergyPlus zone name) it serves.
+    params : ParameterSet, mapping or vector, optional
+        Parameter values; default the physical starting values.
+    options : ModelOptions, optional
+    **kwargs
+        ``step`` [s], ``method``, ``u_nominal`` [kg/s] of :class:`BilinearModel`.
+
+    Returns
+    -------
+    BilinearModel
+    """
+    structure = build_structure(building, zones, boxes, options)
+    if params is not None and not isinstance(params, ParameterSet):
+        params = ParameterSet(list(structure.zones), params)
+    return BilinearModel(structure, params, **kwargs)
+
+
+__all__.append("build_model")
+
+
+def write_model_summary(model: BilinearModel, out_json: str | Path, out_npz: str | Path) -> None:
+    """Write the model description (JSON) and its matrices (.npz).
+
+    The .npz holds the continuous A, B_v, B_IG, C, the per-box B_xu_j/B_vu_j
+    nonzeros (room index, value), state capacities, and the exact discrete
+    matrices at zero airflow (``Phi0``, ``Gamma_v0``, ``Gamma_ig0``).
+    """
+    summary = model.summary()
+    Path(out_json).write_text(json.dumps(summary, indent=2))
+    phi, gv, gig = model.step_matrices(np.zeros(model.n_boxes))
+    np.savez_compressed(
+        out_npz,
+        A=model.A, Bv=model.Bv, B_ig=model.B_ig, C=model.C,
+        Bxu_room=model.structure.room_of_box, Bxu_value=model.structure.Bxu_diag(),
+        capacity=model.structure.capacity, Phi0=phi, Gamma_v0=gv, Gamma_ig0=gig,
+        step=model.step, labels=np.array(summary["state_labels"]),
+        param_names=np.array(model.params.param_names), param_values=model.params.values,
+    )

@@ -1,0 +1,124 @@
+"""Building elements: constructions discretised into a few capacitive nodes.
+
+BRCM-like lumping (paper section sec:model, footnote: "each wall, floor and
+ceiling is decomposed into 2 to 3 BEs"): the layers of a construction are
+placed on a *resistance coordinate* r in [0, R_total] (0 = outside face). Two
+nodes sit on the faces; a third, middle node is added for massive multi-layer
+constructions at the capacity centroid. Each layer's heat capacity is shared
+among the nodes with linear (hat) weights in r, so thin layers are grouped with
+their neighbours automatically; the conduction resistance between neighbouring
+nodes is the resistance between their positions (pure-resistance layers such
+as Material:NoMass and Material:AirGap simply add resistance).
+
+Putting nodes on the faces makes every film conductance exactly gamma * area,
+so the model matrices are affine in each gamma (see ``docs/model.md``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..idf import Layer
+
+__all__ = ["MASSLESS_FACE_CAPACITY", "MIN_RESISTANCE", "NodeLayout", "discretise_layers"]
+
+#: Areal capacity given to each face node of a construction without mass [J/(m2 K)]
+#: (about 2 mm of gypsum): keeps the state equation regular; documented in docs/model.md.
+MASSLESS_FACE_CAPACITY = 2.0e3
+#: Smallest total construction resistance accepted [m2 K/W].
+MIN_RESISTANCE = 1.0e-3
+#: A single massive layer above this areal capacity gets a middle node [J/(m2 K)].
+THICK_LAYER_CAPACITY = 1.0e5
+#: Smallest total resistance for a three-node element [m2 K/W].
+MIN_THREE_NODE_RESISTANCE = 0.04
+
+
+@dataclass(frozen=True)
+class NodeLayout:
+    """Discretisation of one construction, per unit area.
+
+    Attributes
+    ----------
+    positions : ndarray
+        Node positions on the resistance coordinate [m2 K/W], outside face first.
+    capacities : ndarray
+        Areal heat capacity of each node [J/(m2 K)].
+    resistances : ndarray
+        Resistance between neighbouring nodes [m2 K/W] (len(positions) - 1).
+    """
+
+    positions: np.ndarray
+    capacities: np.ndarray
+    resistances: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.positions)
+
+    @property
+    def resistance(self) -> float:
+        """Face-to-face resistance [m2 K/W]."""
+        return float(self.positions[-1] - self.positions[0])
+
+
+def _hat_share(a: float, b: float, p0: float, p1: float) -> tuple[float, float]:
+    """Integral over [a, b] (inside [p0, p1]) of the two hat weights, per unit density."""
+    w = p1 - p0
+    # integral of (p1 - r)/w and (r - p0)/w over [a, b]
+    left = ((p1 - a) ** 2 - (p1 - b) ** 2) / (2 * w)
+    right = ((b - p0) ** 2 - (a - p0) ** 2) / (2 * w)
+    return left, right
+
+
+def discretise_layers(layers: Sequence[Layer]) -> NodeLayout:
+    """Lump a construction (outside layer first) into 2 or 3 nodes.
+
+    Parameters
+    ----------
+    layers : sequence of Layer
+        Outside to inside.
+
+    Returns
+    -------
+    NodeLayout
+    """
+    res = np.array([max(layer.resistance, 0.0) for layer in layers], dtype=float)
+    cap = np.array([layer.heat_capacity for layer in layers], dtype=float)
+    r_total = max(float(res.sum()), MIN_RESISTANCE)
+    if res.sum() < MIN_RESISTANCE:  # scale a degenerate construction up to the minimum
+        res = np.full(max(len(layers), 1), r_total / max(len(layers), 1))
+        cap = cap if len(cap) else np.zeros(1)
+    edges = np.concatenate([[0.0], np.cumsum(res)])
+    massive = int((cap > 0).sum())
+    c_total = float(cap.sum())
+    if c_total <= 0:
+        return NodeLayout(
+            np.array([0.0, r_total]), np.full(2, MASSLESS_FACE_CAPACITY), np.array([r_total])
+        )
+    three = r_total >= MIN_THREE_NODE_RESISTANCE and (
+        massive >= 2 or c_total >= THICK_LAYER_CAPACITY
+    )
+    if three:
+        centres = 0.5 * (edges[:-1] + edges[1:])
+        mid = float(np.dot(cap, centres) / c_total)
+        mid = min(max(mid, 0.25 * r_total), 0.75 * r_total)
+        pos = np.array([0.0, mid, r_total])
+    else:
+        pos = np.array([0.0, r_total])
+    node_cap = np.zeros(len(pos))
+    for k in range(len(pos) - 1):
+        p0, p1 = pos[k], pos[k + 1]
+        for i in range(len(res)):
+            a, b = max(edges[i], p0), min(edges[i + 1], p1)
+            if b <= a or res[i] <= 0:
+                continue
+            density = cap[i] / res[i]
+            left, right = _hat_share(a, b, p0, p1)
+            node_cap[k] += density * left
+            node_cap[k + 1] += density * right
+    # layers of zero resistance but with mass cannot exist (R = d/k > 0); keep totals exact
+    node_cap *= c_total / node_cap.sum()
+    return NodeLayout(pos, node_cap, np.diff(pos))

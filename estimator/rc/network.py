@@ -1,0 +1,487 @@
+"""Thermal submodel (A_t, B_t) and external heat flux models of paper sec:model.
+
+:func:`build_structure` turns a :class:`~zonecast.estimator.idf.Building` plus the
+model zones and VAV boxes into an :class:`RCStructure`: the continuous bilinear
+model of paper eq:ct_model with every matrix stored as its parameter-free part
+plus one piece per parameter, so that for the seven matrix parameters
+theta = [gamma_EW, gamma_IW, gamma_floor, gamma_ceil, gamma_absorp,
+gamma_winSolAbs, U_win]::
+
+    A(theta)   = A_0   + sum_p theta_p A_p
+    B_v(theta) = B_v,0 + sum_p theta_p B_v,p
+
+B_IG, B_xu_j, B_vu_j and C do not depend on parameters.
+
+External heat flux models, exactly as the paper:
+
+* building hull, eq:q_bh -- exterior-surface convection gamma_EW a_EW (Ta - x)
+  and solar absorption gamma_absorp a_EW v_sol on the *outer face node* of each
+  exterior opaque element; window transmission U_win a_win (Ta - x) and
+  gamma_winSolAbs a_win v_sol on the room air;
+* HVAC, eq:q_hvac -- c_p sum_{j in B_i} u_j (v_Ts - x_i) on room air;
+* internal gains, eq:q_ig -- a_floor,i (c_IG + f_IG) on room air.
+
+Disturbance order is the paper's: v = [Ta, Ts, solE, solS, solW, solN].
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..idf import Building, Construction, Surface
+from .elements import NodeLayout, discretise_layers
+
+__all__ = [
+    "CP_AIR",
+    "DISTURBANCES",
+    "RHO_AIR",
+    "ModelDefinitionError",
+    "ModelOptions",
+    "RCStructure",
+    "StateLabel",
+    "build_structure",
+    "facade_of",
+]
+
+#: Disturbance vector, paper order (sec:model): ambient, supply air, solar E, S, W, N.
+DISTURBANCES = ("Ta", "Ts", "solE", "solS", "solW", "solN")
+#: Specific heat capacity of air c_p [J/(kg K)].
+CP_AIR = 1005.0
+#: Air density for room air capacity [kg/m3].
+RHO_AIR = 1.2
+
+# parameter indices of the seven matrix parameters (same order as rc.parameters.PHYSICAL)
+EW, IW, FLOOR, CEIL, ABSORP, WINSOL, UWIN = range(7)
+_INSIDE_GAMMA = {"Wall": IW, "Floor": FLOOR, "Ceiling": CEIL, "Roof": CEIL}
+# the other side of an interzone surface faces the mirrored type
+_MIRROR = {"Wall": "Wall", "Floor": "Ceiling", "Ceiling": "Floor", "Roof": "Floor"}
+_FACADES = {90.0: "solE", 180.0: "solS", 270.0: "solW", 0.0: "solN"}
+
+
+class ModelDefinitionError(ValueError):
+    """The zones/boxes given for the model do not fit the building."""
+
+
+@dataclass(frozen=True)
+class StateLabel:
+    """What a state is.
+
+    Attributes
+    ----------
+    kind : str
+        ``"room_air"`` (a room in a model zone), ``"unmeasured_air"`` (a room in
+        no model zone, e.g. a plenum), or the element kind ``"wall"``,
+        ``"floor"``, ``"ceiling"``, ``"roof"``, ``"floor_ceiling"``,
+        ``"internal_mass"``.
+    room : str
+        Room (EnergyPlus zone) the state belongs to; for elements the room on the
+        element's inside face.
+    element : str or None
+        Surface (or surface pair ``A|B``, internal mass) name.
+    layer : int or None
+        Node index from the outside face (0) to the inside face.
+    """
+
+    kind: str
+    room: str
+    element: str | None = None
+    layer: int | None = None
+
+    def __str__(self) -> str:
+        if self.element is None:
+            return f"{self.kind}:{self.room}"
+        return f"{self.kind}:{self.element}:{self.layer}"
+
+
+@dataclass(frozen=True)
+class ModelOptions:
+    """Modelling choices that are not parameters.
+
+    Attributes
+    ----------
+    roof_solar : {"mean", "none"}
+        Solar input on roofs and other surfaces tilted less than 60 deg from
+        horizontal: the mean of the four facade irradiances, or none (v has no
+        horizontal component, paper sec:model).
+    ground : {"adiabatic"}
+        Ground-contact outer faces: no heat flux (a fixed ground temperature
+        would need an input the paper's v does not have).
+    rho_air : float
+        Air density for room capacities [kg/m3].
+    cp_air : float
+        c_p of air [J/(kg K)] (paper eq:q_hvac).
+    """
+
+    roof_solar: str = "mean"
+    ground: str = "adiabatic"
+    rho_air: float = RHO_AIR
+    cp_air: float = CP_AIR
+
+    def __post_init__(self):
+        if self.roof_solar not in ("mean", "none"):
+            raise ModelDefinitionError("roof_solar must be 'mean' or 'none'")
+        if self.ground != "adiabatic":
+            raise ModelDefinitionError("ground must be 'adiabatic' (the only supported choice)")
+
+
+def facade_of(tilt: float, azimuth: float, roof_solar: str = "mean") -> dict[str, float]:
+    """Solar columns (with weights) acting on a surface.
+
+    Parameters
+    ----------
+    tilt : float
+        [deg] 0 facing up, 90 vertical.
+    azimuth : float
+        [deg] clockwise from north.
+    roof_solar : {"mean", "none"}
+
+    Returns
+    -------
+    dict
+        Disturbance name -> weight; vertical surfaces take the nearest of
+        E/S/W/N (90/180/270/0 deg), surfaces facing down none.
+    """
+    if tilt > 120.0:
+        return {}
+    if tilt < 60.0:
+        return {f: 0.25 for f in _FACADES.values()} if roof_solar == "mean" else {}
+    diffs = {f: abs((azimuth - a + 180.0) % 360.0 - 180.0) for a, f in _FACADES.items()}
+    return {min(diffs, key=diffs.get): 1.0}
+
+
+@dataclass
+class RCStructure:
+    """Continuous bilinear model, affine in the seven matrix parameters (paper eq:ct_model).
+
+    Attributes
+    ----------
+    labels : list of StateLabel
+    rooms : list of str
+        Rooms (EnergyPlus zones) with an air state, in state order (first states).
+    zones : dict
+        Model zone -> its rooms.
+    boxes : dict
+        Box id -> room.
+    capacity : ndarray
+        Heat capacity per state [J/K].
+    A0, A_p : sparse matrices
+        A = A0 + sum_p theta_p A_p[p] [1/s].
+    Bv0, Bv_p : sparse matrices
+        B_v = Bv0 + sum_p theta_p Bv_p[p], columns :data:`DISTURBANCES`.
+    B_ig : ndarray, shape (n, n_zones)
+        [K/s per W/m2], paper eq:q_ig.
+    room_of_box : ndarray of int
+        State index of each box's room; B_xu_j = -c_p/C e_r e_r^T and
+        B_vu_j = c_p/C e_r e_Ts^T for r = room_of_box[j] (paper eq:q_hvac).
+    C : ndarray, shape (n_zones, n)
+        Air-volume-weighted mean of each zone's rooms.
+    notes : list of str
+    """
+
+    labels: list[StateLabel]
+    rooms: list[str]
+    zones: dict[str, list[str]]
+    boxes: dict[str, str]
+    capacity: np.ndarray
+    A0: sp.csr_matrix
+    A_p: list[sp.csr_matrix]
+    Bv0: sp.csr_matrix
+    Bv_p: list[sp.csr_matrix]
+    B_ig: np.ndarray
+    room_of_box: np.ndarray
+    C: np.ndarray
+    cp_air: float
+    notes: list[str] = field(default_factory=list)
+    areas: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return len(self.labels)
+
+    def state_counts(self) -> dict[str, int]:
+        """Number of states by kind."""
+        return dict(Counter(label.kind for label in self.labels))
+
+    def A(self, theta: np.ndarray) -> sp.csr_matrix:
+        """Continuous A(theta) [1/s]."""
+        out = self.A0.copy()
+        for t, piece in zip(theta, self.A_p):
+            out = out + t * piece
+        return out.tocsr()
+
+    def Bv(self, theta: np.ndarray) -> sp.csr_matrix:
+        """Continuous B_v(theta) [K/s per unit of v]."""
+        out = self.Bv0.copy()
+        for t, piece in zip(theta, self.Bv_p):
+            out = out + t * piece
+        return out.tocsr()
+
+    def Bxu_diag(self) -> np.ndarray:
+        """-c_p / C_room for each box [1/(s kg/s)] (the one nonzero of B_xu_j)."""
+        return -self.cp_air / self.capacity[self.room_of_box]
+
+
+class _Assembler:
+    """Collects conductances (per parameter) and capacities."""
+
+    def __init__(self, n_par: int = 7):
+        self.cap: list[float] = []
+        self.labels: list[StateLabel] = []
+        self.n_par = n_par
+        # (i, j, g, p): conductance g * theta_p (p = -1: parameter free) between states
+        self.links: list[tuple[int, int, float, int]] = []
+        # (i, col, g, p): input coupling to disturbance column col, g * theta_p
+        self.inputs: list[tuple[int, int, float, int]] = []
+        # (i, g, p): conductance to an input temperature (adds -g to the diagonal)
+        self.to_input_temp: list[tuple[int, int, float, int]] = []
+
+    def add_state(self, label: StateLabel, capacity: float) -> int:
+        self.labels.append(label)
+        self.cap.append(float(capacity))
+        return len(self.cap) - 1
+
+    def link(self, i: int, j: int, g: float, p: int = -1) -> None:
+        if i != j and g != 0:
+            self.links.append((i, j, float(g), p))
+
+    def to_temperature(self, i: int, col: int, g: float, p: int) -> None:
+        """Heat flow g theta_p (v_col - x_i)."""
+        self.to_input_temp.append((i, col, float(g), p))
+
+    def source(self, i: int, col: int, g: float, p: int) -> None:
+        """Heat flow g theta_p v_col."""
+        self.inputs.append((i, col, float(g), p))
+
+    def matrices(self) -> tuple[np.ndarray, list, list]:
+        n = len(self.cap)
+        cap = np.array(self.cap)
+        inv = 1.0 / cap
+        a_rows: dict[int, tuple[list, list, list]] = {p: ([], [], []) for p in range(-1, self.n_par)}
+        b_rows: dict[int, tuple[list, list, list]] = {p: ([], [], []) for p in range(-1, self.n_par)}
+
+        def put(store, p, r, c, val):
+            store[p][0].append(r)
+            store[p][1].append(c)
+            store[p][2].append(val)
+
+        for i, j, g, p in self.links:
+            for a, b in ((i, j), (j, i)):
+                put(a_rows, p, a, a, -g * inv[a])
+                put(a_rows, p, a, b, g * inv[a])
+        for i, col, g, p in self.to_input_temp:
+            put(a_rows, p, i, i, -g * inv[i])
+            put(b_rows, p, i, col, g * inv[i])
+        for i, col, g, p in self.inputs:
+            put(b_rows, p, i, col, g * inv[i])
+
+        def build(store, ncol):
+            return [
+                sp.csr_matrix((store[p][2], (store[p][0], store[p][1])), shape=(n, ncol))
+                for p in range(-1, self.n_par)
+            ]
+
+        return cap, build(a_rows, n), build(b_rows, len(DISTURBANCES))
+
+
+def _resolve(names: Sequence[str], table: Mapping[str, object], what: str) -> list[str]:
+    out = []
+    for name in names:
+        try:
+            out.append(Building.find(table, str(name), what))
+        except KeyError as exc:
+            raise ModelDefinitionError(str(exc.args[0])) from None
+    return out
+
+
+def _add_element(
+    asm: _Assembler,
+    kind: str,
+    name: str,
+    room_state: Mapping[str, int],
+    layout: NodeLayout,
+    area: float,
+    inside_room: str,
+    inside_gamma: int,
+) -> list[int]:
+    """Element nodes with conduction links; the inside face convects to its room."""
+    nodes = [
+        asm.add_state(StateLabel(kind, inside_room, name, k), layout.capacities[k] * area)
+        for k in range(layout.n)
+    ]
+    for k, r in enumerate(layout.resistances):
+        asm.link(nodes[k], nodes[k + 1], area / r)
+    asm.link(nodes[-1], room_state[inside_room], area, inside_gamma)
+    return nodes
+
+
+def build_structure(
+    building: Building,
+    zones: Mapping[str, Sequence[str]],
+    boxes: Mapping[str, str],
+    options: ModelOptions | None = None,
+) -> RCStructure:
+    """Build the continuous bilinear RC model of paper eq:ct_model, affine in the parameters.
+
+    Parameters
+    ----------
+    building : Building
+        From :func:`zonecast.estimator.idf.read_building`.
+    zones : mapping
+        Model zone -> EnergyPlus zone names (rooms); names are case-insensitive.
+        Rooms in no model zone (plenums, attics) become ``unmeasured_air`` states.
+    boxes : mapping
+        VAV box id -> the room it serves.
+    options : ModelOptions, optional
+
+    Returns
+    -------
+    RCStructure
+    """
+    opts = options or ModelOptions()
+    if not zones:
+        raise ModelDefinitionError("give at least one model zone (zone name -> EnergyPlus zones)")
+    zone_rooms = {str(z): _resolve(list(rooms), building.zones, "EnergyPlus zone")
+                  for z, rooms in zones.items()}
+    for z, rooms in zone_rooms.items():
+        if not rooms:
+            raise ModelDefinitionError(f"model zone {z!r} has no rooms")
+    seen: dict[str, str] = {}
+    for z, rooms in zone_rooms.items():
+        for r in rooms:
+            if r in seen:
+                raise ModelDefinitionError(
+                    f"room {r!r} is in model zones {seen[r]!r} and {z!r}; a room belongs to one zone"
+                )
+            seen[r] = z
+    box_rooms = {str(b): _resolve([room], building.zones, f"room of box {b!r}")[0]
+                 for b, room in boxes.items()}
+    for b, room in box_rooms.items():
+        if room not in seen:
+            raise ModelDefinitionError(
+                f"box {b!r} serves {room!r}, which is in no model zone; add the room to a zone"
+            )
+
+    asm = _Assembler()
+    notes: list[str] = []
+    # room air states first: rooms of model zones in zone order, then unmeasured rooms
+    rooms = [r for rs in zone_rooms.values() for r in rs]
+    rooms += [r for r in building.zones if r not in seen]
+    room_state: dict[str, int] = {}
+    for r in rooms:
+        kind = "room_air" if r in seen else "unmeasured_air"
+        room_state[r] = asm.add_state(
+            StateLabel(kind, r), opts.rho_air * opts.cp_air * building.zones[r].volume
+        )
+
+    layouts: dict[str, NodeLayout] = {}
+
+    def layout_of(cons: Construction) -> NodeLayout:
+        if cons.name not in layouts:
+            layouts[cons.name] = discretise_layers(cons.layers)
+        return layouts[cons.name]
+
+    surfaces = building.surfaces
+    skey = {k.lower(): k for k in surfaces}
+    done: set[str] = set()
+    area_ext = area_win = 0.0
+    for name in sorted(surfaces):
+        if name in done:
+            continue
+        s: Surface = surfaces[name]
+        done.add(name)
+        if s.area <= 0:
+            continue
+        cons = building.constructions[s.construction]
+        layout = layout_of(cons)
+        inside_g = _INSIDE_GAMMA.get(s.surface_type, IW)
+        kind = s.surface_type.lower()
+        if s.parent is not None:  # doors
+            kind = "wall"
+        if s.boundary == "Surface" and s.boundary_object:
+            other_name = skey.get(s.boundary_object.lower())
+            if other_name is None:
+                raise ModelDefinitionError(
+                    f"surface {name!r} faces {s.boundary_object!r}, which is not a surface"
+                )
+            other = surfaces[other_name]
+            done.add(other_name)
+            if {s.surface_type, other.surface_type} & {"Floor", "Ceiling", "Roof"}:
+                kind = "floor_ceiling"
+            label = name if other_name == name else f"{name}|{other_name}"
+            nodes = _add_element(asm, kind, label, room_state, layout, s.area, s.zone, inside_g)
+            outer_g = _INSIDE_GAMMA.get(other.surface_type, IW)
+            asm.link(nodes[0], room_state[other.zone], s.area, outer_g)
+        elif s.boundary == "Zone" and s.boundary_object:
+            other_zone = _resolve([s.boundary_object], building.zones, "zone")[0]
+            nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
+            mirror = _INSIDE_GAMMA.get(_MIRROR.get(s.surface_type, "Wall"), IW)
+            asm.link(nodes[0], room_state[other_zone], s.area, mirror)
+        elif s.boundary == "Outdoors":
+            nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
+            asm.to_temperature(nodes[0], 0, s.area, EW)  # paper eq:q_bh, convection
+            for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar).items():
+                asm.source(nodes[0], DISTURBANCES.index(col), w * s.area, ABSORP)
+            area_ext += s.area
+        else:
+            _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
+            if s.boundary not in ("Adiabatic", "Ground"):
+                notes.append(f"surface {name}: boundary {s.boundary} treated as adiabatic")
+    if any(s.boundary == "Ground" for s in surfaces.values()):
+        notes.append("ground-contact surfaces: outer face adiabatic (ModelOptions.ground)")
+
+    for name in sorted(building.windows):
+        w = building.windows[name]
+        parent = surfaces[w.surface]
+        r = room_state[w.zone]
+        if parent.boundary == "Outdoors":
+            asm.to_temperature(r, 0, w.area, UWIN)  # paper eq:q_bh, window transmission
+            for col, wt in facade_of(parent.tilt, parent.azimuth, opts.roof_solar).items():
+                asm.source(r, DISTURBANCES.index(col), wt * w.area, WINSOL)
+            area_win += w.area
+        elif parent.boundary == "Surface":
+            other = surfaces[skey[parent.boundary_object.lower()]]
+            asm.link(r, room_state[other.zone], w.area, UWIN)
+            notes.append(f"interior window {name}: U_win coupling between rooms")
+        else:
+            notes.append(f"window {name} on a {parent.boundary} surface: ignored")
+
+    for name in sorted(building.internal_masses):
+        m = building.internal_masses[name]
+        layout = layout_of(building.constructions[m.construction])
+        # EnergyPlus exposes both faces of internal mass to its zone
+        nodes = _add_element(asm, "internal_mass", name, room_state, layout, m.area, m.zone, IW)
+        asm.link(nodes[0], room_state[m.zone], m.area, IW)
+
+    cap, a_list, b_list = asm.matrices()
+    n = len(cap)
+    zone_names = list(zone_rooms)
+    b_ig = np.zeros((n, len(zone_names)))
+    c_mat = np.zeros((len(zone_names), n))
+    for zi, z in enumerate(zone_names):
+        vols = np.array([building.zones[r].volume for r in zone_rooms[z]])
+        for r, vol in zip(zone_rooms[z], vols):
+            i = room_state[r]
+            b_ig[i, zi] = building.zones[r].floor_area / cap[i]  # paper eq:q_ig
+            c_mat[zi, i] = vol / vols.sum()  # volume-weighted mean of the zone's rooms
+    return RCStructure(
+        labels=asm.labels,
+        rooms=rooms,
+        zones=zone_rooms,
+        boxes=box_rooms,
+        capacity=cap,
+        A0=a_list[0],
+        A_p=a_list[1:],
+        Bv0=b_list[0],
+        Bv_p=b_list[1:],
+        B_ig=b_ig,
+        room_of_box=np.array([room_state[box_rooms[b]] for b in box_rooms], dtype=int),
+        C=c_mat,
+        cp_air=opts.cp_air,
+        notes=notes,
+        areas={"exterior_opaque": area_ext, "windows": area_win},
+    )

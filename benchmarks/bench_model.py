@@ -19,6 +19,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import platform
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from zonecast.estimator.idf import read_building
@@ -71,4 +72,4 @@ def main(path: str) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else "/work/shared/data/5ZoneAirCooled.idf")
+    main(sys.argv[1] if len(sys.argv) > 1 else str(Path(__file__).resolve().parents[1] / "configs" / "sites" / "nrel" / "5ZoneAirCooled.idf"))

@@ -51,7 +51,7 @@ class ModelData:
     def __len__(self) -> int:
         return len(self.times)
 
-    def rows(self, sel) -> "ModelData":
+    def rows(self, sel) -> ModelData:
         """A sub-span by boolean mask or slice; segments are recomputed."""
         idx = np.arange(len(self))[sel]
         times = self.times[idx]

@@ -15,8 +15,7 @@ from pathlib import Path
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 import yaml
-from pydantic import (BaseModel, ConfigDict, Field, ValidationError, field_validator,
-                      model_validator)
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from .units import check_unit
 
@@ -109,7 +108,8 @@ class Points(_Strict):
     @classmethod
     def _zones(cls, v):
         if not isinstance(v, dict):
-            raise ValueError("zone_temperature must map each model zone to a point or a list "
+            # pydantic turns only ValueError into a ValidationError with the field's location
+            raise ValueError(  # noqa: TRY004"zone_temperature must map each model zone to a point or a list "
                              "of points")
         out = {}
         for zone, pts in v.items():

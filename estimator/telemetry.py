@@ -13,6 +13,7 @@ are allowed and reported as contiguous segments; nothing is silently dropped.
 from __future__ import annotations
 
 import datetime as dt
+import itertools
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -85,7 +86,7 @@ def segments_of(times: pd.DatetimeIndex, step: dt.timedelta) -> list[tuple[int, 
         return []
     gaps = np.flatnonzero(np.diff(times.as_unit("ns").asi8) != int(step.total_seconds() * 1e9)) + 1
     bounds = [0, *gaps.tolist(), len(times)]
-    return list(zip(bounds[:-1], bounds[1:]))
+    return list(itertools.pairwise(bounds))
 
 
 @dataclass
@@ -148,7 +149,7 @@ class Telemetry:
                 out[:, j] = np.where(wsum > 0, np.nansum(vals * w, axis=1) / wsum, np.nan)
         return out
 
-    def slice(self, start, end) -> "Telemetry":
+    def slice(self, start, end) -> Telemetry:
         """Rows with start <= time < end (tz-aware bounds)."""
         sub = self.frame[(self.frame.index >= start) & (self.frame.index < end)]
         return Telemetry(sub, self.site, segments_of(sub.index, self.site.step),

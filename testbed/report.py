@@ -138,11 +138,12 @@ def write_report(run_dir: Path, out: Path) -> Path:
                     f"{np.nanstd(y[:, j]):.2f} | {gains / area:.1f} | "
                     f"{truth[f'reheat:zone:{z}'].mean() / area:.1f} |")
     lines = [f"# Virtual building {meta['building']}: campaign report", "",
-             f"Seed {meta['seed']}; EnergyPlus {meta['energyplus']}; weeks "
-             f"{', '.join(meta['weeks'])}; excitation weekends {', '.join(meta['excitation_weekends'])}.",
-             f"Simulation: EnergyPlus {meta['timings']['energyplus_s']:.1f} s, whole run "
-             f"{meta['timings']['total_s']:.1f} s. {len(tel.frame)} steps of 15 min in "
-             f"{len(tel.segments)} segments.", "",
+             (f"Seed {meta['seed']}; EnergyPlus {meta['energyplus']}; weeks "
+              f"{', '.join(meta['weeks'])}; excitation weekends "
+              f"{', '.join(meta['excitation_weekends'])}."),
+             (f"Simulation: EnergyPlus {meta['timings']['energyplus_s']:.1f} s, whole run "
+              f"{meta['timings']['total_s']:.1f} s. {len(tel.frame)} steps of 15 min in "
+              f"{len(tel.segments)} segments."), "",
              "| zone | rooms | floor area [m²] | mean T [°C] | std T [°C] | mean gains [W/m²] | mean reheat [W/m²] |",
              "|---|---|---|---|---|---|---|", *rows, ""]
     lines += [f"![{f}]({f})" for f in figs]

@@ -16,9 +16,9 @@ import shutil
 import sqlite3
 import subprocess
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pandas as pd
@@ -75,7 +75,7 @@ def _patch_expanded(expanded: str, cfg: BuildingConfig) -> str:
         return m.group(0).replace("autosize", f"{flow * 1.2 * CP_AIR * REHEAT_DELTA_T:.1f}", 1)
 
     out, n = re.subn(r"Coil:Heating:Electric,\s*\n\s*(\S+) Reheat Coil,[^;]*?autosize", reheat,
-                     expanded, flags=re.S)
+                     expanded, flags=re.DOTALL)
     if n != len(cfg.rooms):
         raise EnergyPlusError(f"expected {len(cfg.rooms)} reheat coils in the expanded IDF, found {n}")
     lo, sp_lo, hi, sp_hi = cfg.hvac.supply_reset
@@ -117,7 +117,7 @@ def _read_sql(sql: Path) -> pd.DataFrame:
         df = pd.read_sql_query(q, con)
     finally:
         con.close()
-    base = pd.to_datetime(dict(year=df.Year, month=df.Month, day=df.Day))
+    base = pd.to_datetime({"year": df.Year, "month": df.Month, "day": df.Day})
     end = base + pd.to_timedelta(df.Hour, unit="h") + pd.to_timedelta(df.Minute, unit="m")
     df["end"] = end
     df["key"] = df.KeyValue.str.upper() + "|" + df.Name
@@ -146,7 +146,8 @@ def simulate(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], out: P
     (work / "in.idf").write_text(idf)
     shutil.copy(out / SCHEDULE_FILE, work / SCHEDULE_FILE)
     progress("ExpandObjects")
-    r = subprocess.run([str(epdir / "ExpandObjects")], cwd=work, capture_output=True, text=True)
+    r = subprocess.run([str(epdir / "ExpandObjects")], cwd=work, capture_output=True, text=True,
+                       check=False)
     if r.returncode != 0 or not (work / "expanded.idf").is_file():
         raise EnergyPlusError(f"ExpandObjects failed: {r.stdout[-2000:]}{r.stderr[-2000:]}")
     expanded = _patch_expanded((work / "expanded.idf").read_text(), cfg)
@@ -154,7 +155,8 @@ def simulate(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], out: P
     progress("EnergyPlus")
     t0 = time.perf_counter()
     r = subprocess.run([str(epdir / "energyplus"), "-w", str(epdir / "WeatherData" / cfg.weather),
-                        "-d", str(work), str(out / "building.idf")], capture_output=True, text=True)
+                        "-d", str(work), str(out / "building.idf")], capture_output=True, text=True,
+                       check=False)
     t_ep = time.perf_counter() - t0
     err = (work / "eplusout.err").read_text(errors="replace") if (work / "eplusout.err").exists() else ""
     if r.returncode != 0 or "EnergyPlus Completed Successfully" not in err:

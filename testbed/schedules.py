@@ -64,7 +64,7 @@ def occupancy_profiles(cfg: BuildingConfig, days: pd.DatetimeIndex, seed: int) -
     for name, room in cfg.rooms.items():
         kind = cfg.kinds[room.kind]
         if kind.occupancy == "office":
-            n = int(round(kind.people_per_m2 * room.floor_area))
+            n = round(kind.people_per_m2 * room.floor_area)
             office[name] = office_occupancy(days, n, rng)
     mean_office = np.mean(list(office.values()), axis=0) if office else np.zeros((len(days), 96))
     n_days = len(days)

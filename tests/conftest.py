@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -32,7 +33,7 @@ def site_dict():
     return copy.deepcopy(SITE)
 
 
-def write_site(tmp_path, data) -> "Path":
+def write_site(tmp_path, data) -> Path:
     path = tmp_path / "site.yaml"
     path.write_text(yaml.safe_dump(data))
     return path

@@ -1,7 +1,7 @@
 from typer.testing import CliRunner
 
-from zonecast.cli import app
 from tests.conftest import telemetry_frame, write_site
+from zonecast.cli import app
 
 runner = CliRunner()
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import datetime as dt
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -16,10 +16,10 @@ testbed_app = typer.Typer(no_args_is_help=True,
                           help="The virtual building: EnergyPlus plays the real building.")
 app.add_typer(testbed_app, name="testbed")
 
-Disable = Annotated[Optional[list[str]], typer.Option(
+Disable = Annotated[list[str] | None, typer.Option(
     "--disable", help="Withhold an effect: reheat, infiltration, gains, gains.ZONE, "
                       "window_solar, sensor_noise, sensor_bias (repeatable).")]
-Set = Annotated[Optional[list[str]], typer.Option(
+Set = Annotated[list[str] | None, typer.Option(
     "--set", help="Set an effect: infiltration=SCALE, shgc=VALUE, sensor_noise=SIGMA, "
                   "sensor_resolution=DEGC, airflow_noise=REL, gains.ZONE=SCALE, bias.ZONE=DEGC "
                   "(repeatable).")]
@@ -71,7 +71,7 @@ def testbed_campaign(out: Annotated[Path, typer.Option(help="Output folder.")],
 def testbed_run(out: Annotated[Path, typer.Option(help="Output folder.")],
                 start: Annotated[str, typer.Option(help="First Monday, YYYY-MM-DD.")],
                 weeks: Annotated[int, typer.Option(min=1, max=50, help="Consecutive weeks.")] = 1,
-                excite: Annotated[Optional[list[str]], typer.Option(
+                excite: Annotated[list[str] | None, typer.Option(
                     help="Saturday (YYYY-MM-DD) whose weekend runs the excitation experiment "
                          "(repeatable).")] = None,
                 seed: Seed = 0, building: Building = "office6",
@@ -113,10 +113,10 @@ def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-
          seed: Seed = 0) -> None:
     """The main job on embedded defaults: run the virtual building's campaign and write a
     report with plots."""
+    from zonecast.testbed.config import load_config
+    from zonecast.testbed.effects import Effects
     from zonecast.testbed.report import write_report
     from zonecast.testbed.run import run_campaign
-    from zonecast.testbed.effects import Effects
-    from zonecast.testbed.config import load_config
     cfg = load_config("office6")
     with _progress() as prog:
         task = prog.add_task("campaign", total=None)

@@ -3,21 +3,21 @@
 from __future__ import annotations
 
 import json
-import os
 import sqlite3
 import subprocess
 from pathlib import Path
 
 import pytest
 
-DATA = Path(os.environ.get("ZONECAST_TEST_DATA", "/work/shared/data"))
+#: NREL's example inputs, vendored with provenance in configs/sites/nrel
+DATA = Path(__file__).resolve().parents[2] / "configs" / "sites" / "nrel"
 FIVE_ZONE = DATA / "5ZoneAirCooled.idf"
 SMALL_OFFICE = DATA / "RefBldgSmallOfficeNew2004_Chicago.idf"
 
 
 def _need(path: Path) -> Path:
     if not path.is_file():
-        pytest.skip(f"test building {path} not available (set ZONECAST_TEST_DATA)")
+        raise FileNotFoundError(f"test building {path} is missing from the repository")
     return path
 
 

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
-
 from zonecast.estimator.dataset import DISTURBANCES, model_data, zone_weights
 from zonecast.estimator.site import load_site
 from zonecast.estimator.telemetry import load_telemetry
+
 from tests.conftest import telemetry_frame, write_site
 
 

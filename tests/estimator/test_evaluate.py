@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-
 from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
 
 

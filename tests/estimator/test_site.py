@@ -1,8 +1,8 @@
 import datetime as dt
 
 import pytest
-
 from zonecast.estimator.site import SiteError, load_site
+
 from tests.conftest import write_site
 
 

@@ -1,10 +1,10 @@
 import numpy as np
 import pandas as pd
 import pytest
-
 from zonecast.estimator.site import load_site
 from zonecast.estimator.telemetry import TelemetryError, load_telemetry
 from zonecast.estimator.units import STANDARD_AIR_DENSITY
+
 from tests.conftest import telemetry_frame, write_site
 
 

@@ -1,5 +1,4 @@
 import pytest
-
 from zonecast.testbed.effects import parse_switches
 
 ZONES = ["NW", "NE", "W", "E", "S", "C"]

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import datetime as dt
+import itertools
 import sqlite3
 
 import numpy as np
 import pandas as pd
 import pytest
-
 from zonecast.estimator.site import load_site
 from zonecast.estimator.telemetry import load_telemetry
 from zonecast.testbed.config import load_config
@@ -158,6 +158,6 @@ def test_campaign_is_the_papers_data_set(tmp_path):
     starts = [local[a] for a, _ in tel.segments]
     assert all(s.day_of_week == 0 and s.hour == 0 for s in starts)
     assert starts[0].month == 9 and starts[-1].month == 6
-    assert all((b - a).days > 7 for a, b in zip(starts, starts[1:]))   # non-consecutive
+    assert all((b - a).days > 7 for a, b in itertools.pairwise(starts))   # non-consecutive
     seasons = {e.start.month for e in site.experiments}
     assert len(site.experiments) == 6 and {10, 4, 6} <= seasons

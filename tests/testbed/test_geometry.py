@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-
 from zonecast.testbed.config import load_config
 from zonecast.testbed.geometry import SIDES, plan_walls, wall_vertices, window_on
 

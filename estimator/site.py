@@ -109,8 +109,8 @@ class Points(_Strict):
     def _zones(cls, v):
         if not isinstance(v, dict):
             # pydantic turns only ValueError into a ValidationError with the field's location
-            raise ValueError(  # noqa: TRY004"zone_temperature must map each model zone to a point or a list "
-                             "of points")
+            msg = "zone_temperature must map each model zone to a point or a list of points"
+            raise ValueError(msg)  # noqa: TRY004
         out = {}
         for zone, pts in v.items():
             pts = pts if isinstance(pts, list) else [pts]

@@ -179,6 +179,8 @@ def _poa(prep: _Prepared, surface_tilt: float, surface_azimuth: float) -> pd.Dat
     if prep.sky_model != "isotropic" and prep.sun_down.any():
         iso = np.asarray(total("isotropic")["poa_sky_diffuse"], dtype=float)
         sky = np.where(prep.sun_down, iso, sky)
+    # no diffuse light -> no sky diffuse on any plane (Perez divides 0 by 0 there)
+    sky = np.where(prep.dhi <= 0.0, 0.0, sky)
     out = {}
     for name, comp in (("poa_direct", poa["poa_direct"]), ("poa_sky_diffuse", sky),
                        ("poa_ground_diffuse", poa["poa_ground_diffuse"])):

@@ -33,7 +33,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Self
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 from .ingest import parse_time
@@ -73,7 +73,7 @@ class PutResult(tuple):
     ``conflicts`` is the part of ``duplicates`` whose value differed.
     """
 
-    def __new__(cls, inserted: int, duplicates: int, conflicts: int = 0) -> PutResult:
+    def __new__(cls, inserted: int, duplicates: int, conflicts: int = 0) -> Self:
         self = super().__new__(cls, (inserted, duplicates))
         self.conflicts = conflicts
         return self
@@ -165,7 +165,7 @@ class Storage(ABC):
     #: Placeholder style of the driver ("?" for sqlite3, "%s" for psycopg).
     _param = "?"
     #: Versioned migrations: version -> DDL statements of this backend.
-    _migrations: dict[int, tuple[str, ...]] = {}
+    _migrations: ClassVar[dict[int, tuple[str, ...]]] = {}
 
     def __init__(self, url: str):
         self.url = url
@@ -431,7 +431,7 @@ class Storage(ABC):
                 self._conn.close()
                 self._conn = None
 
-    def __enter__(self) -> Storage:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -444,17 +444,17 @@ class Storage(ABC):
 class SQLiteStorage(Storage):
     """SQLite backend (WAL, ``synchronous=FULL``); see :func:`open_storage`."""
 
-    _migrations = {
+    _migrations: ClassVar[dict[int, tuple[str, ...]]] = {
         1: (
-            "CREATE TABLE readings (building TEXT NOT NULL, point TEXT NOT NULL, "
-            "time INTEGER NOT NULL, value REAL NOT NULL, received_at INTEGER NOT NULL, "
-            "PRIMARY KEY (building, point, time)) WITHOUT ROWID",
+            ("CREATE TABLE readings (building TEXT NOT NULL, point TEXT NOT NULL, "
+             "time INTEGER NOT NULL, value REAL NOT NULL, received_at INTEGER NOT NULL, "
+             "PRIMARY KEY (building, point, time)) WITHOUT ROWID"),
             "CREATE INDEX readings_by_time ON readings (building, time)",
-            "CREATE TABLE dead_letters (id INTEGER PRIMARY KEY AUTOINCREMENT, building TEXT, "
-            "topic TEXT NOT NULL, payload TEXT NOT NULL, reason TEXT NOT NULL, "
-            "received_at INTEGER NOT NULL)",
-            "CREATE TABLE checkpoints (building TEXT PRIMARY KEY, time INTEGER NOT NULL, "
-            "state BLOB NOT NULL, saved_at INTEGER NOT NULL)",
+            ("CREATE TABLE dead_letters (id INTEGER PRIMARY KEY AUTOINCREMENT, building TEXT, "
+             "topic TEXT NOT NULL, payload TEXT NOT NULL, reason TEXT NOT NULL, "
+             "received_at INTEGER NOT NULL)"),
+            ("CREATE TABLE checkpoints (building TEXT PRIMARY KEY, time INTEGER NOT NULL, "
+             "state BLOB NOT NULL, saved_at INTEGER NOT NULL)"),
         ),
     }
 
@@ -521,17 +521,17 @@ class PostgresStorage(Storage):
     """PostgreSQL backend (psycopg 3); see :func:`open_storage`."""
 
     _param = "%s"
-    _migrations = {
+    _migrations: ClassVar[dict[int, tuple[str, ...]]] = {
         1: (
-            "CREATE TABLE readings (building TEXT NOT NULL, point TEXT NOT NULL, "
-            "time TIMESTAMPTZ NOT NULL, value DOUBLE PRECISION NOT NULL, "
-            "received_at TIMESTAMPTZ NOT NULL, PRIMARY KEY (building, point, time))",
+            ("CREATE TABLE readings (building TEXT NOT NULL, point TEXT NOT NULL, "
+             "time TIMESTAMPTZ NOT NULL, value DOUBLE PRECISION NOT NULL, "
+             "received_at TIMESTAMPTZ NOT NULL, PRIMARY KEY (building, point, time))"),
             "CREATE INDEX readings_by_time ON readings (building, time)",
-            "CREATE TABLE dead_letters (id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY, "
-            "building TEXT, topic TEXT NOT NULL, payload TEXT NOT NULL, reason TEXT NOT NULL, "
-            "received_at TIMESTAMPTZ NOT NULL)",
-            "CREATE TABLE checkpoints (building TEXT PRIMARY KEY, time TIMESTAMPTZ NOT NULL, "
-            "state BYTEA NOT NULL, saved_at TIMESTAMPTZ NOT NULL)",
+            ("CREATE TABLE dead_letters (id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY, "
+             "building TEXT, topic TEXT NOT NULL, payload TEXT NOT NULL, reason TEXT NOT NULL, "
+             "received_at TIMESTAMPTZ NOT NULL)"),
+            ("CREATE TABLE checkpoints (building TEXT PRIMARY KEY, time TIMESTAMPTZ NOT NULL, "
+             "state BYTEA NOT NULL, saved_at TIMESTAMPTZ NOT NULL)"),
         ),
     }
 

@@ -323,14 +323,15 @@ def _check_value(point: str, value: Any, spec: PointSpec) -> float:
     return number
 
 
-def _loads(payload: bytes | str) -> Any:
+def _loads(payload: bytes | str, building: str) -> Any:
     # NaN/Infinity/-Infinity literals (not strict JSON, but Python and some
     # gateways emit them) parse to floats so they are rejected as not_finite.
     try:
-        return json.loads(payload, parse_constant=float)
-    except (ValueError, UnicodeDecodeError) as exc:
+        text = payload.decode("utf-8") if isinstance(payload, bytes) else payload
+        return json.loads(text, parse_constant=float)
+    except ValueError as exc:  # UnicodeDecodeError and JSONDecodeError
         raise MessageRejected(Reason.MALFORMED_JSON,
-                              f"payload is not valid UTF-8 JSON ({exc})") from None
+                              f"payload is not valid UTF-8 JSON ({exc})", building) from None
 
 
 def validate_message(
@@ -399,7 +400,7 @@ def validate_message(
                               f"building {building!r} has no point catalogue: register the "
                               "building or fix the topic", building)
     now = datetime.now(UTC) if now is None else now
-    body = _loads(payload)
+    body = _loads(payload, building)
 
     def reject(reason: Reason, detail: str) -> MessageRejected:
         return MessageRejected(reason, detail, building)

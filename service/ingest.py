@@ -68,6 +68,8 @@ class Reason(str, Enum):
     UNPARSABLE_TIME = "unparsable_time"
     TIME_WITHOUT_OFFSET = "time_without_offset"
     FUTURE_TIME = "future_time"
+    #: Passed validation but storage refused it (a bug: please report it).
+    STORAGE_REJECTED = "storage_rejected"
 
     def __str__(self) -> str:  # "unknown_point", not "Reason.UNKNOWN_POINT"
         return self.value

@@ -90,6 +90,7 @@ class Broker:
     host: str
     port: int
     mqtt5: bool  # False: MQTT 3.1.1 only
+    username: str  # clients log in with this name (any password)
     process: subprocess.Popen
     log: Path
 
@@ -145,14 +146,16 @@ def start_broker(workdir: Path) -> Broker:
         conf.write_text(
             "listeners:\n  default:\n    type: tcp\n"
             f"    bind: 127.0.0.1:{port}\n"
+            # amqtt drops the session of an anonymous client on disconnect:
+            # require a user name (any) so persistent sessions survive.
             "plugins:\n  amqtt.plugins.authentication.AnonymousAuthPlugin:\n"
-            "    allow_anonymous: true\n")
+            "    allow_anonymous: false\n")
         cmd = [sys.executable, "-m", "amqtt.scripts.broker_script", "-c", str(conf)]
         kind, mqtt5 = "amqtt", False
     with open(log, "wb") as out:
         proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, cwd=workdir)
     _wait_listening(port, proc, log)
-    return Broker(kind, "127.0.0.1", port, mqtt5, proc, log)
+    return Broker(kind, "127.0.0.1", port, mqtt5, "zonecast-test", proc, log)
 
 
 @pytest.fixture(scope="session")

@@ -29,7 +29,6 @@ from pathlib import Path
 
 import paho.mqtt.client as mqtt
 from paho.mqtt.enums import CallbackAPIVersion
-
 from zonecast.service.ingest import PointSpec
 from zonecast.service.mqtt import Ingester, MqttSettings
 from zonecast.service.storage import open_storage

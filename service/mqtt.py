@@ -406,18 +406,19 @@ class Ingester:
                         RejectedReading(None, Reason.STORAGE_REJECTED, str(exc))])
                     self._count_reason(Reason.STORAGE_REJECTED.value)
                     results += self._commit([(message, None, rows, notice)])
-        if self._aborted:
+        client = self._client
+        if self._aborted or client is None:
             return  # simulated crash: committed but never acknowledged
         letters = 0
         for message, _, rows, notice in checked:
             letters += len(rows)
             if notice is not None:
-                self._client.publish(dead_letter_topic(notice["building"],
+                client.publish(dead_letter_topic(notice["building"],
                                                        self.settings.topic_prefix),
                                      json.dumps(notice), qos=1)
         for message, _ in batch:
             if message.qos > 0:
-                self._client.ack(message.mid, message.qos)
+                client.ack(message.mid, message.qos)
         self._count("messages_stored", len(batch))
         self._count("dead_letters", letters)
         self._count("readings_stored", sum(r.inserted for r in results))

@@ -124,7 +124,15 @@ def _utc(value: Any, what: str) -> datetime:
 def _excerpt(payload: bytes | str) -> str:
     if isinstance(payload, bytes | bytearray | memoryview):
         payload = bytes(payload[: EXCERPT_CHARS * 4]).decode("utf-8", errors="replace")
-    return payload[:EXCERPT_CHARS]
+    # PostgreSQL text cannot hold NUL: keep the excerpt storable on every backend.
+    return payload[:EXCERPT_CHARS].replace("\x00", "\ufffd")
+
+
+def _check_name(value: Any, what: str) -> str:
+    if not isinstance(value, str) or not value or "\x00" in value:
+        raise ValueError(f"{what} must be a non-empty string without NUL characters, "
+                         f"got {value!r}")
+    return value
 
 
 def _unique_rows(rows: Iterable[Sequence[Any]]) -> tuple[list[tuple[str, datetime, float]], int, int]:
@@ -140,8 +148,7 @@ def _unique_rows(rows: Iterable[Sequence[Any]]) -> tuple[list[tuple[str, datetim
             point, when, value = row
         except (TypeError, ValueError):
             raise ValueError(f"reading {row!r} must be a (point, time, value) triple") from None
-        if not isinstance(point, str) or not point:
-            raise ValueError(f"reading {row!r}: point must be a non-empty string")
+        _check_name(point, f"reading {row!r}: point")
         if isinstance(value, bool) or not isinstance(value, int | float) \
                 or not math.isfinite(value):
             raise ValueError(f"reading {row!r}: value must be a finite number; omit missing "
@@ -276,8 +283,7 @@ class Storage(ABC):
         received = _utc(received_at or datetime.now(UTC), "received_at")
         prepared = []
         for building, rows in batches:
-            if not isinstance(building, str) or not building:
-                raise ValueError(f"building must be a non-empty string, got {building!r}")
+            _check_name(building, "building")
             prepared.append((building, *_unique_rows(rows)))
         letters = [self._dead_letter_row(**kw) for kw in dead_letters]
         results = []
@@ -343,7 +349,8 @@ class Storage(ABC):
                          building: str | None = None,
                          received_at: datetime | None = None) -> tuple[Any, ...]:
         received = _utc(received_at or datetime.now(UTC), "received_at")
-        return (building, topic, _excerpt(payload), str(reason), self._to_db(received))
+        return (building, _excerpt(topic), _excerpt(payload), _excerpt(str(reason)),
+                self._to_db(received))
 
     def _insert_dead_letters(self, cur: Any, rows: list[tuple[Any, ...]]) -> None:
         if rows:

@@ -102,6 +102,7 @@ def test_buildings_are_separate(storage):
     (("T", T0, math.nan), "finite"),
     (("T", T0, "21"), "finite number"),
     (("", T0, 1.0), "point"),
+    (("T\x00", T0, 1.0), "NUL"),
     (("T", T0), "triple"),
 ])
 def test_invalid_rows_raise_and_store_nothing(storage, bad, match):
@@ -133,6 +134,11 @@ def test_dead_letters_newest_first_and_excerpted(storage):
     assert letters[0].received_at.tzinfo is not None
     assert [d.topic for d in storage.dead_letters(limit=1)] == ["zonecast/b/telemetry"]
     assert len(storage.dead_letters(building="b")) == 1
+
+
+def test_dead_letter_with_nul_bytes_is_storable(storage):
+    storage.put_dead_letter("zonecast/b/telemetry", b"{\x00 bad", "malformed_json: x\x00")
+    assert storage.dead_letters()[0].payload == "{\ufffd bad"
 
 
 def test_checkpoints_roundtrip_latest_wins(storage):

@@ -219,3 +219,18 @@ def test_put_result_reads_like_a_tuple():
     inserted, duplicates = r
     assert (inserted, duplicates, r.conflicts) == (3, 2, 1) and r == (3, 2)
     assert "conflicts=1" in repr(r)
+
+
+def test_postgres_reconnects_after_connection_loss(postgres_url):
+    import psycopg
+
+    store = open_storage(postgres_url)
+    store.put_readings("b", rows_at(1))
+    pid = store._conn.info.backend_pid
+    base = postgres_url.split("?")[0]
+    with psycopg.connect(base, autocommit=True) as admin:
+        admin.execute("SELECT pg_terminate_backend(%s)", (pid,))
+    with pytest.raises(psycopg.OperationalError):  # the write in flight fails...
+        store.put_readings("b", rows_at(2))
+    assert store.put_readings("b", rows_at(2)) == (1, 1)  # ...the retry reconnects
+    store.close()

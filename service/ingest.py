@@ -1,0 +1,477 @@
+"""Validate telemetry messages from a building management system (BMS).
+
+Pure functions: no network, no database, no clock except the ``now`` a caller
+passes (it defaults to the current UTC time). The MQTT ingester
+(:mod:`zonecast.service.mqtt`) calls :func:`validate_message` for every message
+it receives and stores what comes back; ``docs/service.md`` is the user-facing
+description of the topic scheme, payload forms and rejection reasons.
+
+Topic scheme (``prefix`` defaults to ``zonecast``)::
+
+    <prefix>/<building>/telemetry        one or many points in one JSON object
+    <prefix>/<building>/points/<point>   one reading of one point
+
+Rejections come in two sizes. A *message* is rejected as a whole
+(:class:`MessageRejected`) when nothing in it can be trusted: the payload is too
+large or not JSON, the topic or building is unknown, the message-level time is
+bad, or it holds no readings or too many. Otherwise each reading is judged on its
+own: good readings are kept and every bad one is returned in
+:attr:`ValidatedMessage.rejected` with its reason, so one broken sensor does not
+discard a whole floor's readings and nothing is dropped silently.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import UTC, datetime, timedelta
+from enum import Enum
+from typing import Any, NamedTuple
+
+__all__ = [
+    "DEFAULT_PREFIX",
+    "IngestLimits",
+    "MessageRejected",
+    "PointCatalogue",
+    "PointKind",
+    "PointSpec",
+    "Reading",
+    "Reason",
+    "RejectedReading",
+    "ValidatedMessage",
+    "parse_time",
+    "parse_topic",
+    "validate_message",
+]
+
+DEFAULT_PREFIX = "zonecast"
+
+
+class Reason(str, Enum):
+    """Why a message or a reading was rejected (the value is the stable code)."""
+
+    BAD_TOPIC = "bad_topic"
+    PAYLOAD_TOO_LARGE = "payload_too_large"
+    MALFORMED_JSON = "malformed_json"
+    NOT_AN_OBJECT = "not_an_object"
+    UNKNOWN_BUILDING = "unknown_building"
+    NO_READINGS = "no_readings"
+    TOO_MANY_READINGS = "too_many_readings"
+    MALFORMED_READING = "malformed_reading"
+    UNKNOWN_POINT = "unknown_point"
+    WRONG_TYPE = "wrong_type"
+    NOT_FINITE = "not_finite"
+    ABSURD_VALUE = "absurd_value"
+    MISSING_TIME = "missing_time"
+    UNPARSABLE_TIME = "unparsable_time"
+    TIME_WITHOUT_OFFSET = "time_without_offset"
+    FUTURE_TIME = "future_time"
+    #: Passed validation but storage refused it (a bug: please report it).
+    STORAGE_REJECTED = "storage_rejected"
+
+    def __str__(self) -> str:  # "unknown_point", not "Reason.UNKNOWN_POINT"
+        return self.value
+
+
+class PointKind(str, Enum):
+    """What a point measures; selects the default plausible range."""
+
+    TEMPERATURE = "temperature"
+    AIRFLOW = "airflow"
+    IRRADIANCE = "irradiance"
+    OTHER = "other"
+
+
+#: Default plausible range per kind, in the kind's SI unit (degC, kg/s, W/m2).
+DEFAULT_RANGES: dict[PointKind, tuple[float, float]] = {
+    PointKind.TEMPERATURE: (-50.0, 80.0),
+    PointKind.AIRFLOW: (0.0, 100.0),
+    PointKind.IRRADIANCE: (0.0, 1500.0),
+    PointKind.OTHER: (-1e12, 1e12),
+}
+_DEFAULT_UNITS = {
+    PointKind.TEMPERATURE: "degC",
+    PointKind.AIRFLOW: "kg/s",
+    PointKind.IRRADIANCE: "W/m2",
+    PointKind.OTHER: "",
+}
+
+
+@dataclass(frozen=True)
+class PointSpec:
+    """What one telemetry point is and which values are plausible.
+
+    Parameters
+    ----------
+    kind : PointKind or str
+        ``temperature``, ``airflow``, ``irradiance`` or ``other``.
+    unit : str, optional
+        Unit of the values on the wire (documentation only; no conversion
+        happens at ingest). Defaults to the kind's SI unit.
+    low, high : float, optional
+        Plausible range [unit], inclusive. Values outside are rejected as
+        ``absurd_value``. Default: the kind's range in :data:`DEFAULT_RANGES`
+        (temperature -50...80 degC).
+    """
+
+    kind: PointKind = PointKind.OTHER
+    unit: str | None = None
+    low: float | None = None
+    high: float | None = None
+
+    def __post_init__(self) -> None:
+        try:
+            kind = PointKind(self.kind)
+        except ValueError:
+            choices = ", ".join(k.value for k in PointKind)
+            raise ValueError(f"unknown point kind {self.kind!r}: use one of {choices}") from None
+        low, high = DEFAULT_RANGES[kind]
+        object.__setattr__(self, "kind", kind)
+        object.__setattr__(self, "unit", _DEFAULT_UNITS[kind] if self.unit is None else self.unit)
+        object.__setattr__(self, "low", low if self.low is None else float(self.low))
+        object.__setattr__(self, "high", high if self.high is None else float(self.high))
+        if not self.low <= self.high:
+            raise ValueError(f"plausible range [{self.low}, {self.high}] is empty: low must be <= high")
+
+
+#: A building's points: BMS point name -> its spec.
+PointCatalogue = Mapping[str, PointSpec]
+
+
+@dataclass(frozen=True)
+class IngestLimits:
+    """Limits that protect storage from broken or hostile publishers.
+
+    Parameters
+    ----------
+    max_payload_bytes : int
+        Largest accepted payload [bytes]; default 64 KiB.
+    max_readings : int
+        Most readings accepted in one message; default 5000.
+    max_future : timedelta
+        How far ahead of ``now`` a timestamp may lie (clock skew allowance);
+        default 10 minutes.
+    """
+
+    max_payload_bytes: int = 64 * 1024
+    max_readings: int = 5000
+    max_future: timedelta = timedelta(minutes=10)
+
+
+class Reading(NamedTuple):
+    """One accepted reading: ``(point, time, value)``; ``time`` is tz-aware UTC."""
+
+    point: str
+    time: datetime
+    value: float
+
+
+@dataclass(frozen=True)
+class RejectedReading:
+    """One reading that failed validation inside an otherwise accepted message."""
+
+    point: str | None
+    reason: Reason
+    detail: str
+
+
+@dataclass(frozen=True)
+class ValidatedMessage:
+    """Result of validating one message whose envelope was accepted."""
+
+    building: str
+    readings: tuple[Reading, ...]
+    rejected: tuple[RejectedReading, ...] = field(default=())
+
+
+class MessageRejected(ValueError):
+    """A whole message was rejected.
+
+    Attributes
+    ----------
+    reason : Reason
+        Stable code, e.g. ``malformed_json``.
+    detail : str
+        What was wrong and what to fix.
+    building : str or None
+        The building named by the topic, when the topic could be read.
+    """
+
+    def __init__(self, reason: Reason, detail: str, building: str | None = None):
+        super().__init__(f"{reason.value}: {detail}")
+        self.reason = reason
+        self.detail = detail
+        self.building = building
+
+
+class _Bad(Exception):
+    """Internal: one reading failed (carries reason and detail)."""
+
+    def __init__(self, reason: Reason, detail: str):
+        super().__init__(detail)
+        self.reason = reason
+        self.detail = detail
+
+
+def parse_topic(topic: str, prefix: str = DEFAULT_PREFIX) -> tuple[str, str | None]:
+    """Split a telemetry topic into building and point.
+
+    Parameters
+    ----------
+    topic : str
+        ``<prefix>/<building>/telemetry`` or ``<prefix>/<building>/points/<point>``.
+        A point name may itself contain ``/`` (everything after ``points/``).
+    prefix : str
+        First topic level.
+
+    Returns
+    -------
+    (building, point)
+        ``point`` is None for the ``telemetry`` form.
+
+    Raises
+    ------
+    MessageRejected
+        ``bad_topic`` when the topic follows neither form.
+    """
+    parts = topic.split("/")
+    if len(parts) >= 3 and parts[0] == prefix and parts[1]:
+        building = parts[1]
+        if len(parts) == 3 and parts[2] == "telemetry":
+            return building, None
+        point = "/".join(parts[3:])
+        if parts[2] == "points" and point:
+            return building, point
+    raise MessageRejected(
+        Reason.BAD_TOPIC,
+        f"topic {topic!r} is not {prefix}/<building>/telemetry or "
+        f"{prefix}/<building>/points/<point>",
+        building=parts[1] if len(parts) >= 2 and parts[0] == prefix and parts[1] else None,
+    )
+
+
+def parse_time(value: Any, *, now: datetime | None = None,
+               max_future: timedelta | None = None) -> datetime:
+    """Parse an ISO-8601 timestamp that carries a UTC offset, to UTC.
+
+    Parameters
+    ----------
+    value : str or datetime
+        e.g. ``"2015-04-11T10:00:00-07:00"`` or ``"2015-04-11T17:00:00Z"``.
+    now : datetime, optional
+        Reference time for the future check (tz-aware).
+    max_future : timedelta, optional
+        With ``now``: the latest accepted time is ``now + max_future``.
+
+    Returns
+    -------
+    datetime
+        tz-aware, in UTC.
+
+    Raises
+    ------
+    ValueError
+        With ``reason`` attribute ``missing_time``, ``unparsable_time``,
+        ``time_without_offset`` or ``future_time``.
+    """
+    try:
+        return _parse_time(value, now, max_future)
+    except _Bad as bad:
+        err = ValueError(f"{bad.reason.value}: {bad.detail}")
+        err.reason = bad.reason  # type: ignore[attr-defined]
+        raise err from None
+
+
+def _parse_time(value: Any, now: datetime | None, max_future: timedelta | None) -> datetime:
+    if value is None:
+        raise _Bad(Reason.MISSING_TIME, 'no "time": add an ISO-8601 time with UTC offset')
+    if isinstance(value, datetime):
+        parsed = value
+    elif isinstance(value, str):
+        try:
+            parsed = datetime.fromisoformat(value.strip())
+        except ValueError:
+            raise _Bad(Reason.UNPARSABLE_TIME,
+                       f"time {value!r} is not ISO-8601, e.g. 2015-04-11T10:00:00-07:00") from None
+    else:
+        raise _Bad(Reason.UNPARSABLE_TIME,
+                   f"time must be an ISO-8601 string, got {type(value).__name__}")
+    if parsed.tzinfo is None or parsed.utcoffset() is None:
+        raise _Bad(Reason.TIME_WITHOUT_OFFSET,
+                   f"time {str(value)!r} has no UTC offset: append Z or +HH:MM")
+    parsed = parsed.astimezone(UTC)
+    if now is not None and max_future is not None and parsed > now + max_future:
+        raise _Bad(Reason.FUTURE_TIME,
+                   f"time {parsed.isoformat()} is more than {max_future} ahead of "
+                   f"{now.astimezone(UTC).isoformat()}: check the publisher's clock")
+    return parsed
+
+
+def _check_value(point: str, value: Any, spec: PointSpec) -> float:
+    # bool is an int subclass in Python but never a measurement.
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _Bad(Reason.WRONG_TYPE,
+                   f"point {point!r}: value {value!r} is a {type(value).__name__}, expected a number")
+    number = float(value)
+    if not math.isfinite(number):
+        raise _Bad(Reason.NOT_FINITE, f"point {point!r}: value {value!r} is not finite; "
+                   "omit the reading when there is no measurement")
+    if not spec.low <= number <= spec.high:
+        raise _Bad(Reason.ABSURD_VALUE,
+                   f"point {point!r}: {number:g} {spec.unit} is outside the plausible range "
+                   f"[{spec.low:g}, {spec.high:g}] for a {spec.kind.value} point")
+    return number
+
+
+def _loads(payload: bytes | str, building: str) -> Any:
+    # NaN/Infinity/-Infinity literals (not strict JSON, but Python and some
+    # gateways emit them) parse to floats so they are rejected as not_finite.
+    try:
+        text = payload.decode("utf-8") if isinstance(payload, bytes) else payload
+        return json.loads(text, parse_constant=float)
+    except ValueError as exc:  # UnicodeDecodeError and JSONDecodeError
+        raise MessageRejected(Reason.MALFORMED_JSON,
+                              f"payload is not valid UTF-8 JSON ({exc})", building) from None
+
+
+def validate_message(
+    topic: str,
+    payload: bytes | str,
+    catalogues: Mapping[str, PointCatalogue],
+    *,
+    now: datetime | None = None,
+    limits: IngestLimits = IngestLimits(),
+    prefix: str = DEFAULT_PREFIX,
+    properties: Mapping[str, str] | None = None,
+) -> ValidatedMessage:
+    """Validate one telemetry message.
+
+    Parameters
+    ----------
+    topic : str
+        MQTT topic (see :func:`parse_topic`).
+    payload : bytes or str
+        Message body. Accepted forms:
+
+        - telemetry, map form: ``{"time": T, "readings": {point: value, ...}}``
+        - telemetry, batch form: ``{"readings": [{"point": P, "time": T, "value": V}, ...]}``
+          (an item without ``time`` takes the top-level ``time`` if any)
+        - point topic, object form: ``{"time": T, "value": V}``
+        - point topic, bare form: a JSON number ``V``; its time comes from the
+          MQTT v5 user property ``time`` (``properties["time"]``).
+
+        ``T`` is ISO-8601 with a UTC offset; ``V`` is a JSON number.
+    catalogues : Mapping[str, PointCatalogue]
+        Known buildings -> their point catalogues.
+    now : datetime, optional
+        Reference time for the future check; default: current UTC time.
+    limits : IngestLimits
+        Size, count and clock-skew limits.
+    prefix : str
+        First topic level.
+    properties : Mapping[str, str], optional
+        MQTT v5 user properties of the message.
+
+    Returns
+    -------
+    ValidatedMessage
+        Accepted readings (UTC) and the readings rejected one by one.
+
+    Raises
+    ------
+    MessageRejected
+        When the message as a whole is unusable; see :class:`Reason`.
+    """
+    size = len(payload.encode() if isinstance(payload, str) else payload)
+    building: str | None = None
+    try:
+        building, topic_point = parse_topic(topic, prefix)
+    except MessageRejected as rej:
+        building = rej.building
+        if size <= limits.max_payload_bytes:
+            raise
+    if size > limits.max_payload_bytes:
+        raise MessageRejected(Reason.PAYLOAD_TOO_LARGE,
+                              f"payload is {size} bytes, the limit is {limits.max_payload_bytes}: "
+                              "split it into several messages", building)
+    catalogue = catalogues.get(building)
+    if catalogue is None:
+        raise MessageRejected(Reason.UNKNOWN_BUILDING,
+                              f"building {building!r} has no point catalogue: register the "
+                              "building or fix the topic", building)
+    now = datetime.now(UTC) if now is None else now
+    body = _loads(payload, building)
+
+    def reject(reason: Reason, detail: str) -> MessageRejected:
+        return MessageRejected(reason, detail, building)
+
+    def message_time(raw: Any) -> datetime:
+        try:
+            return _parse_time(raw, now, limits.max_future)
+        except _Bad as bad:
+            raise reject(bad.reason, bad.detail) from None
+
+    # Normalise every form to a list of (point, raw time, raw value) triples;
+    # a per-item structural problem becomes a RejectedReading.
+    items: list[tuple[str, Any, Any]] = []
+    rejected: list[RejectedReading] = []
+    if topic_point is not None:
+        if isinstance(body, dict):
+            if "value" not in body:
+                raise reject(Reason.NO_READINGS, 'point payload has no "value"')
+            items.append((topic_point, message_time(body.get("time")), body["value"]))
+        elif isinstance(body, (int, float)) and not isinstance(body, bool):
+            when = (properties or {}).get("time")
+            items.append((topic_point, message_time(when), body))
+        else:
+            raise reject(Reason.NOT_AN_OBJECT,
+                         'point payload must be {"time": ..., "value": ...} or a bare number '
+                         f"with an MQTT v5 user property 'time', got {type(body).__name__}")
+    else:
+        if not isinstance(body, dict):
+            raise reject(Reason.NOT_AN_OBJECT,
+                         f"telemetry payload must be a JSON object, got {type(body).__name__}")
+        raw = body.get("readings")
+        if not raw:
+            raise reject(Reason.NO_READINGS,
+                         'no "readings": send {"time": ..., "readings": {point: value}} or '
+                         '{"readings": [{"point": ..., "time": ..., "value": ...}]}')
+        if not isinstance(raw, (dict, list)):
+            raise reject(Reason.NOT_AN_OBJECT,
+                         f'"readings" must be an object or a list, got {type(raw).__name__}')
+        if len(raw) > limits.max_readings:
+            raise reject(Reason.TOO_MANY_READINGS,
+                         f"{len(raw)} readings in one message, the limit is "
+                         f"{limits.max_readings}: split it")
+        if isinstance(raw, dict):
+            when = message_time(body.get("time"))
+            items.extend((str(point), when, value) for point, value in raw.items())
+        else:
+            shared = message_time(body["time"]) if body.get("time") is not None else None
+            for i, item in enumerate(raw):
+                if not isinstance(item, dict) or not isinstance(item.get("point"), str) \
+                        or "value" not in item:
+                    rejected.append(RejectedReading(
+                        item.get("point") if isinstance(item, dict) else None,
+                        Reason.MALFORMED_READING,
+                        f'readings[{i}] must be {{"point": str, "time": str, "value": number}}'))
+                    continue
+                items.append((item["point"], item.get("time", shared), item["value"]))
+
+    accepted: list[Reading] = []
+    for point, when, value in items:
+        try:
+            spec = catalogue.get(point)
+            if spec is None:
+                raise _Bad(Reason.UNKNOWN_POINT,
+                           f"point {point!r} is not in the catalogue of building {building!r}: "
+                           "add it or fix the point name")
+            number = _check_value(point, value, spec)
+            if not isinstance(when, datetime):
+                when = _parse_time(when, now, limits.max_future)
+            accepted.append(Reading(point, when, number))
+        except _Bad as bad:
+            rejected.append(RejectedReading(point, bad.reason, bad.detail))
+    return ValidatedMessage(building, tuple(accepted), tuple(rejected))

@@ -1,0 +1,452 @@
+"""MQTT ingester: BMS telemetry -> validation -> durable storage -> acknowledgement.
+
+Delivery contract (see ``docs/service.md``):
+
+- QoS 1 subscription on a persistent session (MQTT v5 ``clean_start=False``
+  with a session expiry interval, or MQTT 3.1.1 ``clean_session=False``) under
+  a fixed client id, so the broker keeps queueing while the ingester is down.
+- Manual acknowledgement: a message's PUBACK is sent only after the readings
+  it carries, or the dead letter recording why it was rejected, are committed
+  to storage. A crash before the commit leaves the message unacknowledged and
+  the broker delivers it again on reconnection; storage is idempotent, so a
+  redelivery after the commit but before the PUBACK adds nothing.
+- Rejected messages and readings go to the ``dead_letters`` table and to the
+  topic ``<prefix>/<building>/deadletter``; a bad message never stops ingest.
+
+Threads: paho's network thread only queues incoming messages; one worker
+thread validates, commits a group of queued messages in one transaction (one
+disk sync for many messages), publishes dead letters and acknowledges, in the
+order the messages arrived.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+from collections import Counter
+from collections.abc import Mapping
+from datetime import UTC, datetime, timedelta
+from typing import Any, Literal, Self
+
+from pydantic import BaseModel, Field, SecretStr
+
+from .ingest import (
+    DEFAULT_PREFIX,
+    IngestLimits,
+    MessageRejected,
+    PointCatalogue,
+    Reason,
+    RejectedReading,
+    validate_message,
+)
+from .storage import Storage
+
+__all__ = ["Ingester", "MqttSettings", "TLSSettings", "dead_letter_topic"]
+
+log = logging.getLogger(__name__)
+
+
+class TLSSettings(BaseModel):
+    """TLS towards the broker.
+
+    Parameters
+    ----------
+    ca_certs : str, optional
+        CA bundle file; default: the system's trusted CAs.
+    certfile, keyfile : str, optional
+        Client certificate and key for mutual TLS.
+    insecure : bool
+        Skip the broker hostname check (testing only).
+    """
+
+    ca_certs: str | None = None
+    certfile: str | None = None
+    keyfile: str | None = None
+    insecure: bool = False
+
+
+class MqttSettings(BaseModel):
+    """Connection, session and validation settings of the ingester.
+
+    Parameters
+    ----------
+    host, port : str, int
+        Broker address.
+    client_id : str
+        FIXED client id: the broker keys the persistent session on it, so a
+        restarted ingester receives what it missed. One id per ingester.
+    username, password : str, optional
+        Broker credentials.
+    tls : TLSSettings, optional
+        Enable TLS (use port 8883 on most brokers).
+    protocol : {"5", "3.1.1"}
+        MQTT version. "3.1.1" for brokers without v5 (e.g. amqtt); the bare
+        number point payload needs v5 (its time is a user property).
+    session_expiry : int
+        MQTT v5: how long the broker keeps the session while the ingester is
+        disconnected [s]; default 7 days. (3.1.1 sessions do not expire unless
+        the broker is configured so.)
+    keepalive : int
+        [s].
+    receive_maximum : int
+        MQTT v5: most unacknowledged messages the broker may send at once.
+    batch_max_messages : int
+        Most messages committed in one storage transaction.
+    topic_prefix : str
+        First topic level (``zonecast``).
+    max_payload_bytes, max_readings, max_future : int, int, float
+        Validation limits, see :class:`~zonecast.service.ingest.IngestLimits`
+        (``max_future`` in seconds).
+    """
+
+    host: str = "127.0.0.1"
+    port: int = Field(1883, ge=1, le=65535)
+    client_id: str = Field("zonecast-ingest", min_length=1)
+    username: str | None = None
+    password: SecretStr | None = None
+    tls: TLSSettings | None = None
+    protocol: Literal["5", "3.1.1"] = "5"
+    session_expiry: int = Field(7 * 24 * 3600, ge=1)
+    keepalive: int = Field(30, ge=5)
+    receive_maximum: int = Field(100, ge=1, le=65535)
+    batch_max_messages: int = Field(100, ge=1)
+    topic_prefix: str = DEFAULT_PREFIX
+    max_payload_bytes: int = Field(64 * 1024, ge=1)
+    max_readings: int = Field(5000, ge=1)
+    max_future: float = Field(600.0, ge=0)
+
+    @property
+    def limits(self) -> IngestLimits:
+        """The validation limits as :class:`IngestLimits`."""
+        return IngestLimits(self.max_payload_bytes, self.max_readings,
+                            timedelta(seconds=self.max_future))
+
+
+def dead_letter_topic(building: str | None, prefix: str = DEFAULT_PREFIX) -> str:
+    """``<prefix>/<building>/deadletter``, or ``<prefix>/deadletter`` without a building."""
+    return f"{prefix}/{building}/deadletter" if building else f"{prefix}/deadletter"
+
+
+class _Stopped(Exception):
+    """Internal: the ingester is stopping while storage is unavailable."""
+
+
+class Ingester:
+    """Subscribe to BMS telemetry and store it durably.
+
+    Parameters
+    ----------
+    settings : MqttSettings
+        Broker, session and validation settings.
+    storage : Storage
+        Where readings and dead letters go (see :func:`open_storage`).
+    catalogues : Mapping[str, PointCatalogue]
+        Known buildings -> point catalogues. Read on every message, so a
+        mutable mapping may be updated while running.
+
+    Examples
+    --------
+    >>> with Ingester(MqttSettings(), open_storage(), {"office6": catalogue}) as ing:
+    ...     ing.wait_ready(10)
+    ...     ...  # runs until the block ends; ing.counters() for metrics
+    """
+
+    def __init__(self, settings: MqttSettings, storage: Storage,
+                 catalogues: Mapping[str, PointCatalogue]):
+        self.settings = settings
+        self.storage = storage
+        self.catalogues = catalogues
+        self._limits = settings.limits
+        self._queue: queue.Queue[Any] = queue.Queue()
+        self._stopping = threading.Event()
+        self._aborted = False
+        self._ready = threading.Event()
+        self._worker: threading.Thread | None = None
+        self._client: Any = None
+        self._count_lock = threading.Lock()
+        self._counts: Counter[str] = Counter()
+        self._rejected: Counter[str] = Counter()
+
+    # --- public API --------------------------------------------------------------
+    def start(self) -> Self:
+        """Connect (retrying in the background) and start ingesting."""
+        if self._client is not None:
+            raise RuntimeError("ingester already started; create a new one to restart")
+        self._client = self._make_client()
+        self._worker = threading.Thread(target=self._run, name="zonecast-ingest", daemon=True)
+        self._worker.start()
+        self._connect()
+        self._client.loop_start()
+        return self
+
+    def wait_ready(self, timeout: float | None = None) -> bool:
+        """Wait until connected and subscribed; True if so within ``timeout`` [s]."""
+        return self._ready.wait(timeout)
+
+    def stop(self, timeout: float = 30.0) -> None:
+        """Store and acknowledge what was received, then disconnect cleanly.
+
+        The session stays on the broker: messages published meanwhile are
+        delivered to the next ingester started with the same client id.
+        """
+        if self._client is None:
+            return
+        self._stopping.set()
+        self._join_worker(timeout)
+        self._client.disconnect()
+        self._client.loop_stop()
+        self._client = None
+
+    def abort(self) -> None:
+        """Stop as a crash would: nothing more is acknowledged, no DISCONNECT.
+
+        Messages received but not yet acknowledged stay on the broker and are
+        delivered again on the next connection (used by the tests).
+        """
+        if self._client is None:
+            return
+        self._aborted = True
+        self._stopping.set()
+        self._join_worker(5.0)
+        client, self._client = self._client, None
+        client.loop_stop()
+        sock = client.socket()
+        if sock is not None:
+            sock.close()
+
+    def counters(self) -> dict[str, Any]:
+        """Snapshot of the counters (plain data for /metrics).
+
+        Keys: ``messages_in``, ``messages_stored`` (acknowledged after commit,
+        with or without readings), ``messages_rejected`` (whole message),
+        ``readings_stored``, ``readings_duplicate``, ``readings_conflict``,
+        ``readings_rejected``, ``dead_letters``, ``storage_errors``,
+        ``connects`` and ``rejected`` (reason code -> count of messages or
+        readings rejected for it).
+        """
+        keys = ("messages_in", "messages_stored", "messages_rejected", "readings_stored",
+                "readings_duplicate", "readings_conflict", "readings_rejected",
+                "dead_letters", "storage_errors", "connects")
+        with self._count_lock:
+            out: dict[str, Any] = {k: self._counts[k] for k in keys}
+            out["rejected"] = dict(self._rejected)
+        return out
+
+    def __enter__(self) -> Self:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # --- MQTT -------------------------------------------------------------------
+    def _make_client(self) -> Any:
+        import paho.mqtt.client as mqtt
+        from paho.mqtt.enums import CallbackAPIVersion
+
+        s = self.settings
+        v5 = s.protocol == "5"
+        kwargs: dict[str, Any] = {"protocol": mqtt.MQTTv5 if v5 else mqtt.MQTTv311}
+        if not v5:
+            kwargs["clean_session"] = False
+        client = mqtt.Client(callback_api_version=CallbackAPIVersion.VERSION2,
+                             client_id=s.client_id, manual_ack=True, **kwargs)
+        if s.username is not None:
+            client.username_pw_set(s.username,
+                                   s.password.get_secret_value() if s.password else None)
+        if s.tls is not None:
+            client.tls_set(ca_certs=s.tls.ca_certs, certfile=s.tls.certfile,
+                           keyfile=s.tls.keyfile)
+            client.tls_insecure_set(s.tls.insecure)
+        client.reconnect_delay_set(1, 30)
+        client.on_connect = self._on_connect
+        client.on_disconnect = self._on_disconnect
+        client.on_subscribe = self._on_subscribe
+        client.on_message = self._on_message
+        return client
+
+    def _connect(self) -> None:
+        s = self.settings
+        if s.protocol == "5":
+            from paho.mqtt.packettypes import PacketTypes
+            from paho.mqtt.properties import Properties
+
+            props = Properties(PacketTypes.CONNECT)
+            props.SessionExpiryInterval = s.session_expiry
+            props.ReceiveMaximum = s.receive_maximum
+            self._client.connect_async(s.host, s.port, s.keepalive, clean_start=False,
+                                       properties=props)
+        else:
+            self._client.connect_async(s.host, s.port, s.keepalive)
+
+    def _topics(self) -> list[str]:
+        p = self.settings.topic_prefix
+        return [f"{p}/+/telemetry", f"{p}/+/points/#"]
+
+    def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
+        if reason_code.is_failure:
+            log.error("MQTT connect to %s:%d refused: %s", self.settings.host,
+                      self.settings.port, reason_code)
+            return
+        self._count("connects")
+        log.info("MQTT connected to %s:%d as %s (session present: %s)", self.settings.host,
+                 self.settings.port, self.settings.client_id, flags.session_present)
+        if self.settings.protocol == "5":
+            from paho.mqtt.subscribeoptions import SubscribeOptions
+
+            # retainHandling=1: retained messages only for a new subscription.
+            options = SubscribeOptions(qos=1, retainHandling=1)
+            client.subscribe([(t, options) for t in self._topics()])
+        else:
+            client.subscribe([(t, 1) for t in self._topics()])
+
+    def _on_subscribe(self, client, userdata, mid, reason_codes, properties) -> None:
+        failed = [rc for rc in reason_codes if rc.is_failure]
+        if failed:
+            log.error("MQTT subscription refused: %s", failed)
+            return
+        if any(rc.value == 0 for rc in reason_codes):
+            log.warning("broker granted QoS 0 only: messages can be lost on a crash")
+        self._ready.set()
+
+    def _on_disconnect(self, client, userdata, flags, reason_code, properties) -> None:
+        self._ready.clear()
+        if not self._stopping.is_set():
+            log.warning("MQTT disconnected (%s); reconnecting", reason_code)
+
+    def _on_message(self, client, userdata, message) -> None:
+        # Network thread: only count and queue; the worker does the rest.
+        self._count("messages_in")
+        self._queue.put((message, datetime.now(UTC)))
+
+    # --- worker -----------------------------------------------------------------
+    def _join_worker(self, timeout: float) -> None:
+        if self._worker is not None and self._worker is not threading.current_thread():
+            self._worker.join(timeout)
+            if self._worker.is_alive():
+                log.warning("ingest worker did not finish within %.0f s", timeout)
+
+    def _run(self) -> None:
+        while True:
+            try:
+                first = self._queue.get(timeout=0.1)
+            except queue.Empty:
+                if self._stopping.is_set():
+                    return
+                continue
+            if self._aborted:
+                return
+            batch = [first]
+            while len(batch) < self.settings.batch_max_messages:
+                try:
+                    batch.append(self._queue.get_nowait())
+                except queue.Empty:
+                    break
+            try:
+                self._process(batch)
+            except _Stopped:
+                return
+            except Exception:  # never let one batch kill ingest
+                log.exception("ingest worker: unexpected error; messages left unacknowledged "
+                              "for redelivery")
+                self._count("storage_errors")
+
+    def _validate(self, message: Any, received: datetime) -> tuple[Any, list[dict], dict | None]:
+        """(ValidatedMessage or None, dead-letter rows, dead-letter notice)."""
+        props = getattr(message, "properties", None)
+        user = dict(getattr(props, "UserProperty", []) or [])
+        try:
+            result = validate_message(message.topic, message.payload, self.catalogues,
+                                      now=received, limits=self._limits,
+                                      prefix=self.settings.topic_prefix, properties=user)
+        except MessageRejected as rej:
+            self._count("messages_rejected")
+            self._count_reason(rej.reason.value)
+            return None, *self._dead_letter(message, received, rej.building,
+                                             [RejectedReading(None, rej.reason, rej.detail)])
+        if not result.rejected:
+            return result, [], None
+        self._count("readings_rejected", len(result.rejected))
+        for r in result.rejected:
+            self._count_reason(r.reason.value)
+        return result, *self._dead_letter(message, received, result.building,
+                                          list(result.rejected))
+
+    def _dead_letter(self, message: Any, received: datetime, building: str | None,
+                     rejections: list[RejectedReading]) -> tuple[list[dict], dict]:
+        rows = [{"topic": message.topic, "payload": message.payload, "building": building,
+                 "reason": f"{r.reason.value}: {r.detail}", "received_at": received}
+                for r in rejections]
+        notice = {
+            "topic": message.topic,
+            "building": building,
+            "received_at": received.isoformat(),
+            "rejections": [{"point": r.point, "reason": r.reason.value, "detail": r.detail}
+                           for r in rejections],
+            "payload": rows[0]["payload"][:1024].decode("utf-8", errors="replace"),
+        }
+        return rows, notice
+
+    def _process(self, batch: list[tuple[Any, datetime]]) -> None:
+        checked = [(message, *self._validate(message, received)) for message, received in batch]
+        try:
+            results = self._commit(checked)
+        except ValueError:
+            # Storage refused some data validation let through: commit message
+            # by message and dead-letter the culprit instead of stalling.
+            results = []
+            for message, result, rows, notice in checked:
+                try:
+                    results += self._commit([(message, result, rows, notice)])
+                except ValueError as exc:
+                    log.exception("storage rejected a validated message on %s", message.topic)
+                    building = result.building if result is not None else None
+                    rows, notice = self._dead_letter(message, batch[0][1], building, [
+                        RejectedReading(None, Reason.STORAGE_REJECTED, str(exc))])
+                    self._count_reason(Reason.STORAGE_REJECTED.value)
+                    results += self._commit([(message, None, rows, notice)])
+        client = self._client
+        if self._aborted or client is None:
+            return  # simulated crash: committed but never acknowledged
+        letters = 0
+        for message, _, rows, notice in checked:
+            letters += len(rows)
+            if notice is not None:
+                client.publish(dead_letter_topic(notice["building"],
+                                                       self.settings.topic_prefix),
+                                     json.dumps(notice), qos=1)
+        for message, _ in batch:
+            if message.qos > 0:
+                client.ack(message.mid, message.qos)
+        self._count("messages_stored", len(batch))
+        self._count("dead_letters", letters)
+        self._count("readings_stored", sum(r.inserted for r in results))
+        self._count("readings_duplicate", sum(r.duplicates for r in results))
+        self._count("readings_conflict", sum(r.conflicts for r in results))
+
+    def _commit(self, checked: list[tuple[Any, Any, list[dict], Any]]) -> list:
+        """One transaction; on storage outage retry (messages stay unacknowledged)."""
+        batches = [(result.building, result.readings) for _, result, _, _ in checked
+                   if result is not None and result.readings]
+        letters = [row for _, _, rows, _ in checked for row in rows]
+        delay = 0.1
+        while True:
+            try:
+                return self.storage.put_many(batches, letters)
+            except ValueError:
+                raise  # a data problem: retrying cannot help
+            except Exception as exc:
+                self._count("storage_errors")
+                log.error("storage write failed (%s); retrying in %.1f s", exc, delay)
+                if self._stopping.wait(delay):
+                    raise _Stopped from exc
+                delay = min(delay * 2, 5.0)
+
+    def _count(self, key: str, n: int = 1) -> None:
+        with self._count_lock:
+            self._counts[key] += n
+
+    def _count_reason(self, reason: str) -> None:
+        with self._count_lock:
+            self._rejected[reason] += 1

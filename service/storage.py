@@ -1,0 +1,624 @@
+"""Durable, idempotent storage of readings, dead letters and runner checkpoints.
+
+One interface, :class:`Storage`, two backends selected by URL with
+:func:`open_storage`:
+
+- ``sqlite:///relative/path.db``, ``sqlite:////absolute/path.db`` (default
+  :data:`DEFAULT_URL`): WAL journal with ``synchronous=FULL``, so a committed
+  transaction survives a power cut; times are stored as integer microseconds
+  since the Unix epoch (UTC).
+- ``postgresql://user@host:port/db`` (psycopg 3): times are ``timestamptz``.
+  The extra query parameter ``schema=NAME`` keeps all tables in that schema
+  (created if missing), e.g. one schema per test run or per deployment.
+
+Idempotency rule: a reading is identified by ``(building, point, time)``. The
+first value stored for a key is kept; a later reading with the same key is a
+*duplicate* (not stored again). A duplicate whose value differs from the stored
+one is also counted as a *conflict* (:attr:`PutResult.conflicts`) and logged,
+but never overwrites: stored history is immutable, so a forecast can always be
+reproduced from what was stored. Correct a wrong value by deleting it first.
+
+All methods are thread-safe (one connection guarded by a lock).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import sqlite3
+import threading
+from abc import ABC, abstractmethod
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Self
+from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
+
+from .ingest import parse_time
+
+if TYPE_CHECKING:  # pandas is imported lazily (only readings() needs it)
+    import pandas as pd
+
+__all__ = [
+    "DEFAULT_URL",
+    "Checkpoint",
+    "DeadLetter",
+    "PostgresStorage",
+    "PutResult",
+    "SQLiteStorage",
+    "Storage",
+    "StorageURLError",
+    "open_storage",
+]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_URL = "sqlite:///zonecast.db"
+_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+#: Longest payload excerpt kept in a dead letter [characters].
+EXCERPT_CHARS = 1024
+
+
+class StorageURLError(ValueError):
+    """The storage URL names no supported backend or is incomplete."""
+
+
+class PutResult(tuple):
+    """``(inserted, duplicates)`` of one write, plus ``conflicts``.
+
+    Unpacks as a 2-tuple. ``duplicates`` counts every row not inserted because
+    its key was already stored (or repeated within the same call);
+    ``conflicts`` is the part of ``duplicates`` whose value differed.
+    """
+
+    def __new__(cls, inserted: int, duplicates: int, conflicts: int = 0) -> Self:
+        self = super().__new__(cls, (inserted, duplicates))
+        self.conflicts = conflicts
+        return self
+
+    @property
+    def inserted(self) -> int:
+        return self[0]
+
+    @property
+    def duplicates(self) -> int:
+        return self[1]
+
+    def __repr__(self) -> str:
+        return (f"PutResult(inserted={self[0]}, duplicates={self[1]}, "
+                f"conflicts={self.conflicts})")
+
+
+@dataclass(frozen=True)
+class DeadLetter:
+    """A rejected message as stored (``payload`` is an excerpt)."""
+
+    id: int
+    building: str | None
+    topic: str
+    payload: str
+    reason: str
+    received_at: datetime
+
+
+class Checkpoint(NamedTuple):
+    """Latest saved state of a building's online runner."""
+
+    time: datetime
+    state: bytes
+    saved_at: datetime
+
+
+def _utc(value: Any, what: str) -> datetime:
+    """A tz-aware UTC datetime from a datetime, pandas Timestamp or ISO string."""
+    if hasattr(value, "to_pydatetime"):
+        value = value.to_pydatetime()
+    try:
+        return parse_time(value)
+    except ValueError as exc:
+        raise ValueError(f"{what}: {exc}") from None
+
+
+def _excerpt(payload: bytes | str) -> str:
+    if isinstance(payload, bytes | bytearray | memoryview):
+        payload = bytes(payload[: EXCERPT_CHARS * 4]).decode("utf-8", errors="replace")
+    # PostgreSQL text cannot hold NUL: keep the excerpt storable on every backend.
+    return payload[:EXCERPT_CHARS].replace("\x00", "\ufffd")
+
+
+def _check_name(value: Any, what: str) -> str:
+    if not isinstance(value, str) or not value or "\x00" in value:
+        raise ValueError(f"{what} must be a non-empty string without NUL characters, "
+                         f"got {value!r}")
+    return value
+
+
+def _unique_rows(rows: Iterable[Sequence[Any]]) -> tuple[list[tuple[str, datetime, float]], int, int]:
+    """Validate rows; drop repeats of a key inside the batch (first kept).
+
+    Returns the unique rows, the number of repeats and how many of those
+    repeats carried a different value.
+    """
+    seen: dict[tuple[str, datetime], float] = {}
+    repeats = conflicts = 0
+    for row in rows:
+        try:
+            point, when, value = row
+        except (TypeError, ValueError):
+            raise ValueError(f"reading {row!r} must be a (point, time, value) triple") from None
+        _check_name(point, f"reading {row!r}: point")
+        if isinstance(value, bool) or not isinstance(value, int | float) \
+                or not math.isfinite(value):
+            raise ValueError(f"reading {row!r}: value must be a finite number; omit missing "
+                             "readings instead of storing NaN")
+        key = (point, _utc(when, f"reading {point!r}"))
+        if key in seen:
+            repeats += 1
+            conflicts += seen[key] != float(value)
+        else:
+            seen[key] = float(value)
+    return [(p, t, v) for (p, t), v in seen.items()], repeats, conflicts
+
+
+class Storage(ABC):
+    """Readings, dead letters and checkpoints of any number of buildings.
+
+    Use :func:`open_storage` rather than the subclasses. The schema is created
+    or migrated on open (table ``schema_version`` records applied versions).
+    """
+
+    #: Placeholder style of the driver ("?" for sqlite3, "%s" for psycopg).
+    _param = "?"
+    #: Versioned migrations: version -> DDL statements of this backend.
+    _migrations: ClassVar[dict[int, tuple[str, ...]]] = {}
+
+    def __init__(self, url: str):
+        self.url = url
+        self._lock = threading.RLock()
+        self._conn: Any = None
+        self._connect()
+        self._migrate()
+
+    # --- backend hooks -------------------------------------------------
+    @abstractmethod
+    def _connect(self) -> None:
+        """Open ``self._conn``."""
+
+    @abstractmethod
+    def _transaction(self) -> Any:
+        """Context manager: one transaction, yields a cursor."""
+
+    @abstractmethod
+    def _insert_unique(self, cur: Any, building: str, rows: list[tuple[str, datetime, float]],
+                       received_at: datetime) -> tuple[int, int]:
+        """Insert key-unique rows, keep existing; return (inserted, conflicts)."""
+
+    @abstractmethod
+    def _lock_schema(self, cur: Any) -> None:
+        """Serialise concurrent migrations."""
+
+    def _to_db(self, when: datetime) -> Any:
+        return when
+
+    def _from_db(self, value: Any) -> datetime:
+        return value.astimezone(UTC)
+
+    def _sql(self, text: str) -> str:
+        return text if self._param == "?" else text.replace("?", self._param)
+
+    # --- schema ----------------------------------------------------------
+    @property
+    def schema_version(self) -> int:
+        """Highest applied migration."""
+        with self._transaction() as cur:
+            cur.execute("SELECT max(version) FROM schema_version")
+            return int(cur.fetchone()[0] or 0)
+
+    def _migrate(self) -> None:
+        with self._transaction() as cur:
+            self._lock_schema(cur)
+            cur.execute("CREATE TABLE IF NOT EXISTS schema_version ("
+                        "version INTEGER PRIMARY KEY, applied_at TEXT NOT NULL)")
+            cur.execute("SELECT max(version) FROM schema_version")
+            current = int(cur.fetchone()[0] or 0)
+            for version in sorted(v for v in self._migrations if v > current):
+                for statement in self._migrations[version]:
+                    cur.execute(statement)
+                cur.execute(self._sql("INSERT INTO schema_version VALUES (?, ?)"),
+                            (version, datetime.now(UTC).isoformat()))
+                log.info("storage %s: applied schema version %d", self._safe_url(), version)
+
+    def _safe_url(self) -> str:
+        parts = urlsplit(self.url)
+        netloc = parts.netloc.rsplit("@", 1)[-1]
+        return urlunsplit((parts.scheme, netloc, parts.path, "", ""))
+
+    # --- readings --------------------------------------------------------
+    def put_readings(self, building: str, rows: Iterable[Sequence[Any]], *,
+                     received_at: datetime | None = None) -> PutResult:
+        """Store readings of one building in one transaction, idempotently.
+
+        Parameters
+        ----------
+        building : str
+            Building identifier.
+        rows : iterable of (point, time, value)
+            ``time`` tz-aware (datetime, pandas Timestamp or ISO string with
+            offset); ``value`` a finite number in the point's unit.
+        received_at : datetime, optional
+            When the readings arrived; default now (UTC).
+
+        Returns
+        -------
+        PutResult
+            ``(inserted, duplicates)`` with ``.conflicts``; see the module
+            docstring for the keep-first rule.
+        """
+        return self.put_many([(building, rows)], received_at=received_at)[0]
+
+    def put_many(self, batches: Sequence[tuple[str, Iterable[Sequence[Any]]]],
+                 dead_letters: Sequence[dict[str, Any]] = (), *,
+                 received_at: datetime | None = None) -> list[PutResult]:
+        """Store readings of several buildings and dead letters in ONE transaction.
+
+        The ingester uses this to commit a group of messages with one disk
+        sync before acknowledging them.
+
+        Parameters
+        ----------
+        batches : sequence of (building, rows)
+            As for :meth:`put_readings`.
+        dead_letters : sequence of dict
+            Keyword arguments of :meth:`put_dead_letter`.
+        received_at : datetime, optional
+            Arrival time of the readings; default now (UTC).
+
+        Returns
+        -------
+        list of PutResult
+            One per batch, in order.
+        """
+        received = _utc(received_at or datetime.now(UTC), "received_at")
+        prepared = []
+        for building, rows in batches:
+            _check_name(building, "building")
+            prepared.append((building, *_unique_rows(rows)))
+        letters = [self._dead_letter_row(**kw) for kw in dead_letters]
+        results = []
+        with self._transaction() as cur:
+            for building, unique, repeats, repeat_conflicts in prepared:
+                inserted, conflicts = (self._insert_unique(cur, building, unique, received)
+                                       if unique else (0, 0))
+                results.append(PutResult(inserted, len(unique) - inserted + repeats,
+                                         conflicts + repeat_conflicts))
+            self._insert_dead_letters(cur, letters)
+        for (building, *_), result in zip(prepared, results, strict=True):
+            if result.conflicts:
+                log.warning("building %s: %d readings conflict with stored values (kept the "
+                            "stored ones)", building, result.conflicts)
+        return results
+
+    def readings(self, building: str, start: Any, end: Any,
+                 points: Sequence[str] | None = None) -> pd.DataFrame:
+        """Readings of one building in ``[start, end)`` as a wide table.
+
+        Parameters
+        ----------
+        building : str
+            Building identifier.
+        start, end : datetime, pandas Timestamp or ISO string
+            tz-aware bounds; ``start`` inclusive, ``end`` exclusive.
+        points : sequence of str, optional
+            Only these points, as columns in this order (all-NaN when a point
+            has no data). Default: every stored point, sorted by name.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Index ``time`` (tz-aware UTC, ascending), one float column per
+            point, NaN where a point has no reading at that time.
+        """
+        import pandas as pd
+
+        lo, hi = _utc(start, "start"), _utc(end, "end")
+        sql = "SELECT point, time, value FROM readings WHERE building = ? AND time >= ? AND time < ?"
+        params: list[Any] = [building, self._to_db(lo), self._to_db(hi)]
+        if points is not None:
+            points = list(points)
+            if not points:
+                raise ValueError("points is empty: pass None for all points")
+            sql += f" AND point IN ({', '.join('?' * len(points))})"
+            params += points
+        with self._transaction() as cur:
+            cur.execute(self._sql(sql + " ORDER BY time, point"), params)
+            rows = cur.fetchall()
+        long = pd.DataFrame(rows, columns=["point", "time", "value"])
+        long["time"] = pd.DatetimeIndex([self._from_db(t) for t in long["time"]], tz=UTC) \
+            if len(long) else pd.DatetimeIndex([], tz=UTC)
+        long["value"] = long["value"].astype(float)
+        wide = long.pivot(index="time", columns="point", values="value")
+        wide.columns.name = None
+        wide = wide.reindex(columns=points if points is not None else sorted(wide.columns))
+        wide.index = pd.DatetimeIndex(wide.index, tz=UTC, name="time")
+        return wide.astype(float)
+
+    # --- dead letters ---------------------------------------------------------
+    def _dead_letter_row(self, topic: str, payload: bytes | str, reason: str, *,
+                         building: str | None = None,
+                         received_at: datetime | None = None) -> tuple[Any, ...]:
+        received = _utc(received_at or datetime.now(UTC), "received_at")
+        return (building, _excerpt(topic), _excerpt(payload), _excerpt(str(reason)),
+                self._to_db(received))
+
+    def _insert_dead_letters(self, cur: Any, rows: list[tuple[Any, ...]]) -> None:
+        if rows:
+            cur.executemany(self._sql("INSERT INTO dead_letters (building, topic, payload, reason, "
+                                      "received_at) VALUES (?, ?, ?, ?, ?)"), rows)
+
+    def put_dead_letter(self, topic: str, payload: bytes | str, reason: str, *,
+                        building: str | None = None,
+                        received_at: datetime | None = None) -> None:
+        """Record a rejected message.
+
+        Parameters
+        ----------
+        topic : str
+            Topic the message arrived on.
+        payload : bytes or str
+            The message body; the first :data:`EXCERPT_CHARS` characters are kept.
+        reason : str
+            Why it was rejected (``"<code>: <detail>"``).
+        building : str, optional
+            Building named by the topic, if it could be read.
+        received_at : datetime, optional
+            Arrival time; default now (UTC).
+        """
+        row = self._dead_letter_row(topic, payload, reason, building=building,
+                                    received_at=received_at)
+        with self._transaction() as cur:
+            self._insert_dead_letters(cur, [row])
+
+    def dead_letters(self, limit: int = 100, building: str | None = None) -> list[DeadLetter]:
+        """Most recent dead letters first, optionally of one building only."""
+        if limit < 1:
+            raise ValueError(f"limit must be >= 1, got {limit}")
+        where = " WHERE building = ?" if building is not None else ""
+        params = ([building] if building is not None else []) + [int(limit)]
+        with self._transaction() as cur:
+            cur.execute(self._sql("SELECT id, building, topic, payload, reason, received_at "
+                                  f"FROM dead_letters{where} ORDER BY id DESC LIMIT ?"), params)
+            rows = cur.fetchall()
+        return [DeadLetter(i, b, t, p, r, self._from_db(at)) for i, b, t, p, r, at in rows]
+
+    # --- checkpoints ----------------------------------------------------------
+    def save_checkpoint(self, building: str, time: Any, state: bytes) -> None:
+        """Save the online runner's state for ``building`` after step ``time``.
+
+        Only the latest saved checkpoint per building is kept (last write wins,
+        whatever its ``time``).
+
+        Parameters
+        ----------
+        building : str
+            Building identifier.
+        time : datetime
+            tz-aware time of the last step the state includes.
+        state : bytes
+            Opaque serialised state (e.g. UTF-8 JSON).
+        """
+        if not isinstance(state, bytes | bytearray | memoryview):
+            raise TypeError(f"state must be bytes, got {type(state).__name__}: "
+                            "serialise it (e.g. json.dumps(...).encode())")
+        step = self._to_db(_utc(time, "checkpoint time"))
+        saved = self._to_db(datetime.now(UTC))
+        with self._transaction() as cur:
+            cur.execute(self._sql(
+                "INSERT INTO checkpoints (building, time, state, saved_at) VALUES (?, ?, ?, ?) "
+                "ON CONFLICT (building) DO UPDATE SET time = excluded.time, "
+                "state = excluded.state, saved_at = excluded.saved_at"),
+                (building, step, bytes(state), saved))
+
+    def load_checkpoint(self, building: str) -> Checkpoint | None:
+        """The latest checkpoint of ``building``, or None if none was saved."""
+        with self._transaction() as cur:
+            cur.execute(self._sql("SELECT time, state, saved_at FROM checkpoints "
+                                  "WHERE building = ?"), (building,))
+            row = cur.fetchone()
+        if row is None:
+            return None
+        return Checkpoint(self._from_db(row[0]), bytes(row[1]), self._from_db(row[2]))
+
+    # --- lifecycle ------------------------------------------------------------
+    def close(self) -> None:
+        """Close the connection (idempotent)."""
+        with self._lock:
+            if self._conn is not None:
+                self._conn.close()
+                self._conn = None
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self._safe_url()!r})"
+
+
+class SQLiteStorage(Storage):
+    """SQLite backend (WAL, ``synchronous=FULL``); see :func:`open_storage`."""
+
+    _migrations: ClassVar[dict[int, tuple[str, ...]]] = {
+        1: (
+            ("CREATE TABLE readings (building TEXT NOT NULL, point TEXT NOT NULL, "
+             "time INTEGER NOT NULL, value REAL NOT NULL, received_at INTEGER NOT NULL, "
+             "PRIMARY KEY (building, point, time)) WITHOUT ROWID"),
+            "CREATE INDEX readings_by_time ON readings (building, time)",
+            ("CREATE TABLE dead_letters (id INTEGER PRIMARY KEY AUTOINCREMENT, building TEXT, "
+             "topic TEXT NOT NULL, payload TEXT NOT NULL, reason TEXT NOT NULL, "
+             "received_at INTEGER NOT NULL)"),
+            ("CREATE TABLE checkpoints (building TEXT PRIMARY KEY, time INTEGER NOT NULL, "
+             "state BLOB NOT NULL, saved_at INTEGER NOT NULL)"),
+        ),
+    }
+
+    def __init__(self, url: str):
+        path = url[len("sqlite://"):] if url.lower().startswith("sqlite:///") else ""
+        if path in ("", "/"):
+            raise StorageURLError(f"bad SQLite URL {url!r}: use sqlite:///relative.db or "
+                                  "sqlite:////absolute/path.db")
+        self.path = path[1:]
+        super().__init__(url)
+
+    def _connect(self) -> None:
+        if self.path != ":memory:":
+            Path(self.path).parent.mkdir(parents=True, exist_ok=True)
+        conn = sqlite3.connect(self.path, isolation_level=None, check_same_thread=False,
+                               timeout=30.0)
+        conn.execute("PRAGMA journal_mode=WAL")
+        conn.execute("PRAGMA synchronous=FULL")
+        conn.execute("PRAGMA foreign_keys=ON")
+        self._conn = conn
+
+    @contextmanager
+    def _transaction(self) -> Iterator[sqlite3.Cursor]:
+        with self._lock:
+            if self._conn is None:
+                raise ValueError(f"{self!r} is closed: open a new storage")
+            cur = self._conn.cursor()
+            cur.execute("BEGIN IMMEDIATE")
+            try:
+                yield cur
+            except BaseException:
+                cur.execute("ROLLBACK")
+                raise
+            cur.execute("COMMIT")
+
+    def _lock_schema(self, cur: sqlite3.Cursor) -> None:
+        pass  # BEGIN IMMEDIATE already holds the write lock
+
+    def _to_db(self, when: datetime) -> int:
+        delta = when - _EPOCH
+        return (delta.days * 86_400 + delta.seconds) * 1_000_000 + delta.microseconds
+
+    def _from_db(self, value: int) -> datetime:
+        return _EPOCH + timedelta(microseconds=int(value))
+
+    def _insert_unique(self, cur: sqlite3.Cursor, building: str,
+                       rows: list[tuple[str, datetime, float]],
+                       received_at: datetime) -> tuple[int, int]:
+        received = self._to_db(received_at)
+        params = [(building, p, self._to_db(t), v, received) for p, t, v in rows]
+        cur.executemany("INSERT INTO readings (building, point, time, value, received_at) "
+                        "VALUES (?, ?, ?, ?, ?) ON CONFLICT DO NOTHING", params)
+        inserted = cur.rowcount
+        conflicts = 0
+        if inserted < len(rows):  # rare: redelivery; compare with what is stored
+            for _, point, when, value, _ in params:
+                cur.execute("SELECT value FROM readings WHERE building = ? AND point = ? "
+                            "AND time = ?", (building, point, when))
+                conflicts += cur.fetchone()[0] != value
+        return inserted, conflicts
+
+
+class PostgresStorage(Storage):
+    """PostgreSQL backend (psycopg 3); see :func:`open_storage`."""
+
+    _param = "%s"
+    _migrations: ClassVar[dict[int, tuple[str, ...]]] = {
+        1: (
+            ("CREATE TABLE readings (building TEXT NOT NULL, point TEXT NOT NULL, "
+             "time TIMESTAMPTZ NOT NULL, value DOUBLE PRECISION NOT NULL, "
+             "received_at TIMESTAMPTZ NOT NULL, PRIMARY KEY (building, point, time))"),
+            "CREATE INDEX readings_by_time ON readings (building, time)",
+            ("CREATE TABLE dead_letters (id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY, "
+             "building TEXT, topic TEXT NOT NULL, payload TEXT NOT NULL, reason TEXT NOT NULL, "
+             "received_at TIMESTAMPTZ NOT NULL)"),
+            ("CREATE TABLE checkpoints (building TEXT PRIMARY KEY, time TIMESTAMPTZ NOT NULL, "
+             "state BYTEA NOT NULL, saved_at TIMESTAMPTZ NOT NULL)"),
+        ),
+    }
+
+    def __init__(self, url: str):
+        parts = urlsplit(url)
+        query = dict(parse_qsl(parts.query))
+        self.schema = query.pop("schema", None)
+        if self.schema is not None and not self.schema.replace("_", "").isalnum():
+            raise StorageURLError(f"schema {self.schema!r} must be letters, digits and _ only")
+        query.setdefault("connect_timeout", "10")
+        self._conninfo = urlunsplit(("postgresql", parts.netloc, parts.path,
+                                     urlencode(query), ""))
+        super().__init__(url)
+
+    def _connect(self) -> None:
+        import psycopg
+
+        conn = psycopg.connect(self._conninfo, autocommit=True)
+        conn.execute("SET TIME ZONE 'UTC'")
+        if self.schema:
+            conn.execute(f'CREATE SCHEMA IF NOT EXISTS "{self.schema}"')
+            conn.execute(f'SET search_path TO "{self.schema}"')
+        self._conn = conn
+
+    @contextmanager
+    def _transaction(self) -> Iterator[Any]:
+        with self._lock:
+            if self._conn is None:
+                raise ValueError(f"{self!r} is closed: open a new storage")
+            if self._conn.broken or self._conn.closed:
+                log.warning("storage %s: connection lost, reconnecting", self._safe_url())
+                self._connect()
+            with self._conn.transaction(), self._conn.cursor() as cur:
+                yield cur
+
+    def _lock_schema(self, cur: Any) -> None:
+        cur.execute("SELECT pg_advisory_xact_lock(hashtext(current_schema() || '.zonecast'))")
+
+    def _insert_unique(self, cur: Any, building: str, rows: list[tuple[str, datetime, float]],
+                       received_at: datetime) -> tuple[int, int]:
+        points, times, values = (list(col) for col in zip(*rows, strict=True))
+        # All parts of one statement see the same snapshot: "conflicts" compares
+        # with rows stored before this insert.
+        cur.execute(
+            "WITH incoming AS (SELECT * FROM unnest(%(p)s::text[], %(t)s::timestamptz[], "
+            "  %(v)s::float8[]) AS i(point, time, value)), "
+            "ins AS (INSERT INTO readings (building, point, time, value, received_at) "
+            "  SELECT %(b)s, point, time, value, %(r)s FROM incoming "
+            "  ON CONFLICT (building, point, time) DO NOTHING RETURNING 1) "
+            "SELECT (SELECT count(*) FROM ins), (SELECT count(*) FROM incoming i "
+            "  JOIN readings r ON r.building = %(b)s AND r.point = i.point AND r.time = i.time "
+            "  WHERE r.value <> i.value)",
+            {"p": points, "t": times, "v": values, "b": building, "r": received_at})
+        inserted, conflicts = cur.fetchone()
+        return int(inserted), int(conflicts)
+
+
+def open_storage(url: str = DEFAULT_URL) -> Storage:
+    """Open (and create or migrate) the storage named by ``url``.
+
+    Parameters
+    ----------
+    url : str
+        ``sqlite:///path.db`` (relative), ``sqlite:////abs/path.db``,
+        ``sqlite:///:memory:`` (tests only: not durable) or
+        ``postgresql://user@host:port/db[?schema=NAME]``.
+
+    Returns
+    -------
+    Storage
+
+    Raises
+    ------
+    StorageURLError
+        When the URL names no supported backend.
+    """
+    scheme = url.split(":", 1)[0].lower() if ":" in url else ""
+    if scheme == "sqlite":
+        return SQLiteStorage(url)
+    if scheme in ("postgresql", "postgres"):
+        return PostgresStorage(url)
+    raise StorageURLError(f"unsupported storage URL {url!r}: use sqlite:///path.db or "
+                          "postgresql://user@host/db")

@@ -1,0 +1,236 @@
+"""Storage: the same suite on SQLite and PostgreSQL (``storage`` fixture)."""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+from datetime import UTC, datetime, timedelta, timezone
+
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from zonecast.service.storage import (
+    Checkpoint,
+    PutResult,
+    SQLiteStorage,
+    StorageURLError,
+    open_storage,
+)
+
+T0 = datetime(2015, 4, 11, 17, 0, tzinfo=UTC)
+PDT = timezone(timedelta(hours=-7))
+
+
+def rows_at(n, point="T_NW", start=T0, value=20.0):
+    return [(point, start + timedelta(minutes=15 * i), value + i) for i in range(n)]
+
+
+def test_schema_created_and_versioned(storage, storage_url):
+    assert storage.schema_version == 1
+    storage.close()
+    again = open_storage(storage_url)  # reopening does not re-apply migrations
+    assert again.schema_version == 1
+    again.close()
+
+
+def test_put_and_read_back_wide_utc_frame(storage):
+    rows = rows_at(4) + rows_at(2, point="VAV-NW-1 Flow", value=0.3)
+    assert storage.put_readings("office6", rows) == (6, 0)
+    df = storage.readings("office6", T0, T0 + timedelta(hours=1))
+    assert list(df.columns) == ["T_NW", "VAV-NW-1 Flow"]
+    assert str(df.index.tz) == "UTC" and df.index.name == "time"
+    assert df.index.is_monotonic_increasing and len(df) == 4
+    assert df["T_NW"].tolist() == [20.0, 21.0, 22.0, 23.0]
+    assert df["VAV-NW-1 Flow"].iloc[:2].tolist() == [0.3, 1.3]
+    assert df["VAV-NW-1 Flow"].iloc[2:].isna().all()
+
+
+def test_range_is_half_open_and_points_filter_keeps_order(storage):
+    storage.put_readings("b", rows_at(8) + rows_at(8, point="OAT", value=10))
+    df = storage.readings("b", T0 + timedelta(minutes=15), T0 + timedelta(minutes=60),
+                          points=["OAT", "T_NW", "missing"])
+    assert list(df.columns) == ["OAT", "T_NW", "missing"]
+    assert df.index[0] == T0 + timedelta(minutes=15) and len(df) == 3
+    assert df["missing"].isna().all()
+
+
+def test_offsets_are_converted_to_utc(storage):
+    local = datetime(2015, 4, 11, 10, 0, tzinfo=PDT)  # = 17:00 UTC
+    storage.put_readings("b", [("T", local, 21.5), ("T", "2015-04-11T10:15:00-07:00", 21.6)])
+    df = storage.readings("b", "2015-04-11T17:00:00Z", pd.Timestamp("2015-04-11 18:00", tz="UTC"))
+    assert list(df.index) == [T0, T0 + timedelta(minutes=15)]
+
+
+def test_empty_result_is_an_empty_utc_frame(storage):
+    df = storage.readings("nobody", T0, T0 + timedelta(days=1))
+    assert df.empty and str(df.index.tz) == "UTC"
+    df = storage.readings("nobody", T0, T0 + timedelta(days=1), points=["a"])
+    assert list(df.columns) == ["a"] and df.empty
+
+
+def test_redelivery_is_idempotent(storage):
+    rows = rows_at(5)
+    assert storage.put_readings("b", rows) == (5, 0)
+    again = storage.put_readings("b", rows)
+    assert again == (0, 5) and again.conflicts == 0
+    assert len(storage.readings("b", T0, T0 + timedelta(days=1))) == 5
+
+
+def test_same_key_other_value_keeps_first_and_counts_conflict(storage):
+    storage.put_readings("b", [("T", T0, 20.0)])
+    result = storage.put_readings("b", [("T", T0, 25.0), ("T", T0 + timedelta(minutes=15), 1.0)])
+    assert (result.inserted, result.duplicates, result.conflicts) == (1, 1, 1)
+    assert storage.readings("b", T0, T0 + timedelta(minutes=1))["T"].tolist() == [20.0]
+
+
+def test_repeats_within_one_batch(storage):
+    result = storage.put_readings("b", [("T", T0, 1.0), ("T", T0, 1.0), ("T", T0, 2.0)])
+    assert tuple(result) == (1, 2) and result.conflicts == 1
+    assert storage.readings("b", T0, T0 + timedelta(minutes=1))["T"].tolist() == [1.0]
+
+
+def test_buildings_are_separate(storage):
+    storage.put_readings("a", [("T", T0, 1.0)])
+    assert storage.put_readings("b", [("T", T0, 2.0)]) == (1, 0)
+    assert storage.readings("b", T0, T0 + timedelta(minutes=1))["T"].tolist() == [2.0]
+
+
+@pytest.mark.parametrize("bad, match", [
+    (("T", datetime(2015, 1, 1), 1.0), "UTC offset"),
+    (("T", T0, math.nan), "finite"),
+    (("T", T0, "21"), "finite number"),
+    (("", T0, 1.0), "point"),
+    (("T\x00", T0, 1.0), "NUL"),
+    (("T", T0), "triple"),
+])
+def test_invalid_rows_raise_and_store_nothing(storage, bad, match):
+    with pytest.raises(ValueError, match=match):
+        storage.put_readings("b", [("T", T0 + timedelta(hours=1), 1.0), bad])
+    assert storage.readings("b", T0, T0 + timedelta(days=1)).empty
+
+
+def test_put_many_is_one_transaction(storage):
+    results = storage.put_many(
+        [("a", rows_at(3)), ("b", rows_at(2))],
+        dead_letters=[{"topic": "zonecast/a/telemetry", "payload": b"{", "reason": "x",
+                       "building": "a"}])
+    assert results == [(3, 0), (2, 0)]
+    assert len(storage.dead_letters()) == 1
+    with pytest.raises(ValueError):  # a bad batch rolls back the good one too
+        storage.put_many([("c", rows_at(2)), ("d", [("T", T0, math.inf)])])
+    assert storage.readings("c", T0, T0 + timedelta(days=1)).empty
+
+
+def test_dead_letters_newest_first_and_excerpted(storage):
+    storage.put_dead_letter("zonecast/x/telemetry", b"not json", "malformed_json: ...")
+    storage.put_dead_letter("zonecast/b/telemetry", "x" * 5000, "payload_too_large: ...",
+                            building="b")
+    letters = storage.dead_letters(limit=10)
+    assert [d.reason.split(":")[0] for d in letters] == ["payload_too_large", "malformed_json"]
+    assert letters[0].building == "b" and letters[1].building is None
+    assert len(letters[0].payload) == 1024
+    assert letters[0].received_at.tzinfo is not None
+    assert [d.topic for d in storage.dead_letters(limit=1)] == ["zonecast/b/telemetry"]
+    assert len(storage.dead_letters(building="b")) == 1
+
+
+def test_dead_letter_with_nul_bytes_is_storable(storage):
+    storage.put_dead_letter("zonecast/b/telemetry", b"{\x00 bad", "malformed_json: x\x00")
+    assert storage.dead_letters()[0].payload == "{\ufffd bad"
+
+
+def test_checkpoints_roundtrip_latest_wins(storage):
+    assert storage.load_checkpoint("b") is None
+    state = json.dumps({"x": [1.0, 2.0]}).encode()
+    storage.save_checkpoint("b", T0, state)
+    storage.save_checkpoint("b", T0 + timedelta(minutes=15), b"\x00\x01binary")
+    cp = storage.load_checkpoint("b")
+    assert isinstance(cp, Checkpoint)
+    assert cp.time == T0 + timedelta(minutes=15) and cp.state == b"\x00\x01binary"
+    assert storage.load_checkpoint("other") is None
+    with pytest.raises(TypeError, match="bytes"):
+        storage.save_checkpoint("b", T0, {"x": 1})
+
+
+def test_concurrent_writers_share_one_storage(storage):
+    def write(k):
+        storage.put_readings("b", rows_at(50, point=f"P{k}"))
+        storage.put_readings("b", rows_at(50, point=f"P{k}"))  # redelivered
+
+    threads = [threading.Thread(target=write, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    df = storage.readings("b", T0, T0 + timedelta(days=2))
+    assert df.shape == (50, 4) and not df.isna().any().any()
+
+
+@settings(max_examples=25, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(batches=st.lists(st.lists(st.tuples(st.sampled_from(["A", "B", "C"]),
+                                           st.integers(0, 20),
+                                           st.sampled_from([1.0, 2.5, -3.0])),
+                                 max_size=15), min_size=1, max_size=4))
+def test_stored_set_is_keep_first_union(storage, batches):
+    building = f"h{abs(hash(repr(batches)))}"
+    first: dict = {}
+    for batch in batches:
+        rows = [(p, T0 + timedelta(minutes=m), v) for p, m, v in batch]
+        result = storage.put_readings(building, rows)
+        new = 0
+        for p, m, v in batch:
+            if (p, m) not in first:
+                first[(p, m)] = v
+                new += 1
+        assert result.inserted == new and result.inserted + result.duplicates == len(batch)
+    df = storage.readings(building, T0, T0 + timedelta(hours=1))
+    stored = {(p, int((t - T0).total_seconds() // 60)): v
+              for p in df.columns for t, v in df[p].dropna().items()}
+    assert stored == first
+
+
+def test_sqlite_is_durable_wal_full(tmp_path):
+    store = open_storage(f"sqlite:///{tmp_path}/d.db")
+    assert isinstance(store, SQLiteStorage)
+    conn = store._conn
+    assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    assert conn.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL
+    store.close()
+
+
+def test_sqlite_relative_url(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with open_storage("sqlite:///sub/z.db") as store:
+        store.put_readings("b", rows_at(1))
+    assert (tmp_path / "sub" / "z.db").exists()
+
+
+@pytest.mark.parametrize("url", ["mysql://x/y", "zonecast.db", "sqlite://", "sqlite:/x.db"])
+def test_bad_urls_say_what_to_use(url):
+    with pytest.raises(StorageURLError, match="sqlite:///"):
+        open_storage(url)
+
+
+def test_put_result_reads_like_a_tuple():
+    r = PutResult(3, 2, 1)
+    inserted, duplicates = r
+    assert (inserted, duplicates, r.conflicts) == (3, 2, 1) and r == (3, 2)
+    assert "conflicts=1" in repr(r)
+
+
+def test_postgres_reconnects_after_connection_loss(postgres_url):
+    import psycopg
+
+    store = open_storage(postgres_url)
+    store.put_readings("b", rows_at(1))
+    pid = store._conn.info.backend_pid
+    base = postgres_url.split("?")[0]
+    with psycopg.connect(base, autocommit=True) as admin:
+        admin.execute("SELECT pg_terminate_backend(%s)", (pid,))
+    with pytest.raises(psycopg.OperationalError):  # the write in flight fails...
+        store.put_readings("b", rows_at(2))
+    assert store.put_readings("b", rows_at(2)) == (1, 1)  # ...the retry reconnects
+    store.close()

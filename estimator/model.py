@@ -5,13 +5,20 @@ Paper eq:ct_model (continuous) and eq:model_dt (discrete)::
     x(k+1) = A x + B_v v + B_IG (c_IG + f_IG) + sum_j (B_xu_j x + B_vu_j v) u_j
     y(k)   = C x
 
-Two discretisations are offered (see ``docs/model.md`` for the measured errors):
+Three ways to step it are offered (see ``docs/model.md`` for the measured errors):
 
 ``"exact"`` (default)
     Zero-order hold with the step's u: u and v are held over the step and the
-    full bilinear system, which is linear for a fixed u, is integrated exactly
-    with a matrix exponential. Unconditionally stable for any airflow. The
-    exponentials depend on u only and are cached per distinct u.
+    full bilinear system, which is linear for a fixed u, is integrated exactly.
+    The step's matrix exponential is applied to the state by a Chebyshev series
+    in the sparse generator (:mod:`zonecast.estimator.integrate`), equal to the
+    dense exponential to round-off, at a cost independent of how many distinct
+    airflows occur. Unconditionally stable for any airflow.
+``"eig"``
+    The same zero-order-hold solution from dense propagators exp(A(u) h)
+    computed by symmetric eigendecomposition and cached per distinct u; an
+    independent reference, slow when airflows vary (one decomposition per
+    distinct u).
 ``"bilinear"``
     The paper's fixed-matrix form: the exact step map linearised in u around a
     nominal airflow (Fréchet derivative of the matrix exponential). Accurate
@@ -28,6 +35,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from .integrate import simulate_exact
 import scipy.linalg as sla
 
 from .idf import Building
@@ -38,6 +47,8 @@ __all__ = ["BilinearModel", "DiscreteBilinear", "SimulationResult", "write_model
 
 #: Model step of the paper [s] (eq:model_dt).
 STEP = 900.0
+#: ways to step the model, see the module docstring
+METHODS = ("exact", "eig", "bilinear")
 
 
 @dataclass(frozen=True)
@@ -92,7 +103,7 @@ class BilinearModel:
         Defaults to the physical starting values.
     step : float
         Discretisation step [s]; the paper uses 900.
-    method : {"exact", "bilinear"}
+    method : {"exact", "eig", "bilinear"}
         Default discretisation for :meth:`simulate`.
     u_nominal : float or array
         Airflow per box [kg/s] for the ``"bilinear"`` linearisation.
@@ -109,8 +120,8 @@ class BilinearModel:
         u_nominal: float | Sequence[float] = 0.3,
         cache_size: int | None = None,
     ):
-        if method not in ("exact", "bilinear"):
-            raise ValueError("method must be 'exact' or 'bilinear'")
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}")
         if step <= 0:
             raise ValueError("step must be positive [s]")
         self.structure = structure
@@ -352,7 +363,7 @@ class BilinearModel:
             [Ta degC, Ts degC, solE, solS, solW, solN W/m2].
         f_ig : ndarray (N, n_zones), optional
             Time-varying internal gains [W/m2]; default zero.
-        method : {"exact", "bilinear"}, optional
+        method : {"exact", "eig", "bilinear"}, optional
             Default: the model's method.
 
         Returns
@@ -367,6 +378,11 @@ class BilinearModel:
         gains = f_ig + self.params.c_ig
         x = x0
         if method == "exact":
+            forcing = v @ self.Bv.T + gains @ self.B_ig.T
+            xs = simulate_exact(self.structure.A(self.params.physical), self._rooms, self._bxu,
+                                x0, u, forcing, v[:, 1], self.step,
+                                capacity=self.structure.capacity)
+        elif method == "eig":
             forcing = v @ self.Bv.T + gains @ self.B_ig.T  # parts independent of u
             ts = v[:, 1]
             props: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
@@ -386,7 +402,7 @@ class BilinearModel:
                 x = m @ x + lin[k] + np.tensordot(u[k], d.Bvu, axes=1) @ v[k]
                 xs[k + 1] = x
         else:
-            raise ValueError("method must be 'exact' or 'bilinear'")
+            raise ValueError(f"method must be one of {METHODS}")
         return SimulationResult(xs, xs @ self.C.T)
 
     def steady_state(self, u: np.ndarray, v: np.ndarray, f_ig: np.ndarray | None = None) -> np.ndarray:

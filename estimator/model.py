@@ -35,11 +35,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from .integrate import simulate_exact
 import scipy.linalg as sla
 
 from .idf import Building
+from .integrate import simulate_exact
 from .rc.network import DISTURBANCES, ModelOptions, RCStructure, build_structure
 from .rc.parameters import ParameterSet
 

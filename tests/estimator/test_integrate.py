@@ -5,9 +5,12 @@ import pytest
 import scipy.linalg as sl
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from zonecast.estimator.integrate import (chebyshev_coefficients, simulate_exact, spectral_bound,
-                                          tight_bound)
+from zonecast.estimator.integrate import (
+    chebyshev_coefficients,
+    simulate_exact,
+    spectral_bound,
+    tight_bound,
+)
 
 
 def random_network(rng, n, n_air):

@@ -167,7 +167,6 @@ def test_zero_diffuse_near_the_horizon_gives_zero_not_nan():
     """Regression: at sunset the station reports 0 W/m2 while the sun is still just above
     the horizon at the interval midpoint; Perez's clearness index is 0/0 there."""
     import pandas as pd
-
     from zonecast.estimator.solar import facade_irradiance
 
     t = pd.DatetimeIndex([pd.Timestamp("2014-09-09 02:15:00+00:00")])  # zenith 89.3 deg

@@ -412,6 +412,21 @@ class BilinearModel:
         rhs = self.input_matrix(u) @ v + self.B_ig @ (self.params.c_ig + f_ig)
         return np.linalg.solve(self.system_matrix(u), -rhs)
 
+    # labels ------------------------------------------------------------------------
+    def state_zones(self) -> np.ndarray:
+        """Model-zone index of every state (-1 for states of rooms in no model zone)."""
+        zone_of_room = {r.upper(): i for i, (z, rooms) in enumerate(self.structure.zones.items())
+                        for r in rooms}
+        return np.array([zone_of_room.get(lab.room.upper(), -1) for lab in self.structure.labels])
+
+    def room_weights(self) -> dict[str, float]:
+        """Weight of each room's air temperature in its zone's output (row of C)."""
+        out = {}
+        for i, lab in enumerate(self.structure.labels):
+            if lab.kind == "room_air":
+                out[lab.room] = float(self.C[:, i].max())
+        return out
+
     # reporting -----------------------------------------------------------------
     def summary(self) -> dict:
         """JSON-ready description: states by kind, rooms, zones, boxes, parameters."""

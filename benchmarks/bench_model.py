@@ -29,13 +29,16 @@ from pathlib import Path
 
 import numpy as np
 from scipy.integrate import solve_ivp
-
 from zonecast.estimator.dataset import model_data
 from zonecast.estimator.evaluate import rms_by_zone
 from zonecast.estimator.idf import read_building
-from zonecast.estimator.kalman import (default_initial_covariance, default_measurement_noise,
-                                       default_process_noise, initial_state_from_measurement,
-                                       run_filter)
+from zonecast.estimator.kalman import (
+    default_initial_covariance,
+    default_measurement_noise,
+    default_process_noise,
+    initial_state_from_measurement,
+    run_filter,
+)
 from zonecast.estimator.model import build_model
 from zonecast.estimator.rc.parameters import ParameterSet
 from zonecast.estimator.site import load_site

@@ -150,6 +150,64 @@ def model_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the building
     typer.echo(f"wrote {out} and {out.with_suffix('.npz')}")
 
 
+@app.command("identify")
+def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the building")],
+                 data: Annotated[Path, typer.Option(help="telemetry file, or a folder holding "
+                                                         "telemetry.csv")],
+                 out: Annotated[Path, typer.Option(help="model file (JSON)")] = Path("model.json"),
+                 train: Annotated[list[str] | None, typer.Option(
+                     help="Saturday of a training weekend (repeatable; default: the first two "
+                          "excitation weekends after the earliest, as the paper's spring and "
+                          "summer)")] = None,
+                 validate: Annotated[list[str] | None, typer.Option(
+                     help="Saturday of a validation weekend (repeatable; default: the earliest "
+                          "excitation weekend, as the paper's fall)")] = None,
+                 starts: Annotated[int, typer.Option(min=1, help="starting points")] = 3,
+                 seed: Seed = 0) -> None:
+    """Identify the 13 parameters from excitation weekends (paper section 4-A) and write the
+    model file used by forecasts and the service."""
+    import json
+    import os
+
+    from zonecast.estimator.dataset import model_data
+    from zonecast.estimator.identify import excitation_saturdays, identify
+    from zonecast.estimator.idf import read_building
+    from zonecast.estimator.model import build_model
+    from zonecast.estimator.site import load_site
+    from zonecast.estimator.telemetry import load_telemetry
+    try:
+        s = load_site(site)
+        tel = load_telemetry(data / "telemetry.csv" if data.is_dir() else data, s)
+        model = build_model(read_building(s.idf_path), s.zones,
+                            {b: spec.room for b, spec in s.boxes.items()})
+        d = model_data(tel, model.room_weights())
+        sats = [str(x.date()) for x in excitation_saturdays(d)]
+        train = train or sats[1:3]
+        validate = validate if validate is not None else sats[:1]
+        if not train:
+            raise ValueError("no excitation weekend found: give --train SATURDAY (the site's "
+                             "experiments list marks excitation periods)")
+        with _progress() as prog:
+            task = prog.add_task("identification", total=None)
+            res = identify(model, d, train, validate, n_starts=starts, seed=seed,
+                           progress=lambda m: prog.update(task, description=f"identification: {m}"))
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(exc)
+    doc = {"schema_version": 1, "site": os.path.relpath(site.resolve(), out.resolve().parent),
+           "parameters": {n: float(v) for n, v in zip(res.param_names, res.params)},
+           "weekly_profile": None, "noise": None, "identification": res.to_dict()}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(doc, indent=2))
+    t2 = res.to_dict()["table2"]
+    typer.echo(f"identified on {', '.join(res.train_weekends)} in {res.seconds:.1f} s "
+               f"({res.n_evaluations} evaluations, {starts} starts)")
+    typer.echo("training RMS [degC]: " + ", ".join(f"{k} {v:.3f}" for k, v in t2["training"].items()))
+    if t2["validation"]:
+        typer.echo("validation RMS [degC]: "
+                   + ", ".join(f"{k} {v:.3f}" for k, v in t2["validation"].items()))
+    typer.echo(f"wrote {out}")
+
+
 @app.command("demo")
 def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-out"),
          seed: Seed = 0) -> None:

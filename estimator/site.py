@@ -12,6 +12,7 @@ from __future__ import annotations
 import datetime as dt
 import re
 from pathlib import Path
+from typing import ClassVar
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 import yaml
@@ -42,31 +43,29 @@ def _point(v, default_unit: str):
     return v
 
 
-class TemperaturePoint(Point):
+class _QuantityPoint(Point):
+    """A point whose unit must measure ``quantity``."""
+    quantity: ClassVar[str]
+
+    @field_validator("unit")
+    @classmethod
+    def _unit(cls, v):
+        return check_unit(v, cls.quantity)
+
+
+class TemperaturePoint(_QuantityPoint):
+    quantity: ClassVar[str] = "temperature"
     unit: str = "degC"
 
-    @field_validator("unit")
-    @classmethod
-    def _u(cls, v):
-        return check_unit(v, "temperature")
 
-
-class AirflowPoint(Point):
+class AirflowPoint(_QuantityPoint):
+    quantity: ClassVar[str] = "airflow"
     unit: str = "kg/s"
 
-    @field_validator("unit")
-    @classmethod
-    def _u(cls, v):
-        return check_unit(v, "airflow")
 
-
-class IrradiancePoint(Point):
+class IrradiancePoint(_QuantityPoint):
+    quantity: ClassVar[str] = "irradiance"
     unit: str = "W/m2"
-
-    @field_validator("unit")
-    @classmethod
-    def _u(cls, v):
-        return check_unit(v, "irradiance")
 
 
 class Box(_Strict):

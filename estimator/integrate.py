@@ -169,3 +169,46 @@ def simulate_exact(A, rooms: np.ndarray, bxu: np.ndarray, x0: np.ndarray, u: np.
          np.ascontiguousarray(x0, float), u, np.ascontiguousarray(b_fixed, float),
          np.ascontiguousarray(ts, float), float(h), float(r), coef, xs)
     return xs
+
+
+class ExactStepper:
+    """Single exact steps of one model with the set-up (sparse matrix, spectral bound,
+    Chebyshev coefficients) done once, for sequential estimators that step and correct.
+
+    Parameters
+    ----------
+    A, rooms, bxu, h, capacity : as :func:`simulate_exact`
+    u_max : (n_boxes,) the largest airflows [kg/s] that will be stepped (bounds the spectrum)
+    """
+
+    def __init__(self, A, rooms, bxu, h: float, u_max: np.ndarray,
+                 capacity: np.ndarray | None = None, tol: float = TOL):
+        self.A = sp.csr_matrix(A, dtype=float)
+        self.A.sum_duplicates()
+        self.rooms = np.ascontiguousarray(rooms, dtype=np.int64)
+        self.bxu = np.ascontiguousarray(bxu, dtype=float)
+        self.u_max = np.asarray(u_max, dtype=float)
+        um = self.u_max[None, :]
+        L = (tight_bound(self.A, self.rooms, self.bxu, um, capacity) if capacity is not None
+             else spectral_bound(self.A, self.rooms, self.bxu, um))
+        self.h = float(h)
+        self.r = max(L * h / 2.0, 1e-12)
+        self.coef = chebyshev_coefficients(self.r, tol)
+        if len(self.coef) < 2:
+            self.coef = np.append(self.coef, 0.0)
+        self._ip = self.A.indptr.astype(np.int64)
+        self._ix = self.A.indices.astype(np.int64)
+        self._d = self.A.data.astype(np.float64)
+
+    def step(self, x: np.ndarray, u: np.ndarray, b_fixed: np.ndarray, ts: float) -> np.ndarray:
+        """x(k+1) [degC] from x(k) with airflows ``u`` [kg/s], forcing ``b_fixed`` [K/s] and
+        supply temperature ``ts`` [degC] held over the step."""
+        u = np.ascontiguousarray(u, dtype=float)
+        if np.any(u > self.u_max * (1 + 1e-12)):
+            raise ValueError("airflow above the stepper's u_max: create it with the data's "
+                             "largest airflows")
+        out = np.empty_like(np.asarray(x, dtype=float))
+        _step(self._ip, self._ix, self._d, self.rooms, self.bxu,
+              np.ascontiguousarray(x, dtype=float), u, np.ascontiguousarray(b_fixed, float),
+              float(ts), self.h, self.r, self.coef, out)
+        return out

@@ -15,7 +15,7 @@ from pathlib import Path
 import pandas as pd
 
 from .modelfile import ModelBundle, load_model_file
-from .online import Forecast, OnlineEstimator, rows_from_frame
+from .online import MAX_GAP, Forecast, OnlineEstimator, rows_from_frame
 
 __all__ = ["offline_forecasts", "telemetry_frame"]
 
@@ -34,7 +34,7 @@ def telemetry_frame(telemetry, bundle: ModelBundle) -> pd.DataFrame:
 
 
 def offline_forecasts(model_file, telemetry, times: Iterable, *,
-                      max_gap: pd.Timedelta = pd.Timedelta("6h")) -> dict[pd.Timestamp, Forecast]:
+                      max_gap: pd.Timedelta = MAX_GAP) -> dict[pd.Timestamp, Forecast]:
     """Forecasts issued at ``times`` by the online estimator run over ``telemetry``.
 
     Parameters

@@ -46,6 +46,7 @@ __all__ = ["Forecast", "OnlineEstimator", "StepReport", "rows_from_frame"]
 STEP = pd.Timedelta("15min")
 Z90 = 1.6448536269514722  # standard normal 95 % quantile: two-sided 90 % interval
 HORIZON = 96
+MAX_GAP = pd.Timedelta("6h")
 
 
 @dataclass(frozen=True)
@@ -133,7 +134,7 @@ class OnlineEstimator:
         gap the filter restarts from the next measurement.
     """
 
-    def __init__(self, bundle: ModelBundle, *, max_gap: pd.Timedelta = pd.Timedelta("6h")):
+    def __init__(self, bundle: ModelBundle, *, max_gap: pd.Timedelta = MAX_GAP):
         from zonecast.estimator.gains import DayAheadGains
 
         self.bundle = bundle

@@ -269,7 +269,8 @@ def get_building(building_id: BuildingId, runner: RunnerDep):
         **_summary(building_id, runner).model_dump(), timezone=site.timezone,
         latitude=site.location.latitude, longitude=site.location.longitude,
         step_s=site.step.total_seconds(), n_states=b.model.n, boxes=list(site.boxes),
-        points=dict(site.point_units()), parameters=b.model.params.as_dict(), notes=b.notes)
+        points=dict(site.point_units()), parameters=dict(zip(b.model.params.param_names, map(float, b.model.params.values))),
+        notes=b.notes)
 
 
 @state.get("/{building_id}/state", response_model=S.StateBody, summary="Current state estimate")

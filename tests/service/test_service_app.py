@@ -8,52 +8,17 @@ service restart after the first day, and compares the service's forecasts with
 
 from __future__ import annotations
 
-import datetime as dt
 import json
 import time
 
 import numpy as np
 import pandas as pd
 import pytest
-
 from zonecast.service.modelfile import ModelFileError, load_model_file, write_model_file
 
 TOKEN = "test-token-1"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 DAY = 96
-
-
-@pytest.fixture(scope="session")
-def vb(tmp_path_factory):
-    """One virtual-building week and a model file with a weekly profile."""
-    from zonecast.testbed.run import run_weeks
-
-    out = tmp_path_factory.mktemp("vb")
-    run_weeks([dt.date(2015, 4, 13)], out, seed=3)
-    zones = list(load_site_zones(out))
-    bins = np.arange(672)
-    office = ((bins % 96) >= 32) & ((bins % 96) < 72) & (bins < 480)  # weekdays 8-18 h
-    values = np.where(office[:, None], 6.0, 0.5) * np.ones((1, len(zones)))
-    write_model_file(out / "model.json", out / "site.yaml",
-                     parameters={"gamma_IW": 9.0},
-                     weekly_profile={"zones": zones, "values": values.tolist()})
-    return out
-
-
-def load_site_zones(folder):
-    from zonecast.estimator.site import load_site
-
-    return load_site(folder / "site.yaml").zones
-
-
-@pytest.fixture(scope="session")
-def bundle(vb):
-    return load_model_file(vb / "model.json")
-
-
-@pytest.fixture(scope="session")
-def telemetry(vb):
-    return pd.read_csv(vb / "telemetry.csv", dtype={"time": str})
 
 
 def make_settings(tmp_path, vb, broker=None, **runner):
@@ -278,7 +243,6 @@ def test_checkpoint_round_trip_is_exact(bundle, telemetry):
 # --------------------------------------------------------------------------- REST
 def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
     from fastapi.testclient import TestClient
-
     from zonecast.service.app import create_app
 
     app = create_app(make_settings(tmp_path, vb))
@@ -305,7 +269,6 @@ def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
 
 def test_rest_ingest_state_gains_forecast(tmp_path, vb, bundle, telemetry):
     from fastapi.testclient import TestClient
-
     from zonecast.service.app import create_app
     from zonecast.service.offline import offline_forecasts
 
@@ -373,12 +336,12 @@ def test_replay_two_days_through_broker_with_restart_equals_offline(tmp_path, vb
     the forecasts equal the offline ones within 1e-9."""
     from fastapi.testclient import TestClient
     from typer.testing import CliRunner
-
-    from zonecast.cli import app as cli
     from zonecast.service.app import create_app
     from zonecast.service.mqtt import MqttSettings
     from zonecast.service.offline import offline_forecasts
     from zonecast.service.replay import replay
+
+    from zonecast.cli import app as cli
 
     settings = make_settings(tmp_path, vb, broker, forecast_every=8)
     pub = MqttSettings(host=broker.host, port=broker.port, username=broker.username,

@@ -305,7 +305,17 @@ def get_forecast(building_id: BuildingId, runner: RunnerDep,
     steps = span / pd.Timedelta("15min")
     if not (0 < steps <= 96) or steps != int(steps):
         raise ValueError(f"horizon {horizon!r} must be a positive multiple of 15 min up to 24h")
-    return forecast_body(runner, int(steps))
+    # serve cached bytes: the body of a forecast is built once per horizon, not per request
+    fc = runner.forecast
+    cache = runner.__dict__.setdefault("_body_cache", {})
+    key = (id(fc), int(steps))
+    body = cache.get(key)
+    if body is None:
+        body = forecast_body(runner, int(steps)).model_dump_json().encode()
+        if len(cache) > 16:
+            cache.clear()
+        cache[key] = body
+    return Response(body, media_type="application/json")
 
 
 _telemetry_body = {"requestBody": {"required": True, "content": {"application/json": {"schema": {

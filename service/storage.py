@@ -300,6 +300,29 @@ class Storage(ABC):
                             "stored ones)", building, result.conflicts)
         return results
 
+    def reading_bounds(self, building: str, since: Any = None
+                       ) -> tuple[datetime | None, datetime | None, datetime | None]:
+        """First reading time at or after ``since`` (any time if None), latest reading
+        time, and latest arrival (``received_at``) of ``building``; None where no row.
+
+        The online runner uses these to find its first step, to skip gaps and as the
+        watermark of the stream.
+        """
+        where, params = "building = ?", [building]
+        first_where, first_params = where, list(params)
+        if since is not None:
+            first_where += " AND time >= ?"
+            first_params.append(self._to_db(_utc(since, "since")))
+        with self._transaction() as cur:
+            cur.execute(self._sql(f"SELECT MIN(time) FROM readings WHERE {first_where}"),
+                        first_params)
+            first = cur.fetchone()[0]
+            cur.execute(self._sql(f"SELECT MAX(time), MAX(received_at) FROM readings "
+                                  f"WHERE {where}"), params)
+            last, received = cur.fetchone()
+        return tuple(None if v is None else self._from_db(v)  # type: ignore[return-value]
+                     for v in (first, last, received))
+
     def readings(self, building: str, start: Any, end: Any,
                  points: Sequence[str] | None = None) -> pd.DataFrame:
         """Readings of one building in ``[start, end)`` as a wide table.

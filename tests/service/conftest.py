@@ -164,3 +164,40 @@ def broker(tmp_path_factory) -> Broker:
     b = start_broker(tmp_path_factory.mktemp("broker"))
     yield b
     b.stop()
+
+
+# --------------------------------------------------------------------------- virtual building
+@pytest.fixture(scope="session")
+def vb(tmp_path_factory):
+    """One virtual-building week (real EnergyPlus, ~5 s) and a model file with a weekly
+    internal-gains profile (6 W/m2 on weekdays 8-18 h, else 0.5 W/m2)."""
+    import datetime as dt
+
+    import numpy as np
+    from zonecast.estimator.site import load_site
+    from zonecast.service.modelfile import write_model_file
+    from zonecast.testbed.run import run_weeks
+
+    out = tmp_path_factory.mktemp("vb")
+    run_weeks([dt.date(2015, 4, 13)], out, seed=3)
+    zones = list(load_site(out / "site.yaml").zones)
+    bins = np.arange(672)
+    office = ((bins % 96) >= 32) & ((bins % 96) < 72) & (bins < 480)
+    values = np.where(office[:, None], 6.0, 0.5) * np.ones((1, len(zones)))
+    write_model_file(out / "model.json", out / "site.yaml", parameters={"gamma_IW": 9.0},
+                     weekly_profile={"zones": zones, "values": values.tolist()})
+    return out
+
+
+@pytest.fixture(scope="session")
+def bundle(vb):
+    from zonecast.service.modelfile import load_model_file
+
+    return load_model_file(vb / "model.json")
+
+
+@pytest.fixture(scope="session")
+def telemetry(vb):
+    import pandas as pd
+
+    return pd.read_csv(vb / "telemetry.csv", dtype={"time": str})

@@ -1,0 +1,81 @@
+"""Prometheus metrics of the service (``GET /metrics``), one registry per app.
+
+Counters of the MQTT ingester and the REST ingest are read at scrape time; the step
+latency is a histogram observed by the runners; innovation statistics and the age of
+the last update are gauges computed at scrape time.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any
+
+from prometheus_client import CollectorRegistry, Histogram
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
+
+__all__ = ["ServiceMetrics"]
+
+_BUCKETS = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)
+
+
+class _Collector:
+    def __init__(self, ctx: Any):
+        self.ctx = ctx
+
+    def collect(self):
+        ctx = self.ctx
+        mqtt = ctx.ingester.counters() if ctx.ingester is not None else {"rejected": {}}
+        msgs = CounterMetricFamily("zonecast_messages", "telemetry messages received",
+                                   labels=["transport"])
+        msgs.add_metric(["mqtt"], mqtt.get("messages_in", 0))
+        msgs.add_metric(["rest"], ctx.rest["messages_in"])
+        yield msgs
+        stored = CounterMetricFamily("zonecast_readings_stored", "readings newly stored",
+                                     labels=["transport"])
+        stored.add_metric(["mqtt"], mqtt.get("readings_stored", 0))
+        stored.add_metric(["rest"], ctx.rest["readings_stored"])
+        yield stored
+        rej = CounterMetricFamily("zonecast_rejected", "messages or readings rejected, by "
+                                  "reason code", labels=["transport", "reason"])
+        for reason, n in sorted(mqtt.get("rejected", {}).items()):
+            rej.add_metric(["mqtt", reason], n)
+        for reason, n in sorted(ctx.rest_rejected.items()):
+            rej.add_metric(["rest", reason], n)
+        yield rej
+        now = datetime.now(UTC)
+        steps = CounterMetricFamily("zonecast_steps", "steps processed by the runner",
+                                    labels=["building"])
+        nis = GaugeMetricFamily("zonecast_nis_per_dof", "sum NIS / sum observed outputs since "
+                                "the filter started (about 1 if consistent)", labels=["building"])
+        last = GaugeMetricFamily("zonecast_nis_last", "NIS of the last update",
+                                 labels=["building"])
+        age = GaugeMetricFamily("zonecast_last_update_age_seconds", "now minus the time of the "
+                                "last processed step [s]", labels=["building"])
+        errors = CounterMetricFamily("zonecast_runner_errors", "failed runner polls",
+                                     labels=["building"])
+        for bid, r in sorted(ctx.runners.items()):
+            est = r.est
+            steps.add_metric([bid], est.steps)
+            errors.add_metric([bid], r.errors)
+            if est.dof_sum:
+                nis.add_metric([bid], est.nis_sum / est.dof_sum)
+            if r.last_report is not None and r.last_report.dof:
+                last.add_metric([bid], r.last_report.nis)
+            if est.time is not None:
+                age.add_metric([bid], (now - est.time).total_seconds())
+        yield from (steps, nis, last, age, errors)
+
+
+class ServiceMetrics:
+    """Registry and instruments of one app."""
+
+    def __init__(self, ctx: Any):
+        self.registry = CollectorRegistry()
+        self.step_latency = Histogram("zonecast_step_latency_seconds",
+                                      "wall time of one runner step (filter, f_IG, forecast, "
+                                      "checkpoint) [s]", ["building"], buckets=_BUCKETS,
+                                      registry=self.registry)
+        self.registry.register(_Collector(ctx))
+
+    def observe_step(self, building: str, seconds: float) -> None:
+        self.step_latency.labels(building).observe(seconds)

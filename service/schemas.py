@@ -1,0 +1,131 @@
+"""Response and request bodies of the REST API (and of the MQTT state/forecast messages).
+
+Every field states its unit; times are ISO-8601 with a UTC offset.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+from pydantic import AwareDatetime, BaseModel, Field
+
+__all__ = [
+    "BuildingDetail", "BuildingSummary", "ErrorBody", "ForecastBody", "Health", "InternalGains",
+    "Readiness", "StateBody", "TelemetryResult", "ZoneForecast", "ZoneGains", "ZoneState",
+]
+
+
+class ErrorBody(BaseModel):
+    detail: str = Field(description="what is wrong and how to fix it")
+
+
+class BuildingSummary(BaseModel):
+    id: str = Field(description="building identifier (topic level and URL segment)")
+    zones: list[str] = Field(description="model zones, in model order")
+    model_version: str = Field(description="hash of the identified-model file")
+    last_update: AwareDatetime | None = Field(
+        description="time of the last processed step (UTC, ISO-8601); null before the first")
+
+
+class BuildingDetail(BuildingSummary):
+    timezone: str = Field(description="IANA time zone of the building (schedules, time of week)")
+    latitude: float = Field(description="[deg north]")
+    longitude: float = Field(description="[deg east]")
+    step_s: float = Field(description="model step [s]")
+    n_states: int = Field(description="number of model states [-]")
+    boxes: list[str] = Field(description="VAV boxes (airflow inputs u), in model order")
+    points: dict[str, str] = Field(description="telemetry point -> unit expected on the wire")
+    parameters: dict[str, float] = Field(
+        description="identified parameters (units in docs/model.md: W/m2K, -, W/m2)")
+    notes: list[str] = Field(description="what the model file left at defaults")
+
+
+class ZoneState(BaseModel):
+    zone: str
+    temperature: float = Field(description="filtered zone air temperature C x [degC]")
+    std: float = Field(description="standard deviation of the estimate [K]")
+    measured: float | None = Field(description="zone temperature measured at the last step "
+                                               "[degC]; null if no sensor reported")
+
+
+class StateBody(BaseModel):
+    building: str
+    last_update: AwareDatetime | None = Field(
+        description="time of the last processed step (start of its row, UTC)")
+    data_freshness_s: float | None = Field(
+        description="age of the newest stored reading relative to now [s]; null if none")
+    update_age_s: float | None = Field(
+        description="now minus last_update [s]; null before the first step")
+    zones: list[ZoneState] = Field(description="per zone; empty before the first measurement")
+    steps: int = Field(description="steps processed since the filter started [-]")
+    nis_per_dof: float | None = Field(
+        description="sum of normalised innovation squared / observed outputs since start [-]; "
+                    "about 1 for a consistent filter")
+    quality: list[str] = Field(
+        description="flags: not_started, stale, missing_sensor:<zone>, held_input:<input>, "
+                    "filter_restarted")
+
+
+class ZoneGains(BaseModel):
+    zone: str
+    online: float = Field(description="current online internal gains f_IG (paper "
+                                      "eq:online_ig) [W/m2 of floor area]")
+    last_estimate: float | None = Field(
+        description="last per-step least-squares estimate f_IG(k-1) [W/m2]; null if the "
+                    "step could not determine it")
+    profile: list[float] = Field(
+        description="fixed weekly profile, 672 bins of 15 min from Monday 00:00 local time "
+                    "[W/m2]")
+
+
+class InternalGains(BaseModel):
+    building: str
+    time: AwareDatetime | None = Field(description="last processed step (UTC)")
+    profile_timezone: str = Field(description="IANA time zone of the profile's time axis")
+    zones: list[ZoneGains]
+
+
+class ZoneForecast(BaseModel):
+    zone: str
+    mean: list[float] = Field(description="forecast zone temperature per step [degC]")
+    lower: list[float] = Field(description="lower end of the 90 % interval [degC]")
+    upper: list[float] = Field(description="upper end of the 90 % interval [degC]")
+    std: list[float] = Field(description="standard deviation of the forecast [K]")
+    internal_gains: list[float] = Field(description="f_IG assumed per interval [W/m2]")
+
+
+class ForecastBody(BaseModel):
+    building: str
+    issued: AwareDatetime = Field(description="issue time: the last measurement used (UTC)")
+    model_version: str = Field(description="hash of the identified-model file")
+    step_s: float = Field(description="spacing of the forecast times [s]")
+    times: list[datetime] = Field(description="forecast times, issued + 15 min ... (UTC)")
+    interval: float = Field(0.9, description="coverage of the interval [-]")
+    zones: list[ZoneForecast]
+
+
+class TelemetryRejection(BaseModel):
+    point: str | None = Field(description="point of the rejected reading; null for the message")
+    reason: str = Field(description="stable code, e.g. unknown_point")
+    detail: str = Field(description="what was wrong")
+
+
+class TelemetryResult(BaseModel):
+    building: str
+    accepted: int = Field(description="readings that passed validation [-]")
+    stored: int = Field(description="readings newly stored [-]")
+    duplicates: int = Field(description="readings already stored with the same key [-]")
+    rejected: list[TelemetryRejection] = Field(description="readings rejected one by one")
+
+
+class Health(BaseModel):
+    status: str = Field(description="'ok' while the process serves requests")
+
+
+class Readiness(BaseModel):
+    ready: bool = Field(description="storage answers, broker connected (if enabled), all "
+                                    "models loaded")
+    storage: bool
+    broker: bool | None = Field(description="null when MQTT is disabled")
+    models: dict[str, bool] = Field(description="building -> model loaded")
+    errors: dict[str, str] = Field(description="component -> why it is not ready")

@@ -1,0 +1,387 @@
+"""The online service end to end: settings, model file, runner, REST API, replay over MQTT.
+
+The virtual building (one EnergyPlus week, ~5 s) is simulated once per session. The
+replay test sends two days (192 steps) through a real broker into the service, with a
+service restart after the first day, and compares the service's forecasts with
+``offline_forecasts`` on the same telemetry (1e-9).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+from zonecast.service.modelfile import ModelFileError, load_model_file, write_model_file
+
+TOKEN = "test-token-1"
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+DAY = 96
+
+
+def make_settings(tmp_path, vb, broker=None, **runner):
+    from zonecast.service.settings import load_settings
+
+    mqtt = {"mqtt_enabled": False}
+    if broker is not None:
+        mqtt = {"mqtt_enabled": True, "mqtt": {
+            "host": broker.host, "port": broker.port, "username": broker.username,
+            "protocol": "5" if broker.mqtt5 else "3.1.1",
+            "client_id": f"zc-{tmp_path.name[-20:]}"}}
+    return load_settings(storage_url=f"sqlite:///{tmp_path / 'zc.db'}", api_tokens=[TOKEN],
+                         buildings={"office6": str(vb / "model.json")},
+                         runner={"poll_interval": 0.05, "forecast_every": 1, "publish": False,
+                                 **runner}, **mqtt)
+
+
+def body_of(row: pd.Series) -> dict:
+    return {"time": row["time"],
+            "readings": {k: float(v) for k, v in row.items() if k != "time" and pd.notna(v)}}
+
+
+def wait_until(cond, timeout=60.0, what="condition"):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def processed_through(app, t: str):
+    target = pd.Timestamp(t).tz_convert("UTC")
+    return lambda: (app.state.zc.runners["office6"].est.time or pd.Timestamp(0, tz="UTC")) \
+        >= target
+
+
+def assert_same_forecast(a, b, tol=1e-9):
+    assert a.issued == b.issued
+    assert (a.times == b.times).all()
+    np.testing.assert_allclose(a.mean, b.mean, rtol=0, atol=tol)
+    np.testing.assert_allclose(a.std, b.std, rtol=0, atol=tol)
+    np.testing.assert_allclose(a.f_ig, b.f_ig, rtol=0, atol=tol)
+
+
+# --------------------------------------------------------------------------- settings, files
+def test_settings_yaml_then_environment_then_arguments(tmp_path, monkeypatch):
+    from zonecast.service.settings import load_settings
+
+    cfg = tmp_path / "service.yaml"
+    cfg.write_text("storage_url: sqlite:///a.db\nmqtt: {host: broker, port: 1884}\n"
+                   "api_tokens: [s3cr3t-xyz]\nbuildings: {office6: models/office6.json}\n"
+                   "runner: {grace: 60}\n")
+    monkeypatch.setenv("ZONECAST_MQTT__PORT", "1999")
+    monkeypatch.setenv("ZONECAST_RUNNER__FORECAST_EVERY", "4")
+    s = load_settings(cfg, storage_url="sqlite:///b.db")
+    assert (s.mqtt.host, s.mqtt.port) == ("broker", 1999)
+    assert s.runner.grace == 60 and s.runner.forecast_every == 4
+    assert s.storage_url == "sqlite:///b.db"
+    assert s.buildings["office6"] == tmp_path / "models" / "office6.json"
+    assert s.api_tokens[0].get_secret_value() == "s3cr3t-xyz" and "s3cr3t" not in repr(s)
+    with pytest.raises(ValueError, match="not found"):
+        load_settings(tmp_path / "missing.yaml")
+    with pytest.raises(ValueError, match="letters, digits"):
+        load_settings(buildings={"bad id": "x.json"})
+
+
+def test_service_yaml_in_configs_is_valid(monkeypatch):
+    from pathlib import Path
+
+    from zonecast.service.settings import load_settings
+
+    root = Path(__file__).resolve().parents[2]
+    s = load_settings(root / "configs" / "service.yaml")
+    assert "office6" in s.buildings
+    for f in ("docker/compose.yaml", "configs/mosquitto.conf", "docker/Dockerfile"):
+        assert (root / f).is_file(), f
+    import yaml
+
+    compose = yaml.safe_load((root / "docker" / "compose.yaml").read_text())
+    assert {"zonecast", "mosquitto", "postgres"} <= set(compose["services"])
+
+
+def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
+    assert bundle.model.params.as_dict()["gamma_IW"]["value"] == 9.0
+    assert any("start values" in n for n in bundle.notes)
+    assert bundle.profile.values.shape == (672, len(bundle.zones))
+    bare = load_model_file(write_model_file(tmp_path / "m.json", vb / "site.yaml"))
+    assert np.all(bare.profile.values == 0) and "no weekly" in " ".join(bare.notes)
+    cases = [
+        ({"schema_version": 2, "site": str(vb / "site.yaml")}, "schema_version must be 1"),
+        ({"schema_version": 1}, "'site' must be the path"),
+        ({"schema_version": 1, "site": "nope.yaml"}, "not found"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"), "parameters": {"gamma_XX": 1}},
+         "unknown parameter 'gamma_XX'"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"), "parameters": {"gamma_IW": -1}},
+         "outside its bounds"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"),
+          "weekly_profile": {"values": [[1.0]]}}, r"expected \(672, 6\)"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"), "noise": {"sigma_air": 0}},
+         "positive number"),
+    ]
+    for doc, msg in cases:
+        path = tmp_path / "bad.json"
+        path.write_text(json.dumps(doc))
+        with pytest.raises(ModelFileError, match=msg):
+            load_model_file(path)
+    (tmp_path / "bad.json").write_text("{")
+    with pytest.raises(ModelFileError, match="not valid JSON"):
+        load_model_file(tmp_path / "bad.json")
+
+
+def test_catalogue_converts_plausible_ranges_to_the_wire_unit():
+    from zonecast.service.app import catalogue_for_site
+
+    class Site:  # catalogue_for_site only needs the point -> unit map
+        def point_units(self):
+            return {"T1": "degF", "T2": "degC", "F1": "L/s", "G": "kW/m2"}
+
+    cat = catalogue_for_site(Site())
+    assert cat["T1"].unit == "degF" and cat["T1"].kind.value == "temperature"
+    assert (cat["T1"].low, cat["T1"].high) == (pytest.approx(-58), pytest.approx(176))
+    assert (cat["T2"].low, cat["T2"].high) == (-50, 80)
+    assert cat["F1"].high == pytest.approx(100 / 1.2e-3)
+    assert cat["G"].high == pytest.approx(1.5)
+
+
+# --------------------------------------------------------------------------- runner semantics
+class FakeClock:
+    def __init__(self, t):
+        self.t = pd.Timestamp(t).to_pydatetime()
+
+    def __call__(self):
+        return self.t
+
+
+def test_runner_waits_for_late_points_then_closes_by_watermark_or_idle(bundle, telemetry,
+                                                                         tmp_path):
+    from zonecast.service.app import catalogue_for_site
+    from zonecast.service.ingest import validate_message
+    from zonecast.service.runner import Runner
+    from zonecast.service.settings import RunnerSettings
+    from zonecast.service.storage import open_storage
+
+    store = open_storage(f"sqlite:///{tmp_path / 'r.db'}")
+    cats = {bundle.building: catalogue_for_site(bundle.site)}
+
+    def put(row, drop=()):
+        body = body_of(row)
+        for p in drop:
+            body["readings"].pop(p)
+        msg = validate_message(f"zonecast/{bundle.building}/telemetry", json.dumps(body), cats)
+        store.put_readings(bundle.building, msg.readings)
+
+    rows = telemetry.iloc[:6]
+    late = bundle.site.points.outdoor_air_temperature.point
+    clock = FakeClock("2015-04-13T08:00:00Z")
+    runner = Runner(bundle, store, RunnerSettings(grace=300, idle_timeout=1800,
+                                                  forecast_every=4), clock=clock)
+    put(rows.iloc[0])
+    put(rows.iloc[1], drop=[late])  # row 1 incomplete: its OAT comes late
+    assert runner.poll() == 1  # row 0 complete; row 1 waits
+    put(rows.iloc[2])  # watermark = row 2 < row 1 + 15 min + 5 min: still waiting
+    assert runner.poll() == 0 and runner.est.time == pd.Timestamp(rows.iloc[0]["time"])
+    put(rows.iloc[1])  # the late reading arrives (out of order): row 1 complete, then row 2
+    assert runner.poll() == 2
+    assert runner.last_report.held_inputs == []
+    put(rows.iloc[3], drop=[late])
+    put(rows.iloc[4])
+    assert runner.poll() == 0  # row 3 incomplete, watermark row 4 is within its grace
+    put(rows.iloc[5])  # watermark row 5 >= row 3 + 20 min: row 3 closes without OAT
+    assert runner.poll() == 3
+    assert runner.last_report.time == pd.Timestamp(rows.iloc[5]["time"])
+    # idle: the last row, incomplete, is closed once nothing arrived for idle_timeout
+    put(telemetry.iloc[6], drop=[late])
+    assert runner.poll() == 0
+    clock.t = pd.Timestamp("2030-01-01T00:00:00Z").to_pydatetime()
+    assert runner.poll() == 1
+    assert "v:Ta" in runner.last_report.held_inputs
+    # the same rows offline (row 1 complete, rows 3 and 6 without OAT) give the same numbers
+    from zonecast.service.offline import offline_forecasts
+
+    t4 = pd.Timestamp(telemetry.iloc[4]["time"]).tz_convert("UTC")
+    got = [f for f in runner.history if f.issued == t4]
+    assert len(got) == 1
+    off = offline_forecasts(bundle, telemetry_si(bundle, telemetry.iloc[:7], drop_oat=[3, 6]),
+                            [t4])
+    assert_same_forecast(got[0], off[t4])
+    store.close()
+
+
+def telemetry_si(bundle, rows: pd.DataFrame, drop_oat=()):
+    """Rows of the CSV as an SI frame (the virtual building's units are SI)."""
+    frame = rows.set_index(pd.to_datetime(rows["time"], format="ISO8601", utc=True))
+    frame = frame.drop(columns="time").astype(float)
+    oat = bundle.site.points.outdoor_air_temperature.point
+    for i in drop_oat:
+        frame.iloc[i, frame.columns.get_loc(oat)] = np.nan
+    return frame
+
+
+def test_checkpoint_round_trip_is_exact(bundle, telemetry):
+    from zonecast.service.online import OnlineEstimator, rows_from_frame
+
+    tt, u, v, y = rows_from_frame(bundle, telemetry_si(bundle, telemetry.iloc[:12]))
+    a = OnlineEstimator(bundle)
+    for k in range(8):
+        a.advance(tt[k], u[k], v[k], y[k])
+    b = OnlineEstimator(bundle)
+    b.load_bytes(a.to_bytes())
+    y2 = y.copy()
+    y2[9, 1:] = np.nan  # a partial measurement
+    for k in range(8, 12):
+        a.advance(tt[k], u[k], v[k], y2[k])
+        b.advance(tt[k], u[k], v[k], y2[k])
+    assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+    assert_same_forecast(a.forecast(), b.forecast(), tol=0)
+    with pytest.raises(ValueError, match="not after"):
+        a.advance(tt[3], u[3], v[3], y[3])
+
+
+# --------------------------------------------------------------------------- REST
+def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
+    from fastapi.testclient import TestClient
+    from zonecast.service.app import create_app
+
+    app = create_app(make_settings(tmp_path, vb))
+    paths = ["/api/v1/buildings", "/api/v1/buildings/office6", "/api/v1/buildings/office6/state",
+             "/api/v1/buildings/office6/internal-gains", "/api/v1/buildings/office6/forecast",
+             "/metrics"]
+    with TestClient(app) as client:
+        for p in paths:
+            for headers in ({}, {"Authorization": "Bearer wrong"}, {"Authorization": "Basic x"}):
+                r = client.get(p, headers=headers)
+                assert r.status_code == 401, (p, headers, r.text)
+                assert r.headers["www-authenticate"] == "Bearer"
+                assert "token" in r.json()["detail"]
+        r = client.post("/api/v1/buildings/office6/telemetry", json={"readings": {}})
+        assert r.status_code == 401
+        assert client.get("/healthz").json() == {"status": "ok"}
+        assert client.get("/readyz").json()["ready"] is True
+        spec = client.get("/openapi.json").json()
+    ops = {(path, m): op for path, item in spec["paths"].items() for m, op in item.items()}
+    assert len(ops) == 9
+    for (path, method), op in ops.items():
+        assert bool(op.get("security")) == (path not in ("/healthz", "/readyz")), path
+
+
+def test_rest_ingest_state_gains_forecast(tmp_path, vb, bundle, telemetry):
+    from fastapi.testclient import TestClient
+    from zonecast.service.app import create_app
+    from zonecast.service.offline import offline_forecasts
+
+    app = create_app(make_settings(tmp_path, vb, forecast_every=4))
+    n = 9
+    with TestClient(app) as client:
+        for i in range(n):
+            r = client.post("/api/v1/buildings/office6/telemetry", json=body_of(telemetry.iloc[i]),
+                            headers=AUTH)
+            assert r.status_code == 200, r.text
+            assert r.json()["stored"] == len(telemetry.columns) - 1
+        again = client.post("/api/v1/buildings/office6/telemetry",
+                            json=body_of(telemetry.iloc[0]), headers=AUTH).json()
+        assert again["stored"] == 0 and again["duplicates"] == len(telemetry.columns) - 1
+        wait_until(processed_through(app, telemetry.iloc[n - 1]["time"]), what="runner")
+        st = client.get("/api/v1/buildings/office6/state", headers=AUTH).json()
+        assert st["last_update"] == pd.Timestamp(telemetry.iloc[n - 1]["time"]).tz_convert(
+            "UTC").isoformat().replace("+00:00", "Z")
+        assert [z["zone"] for z in st["zones"]] == bundle.zones
+        assert all(0 < z["std"] < 1 and abs(z["temperature"] - z["measured"]) < 1
+                   for z in st["zones"])
+        assert "stale" in st["quality"] and st["steps"] == n - 1
+        g = client.get("/api/v1/buildings/office6/internal-gains", headers=AUTH).json()
+        assert len(g["zones"][0]["profile"]) == 672
+        assert g["zones"][0]["profile"][0] == 0.5
+        f = client.get("/api/v1/buildings/office6/forecast", params={"horizon": "6h"},
+                       headers=AUTH).json()
+        assert len(f["times"]) == 24 and len(f["zones"][0]["mean"]) == 24
+        z = f["zones"][0]
+        assert all(lo < m < hi for lo, m, hi in zip(z["lower"], z["mean"], z["upper"]))
+        assert f["model_version"] == bundle.version
+        for bad, msg in [("25h", "up to 24h"), ("7min", "multiple of 15 min"),
+                         ("soon", "not a duration")]:
+            r = client.get("/api/v1/buildings/office6/forecast", params={"horizon": bad},
+                           headers=AUTH)
+            assert r.status_code == 422 and msg in r.json()["detail"]
+        # rejections: whole message and per reading, with reasons
+        r = client.post("/api/v1/buildings/office6/telemetry", content=b"{oops", headers=AUTH)
+        assert r.status_code == 422 and r.json()["detail"].startswith("malformed_json")
+        r = client.post("/api/v1/buildings/office6/telemetry", headers=AUTH, json={
+            "time": "2015-04-13T03:00:00-07:00", "readings": {"OAT": "warm", "nope": 1}})
+        assert r.status_code == 200
+        assert sorted(x["reason"] for x in r.json()["rejected"]) == ["unknown_point", "wrong_type"]
+        r = client.post("/api/v1/buildings/office6/telemetry", headers=AUTH,
+                        content=b"x" * (2 * 1024 * 1024))
+        assert r.status_code == 413
+        assert client.get("/api/v1/buildings/elsewhere", headers=AUTH).status_code == 404
+        issued = f["issued"]
+        metrics = client.get("/metrics", headers=AUTH).text
+        assert 'zonecast_rejected_total{reason="unknown_point",transport="rest"} 1.0' in metrics
+        assert "zonecast_step_latency_seconds_count" in metrics
+        assert "zonecast_nis_per_dof" in metrics
+    off = offline_forecasts(bundle, telemetry_si(bundle, telemetry.iloc[:n]), [issued])
+    got = app.state.zc.runners["office6"].forecast
+    assert_same_forecast(got, off[pd.Timestamp(issued)])
+
+
+# --------------------------------------------------------------------------- replay
+@pytest.mark.slow
+def test_replay_two_days_through_broker_with_restart_equals_offline(tmp_path, vb, bundle,
+                                                                     telemetry, broker):
+    """Day 1 is replayed into a running service; the service stops; day 2 is replayed
+    while it is down (the broker queues it on the persistent session) and with the CLI;
+    a new service resumes from the checkpoint. Every reading is stored exactly once and
+    the forecasts equal the offline ones within 1e-9."""
+    from fastapi.testclient import TestClient
+    from typer.testing import CliRunner
+    from zonecast.service.app import create_app
+    from zonecast.service.mqtt import MqttSettings
+    from zonecast.service.offline import offline_forecasts
+    from zonecast.service.replay import replay
+
+    from zonecast.cli import app as cli
+
+    settings = make_settings(tmp_path, vb, broker, forecast_every=8)
+    pub = MqttSettings(host=broker.host, port=broker.port, username=broker.username,
+                       protocol="5" if broker.mqtt5 else "3.1.1")
+    t = [pd.Timestamp(x) for x in telemetry["time"]]
+    split, end = t[DAY], t[2 * DAY]
+    issued = []
+    app = create_app(settings)
+    with TestClient(app):
+        res = replay(vb, pub, "office6", end=split, client_id="zc-replay-1")
+        assert res["messages"] == DAY
+        wait_until(processed_through(app, telemetry.iloc[DAY - 1]["time"]), 120, "day 1")
+        issued += list(app.state.zc.runners["office6"].history)
+    # service down: day 2 is published meanwhile, with the CLI
+    out = CliRunner().invoke(cli, ["replay", "--data", str(vb), "--building", "office6",
+                                   "--broker", f"mqtt://{broker.host}:{broker.port}",
+                                   "--start", split.isoformat(), "--end", end.isoformat(),
+                                   "--username", broker.username,
+                                   "--protocol", pub.protocol])
+    assert out.exit_code == 0, out.output
+    assert f"published {DAY} messages" in out.output
+    app2 = create_app(settings)
+    with TestClient(app2) as client:
+        runner = app2.state.zc.runners["office6"]
+        assert runner.est.time == t[DAY - 1].tz_convert("UTC")  # resumed from the checkpoint
+        wait_until(processed_through(app2, telemetry.iloc[2 * DAY - 1]["time"]), 120, "day 2")
+        issued += list(runner.history)
+        stored = app2.state.zc.storage.readings("office6", t[0], end)
+        st = client.get("/api/v1/buildings/office6/state", headers=AUTH).json()
+    n_points = len(bundle.site.point_units())
+    assert stored.shape == (2 * DAY, n_points) and stored.notna().all().all()
+    expect = telemetry_si(bundle, telemetry.iloc[:2 * DAY])[stored.columns]
+    np.testing.assert_array_equal(stored.to_numpy(), expect.to_numpy())
+    assert st["steps"] == 2 * DAY - 1  # every step once: nothing lost, nothing repeated
+    assert len(issued) == 2 * DAY // 8
+    assert len({f.issued for f in issued}) == len(issued)
+    # compare a spread of the issued forecasts (incl. the last before and the first after
+    # the restart) with the offline pipeline
+    pick = [issued[i] for i in (0, len(issued) // 2 - 1, len(issued) // 2, len(issued) - 1)]
+    offline = offline_forecasts(bundle, telemetry_si(bundle, telemetry.iloc[:2 * DAY]),
+                                [f.issued for f in pick])
+    for f in pick:
+        assert_same_forecast(f, offline[f.issued])

@@ -127,7 +127,10 @@ def tight_bound(A, rooms: np.ndarray, bxu: np.ndarray, u: np.ndarray, capacity: 
     S = sp.diags(sq) @ (A + sp.diags(dd)) @ sp.diags(1.0 / sq)
     S = 0.5 * (S + S.T)
     try:
-        lam = eigsh(S, k=1, which="SA", return_eigenvectors=False, tol=1e-6, maxiter=5000)
+        # a fixed start vector: ARPACK's default is random, which would make the number of
+        # series terms, and so the last bits of every result, differ from call to call
+        lam = eigsh(S, k=1, which="SA", return_eigenvectors=False, tol=1e-6, maxiter=5000,
+                    v0=np.ones(S.shape[0]))
     except ArpackNoConvergence:
         return spectral_bound(A, rooms, bxu, u)
     return float(min(-lam[0] * margin, spectral_bound(A, rooms, bxu, u)))

@@ -46,7 +46,7 @@ def test_recovers_an_injected_gain_profile(model):
 
 
 def test_missing_rows_hold_the_last_estimate(model):
-    d, f_true, x0, _ = _data(model)
+    d, _f_true, x0, _ = _data(model)
     d.y[50] = np.nan
     tr = track_gains(model, d, 0, 100, x0)
     np.testing.assert_allclose(tr.f_ig[49], tr.f_ig[48])   # y(50) missing -> f(49) held

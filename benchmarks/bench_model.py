@@ -52,8 +52,12 @@ def campaign(dir_: Path | None):
         print(f"reusing {dir_}: EnergyPlus time is from that earlier run, not this one")
         return dir_, json.loads((dir_ / "run.json").read_text())["timings"]["energyplus_s"]
     out = dir_ or Path(tempfile.mkdtemp()) / "campaign"
-    res = run_campaign(out, seed=0)
-    return out, res.timings["energyplus_s"]
+    eps = []
+    for i in range(3):  # EnergyPlus's time varies from run to run: median of 3
+        res = run_campaign(out, seed=0)
+        eps.append(res.timings["energyplus_s"])
+        print(f"EnergyPlus campaign run {i + 1}: {eps[-1]:.2f} s")
+    return out, sorted(eps)[1]
 
 
 def kalman_x0(model, d, k0, k1):
@@ -99,7 +103,7 @@ def main() -> None:
         times.append(time.perf_counter() - t)
     t_model = sorted(times)[1]
     print(f"11 weeks ({len(d)} steps): model {t_model:.3f} s (median of 3), EnergyPlus "
-          f"{t_ep:.2f} s in the same run -> model {t_ep / t_model:.1f}x faster (target >= 20x)")
+          f"{t_ep:.2f} s (median of 3) in the same run -> model {t_ep / t_model:.1f}x faster (target >= 20x)")
 
     # discretisation error on the spring excitation week
     week = [s for s in d.segments if d.excitation[s[0]:s[1]].any()][1]

@@ -6,8 +6,8 @@
 
 The data are whole excitation weekends (Saturday and Sunday, local time), when occupancy
 is low and the experiments decorrelate the zones. x(0) of each weekend comes from a Kalman
-filter run over the day before it with the current parameters (the paper's x_KF(0));
-the fit is repeated once with x(0) re-estimated at the identified parameters. Several
+filter run over the 24 h before it (the paper's x_KF(0)) with the starting model; the fit
+is repeated once with x(0) re-estimated at the identified parameters. Several
 starts (the physical starting values, the paper's Table 1 where the zones match, and seeded
 perturbations) guard against local minima; their spread is reported. Standard errors and
 correlations come from the Jacobian at the optimum (they assume independent residuals,
@@ -73,6 +73,8 @@ def excitation_saturdays(data: ModelData) -> list[pd.Timestamp]:
 
 #: process noise [K per step] on air states of the filter that estimates x(0); see docs
 SIGMA_AIR_X0 = 3.0
+#: steps of telemetry before a weekend that the x(0) filter runs over (24 h; docs)
+X0_WINDOW = 96
 
 
 def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
@@ -148,17 +150,75 @@ class IdentificationResult:
 
 
 class _Problem:
-    """Residuals of the simulation error over the spans for a parameter vector."""
+    """Residuals of the simulation error over the spans for a parameter vector.
 
-    def __init__(self, model: BilinearModel, data: ModelData, spans, x0s):
+    Fast path for the many evaluations of a fit: A(θ) is affine in θ (docs/model.md), so
+    its sparse values on one fixed pattern are d0 + Σ θ_p d_p; B_v(θ) likewise; one tight
+    spectral bound per θ covers every span; the compiled stepping kernel is called
+    directly, and the columns of the finite-difference Jacobian run on two threads (the
+    kernel releases the GIL).
+    """
+
+    def __init__(self, model: BilinearModel, data: ModelData, spans, x0s, threads: int = 2):
         self.model, self.data, self.spans, self.x0s = model, data, spans, x0s
+        self.threads = threads
         self.n_evaluations = 0
+        st = model.structure
+        pattern = abs(st.A0).tocsr()
+        for piece in st.A_p:
+            pattern = pattern + abs(piece)
+        pattern = pattern.tocsr()
+        pattern.sum_duplicates()
+        pattern.sort_indices()
+        self.indptr = pattern.indptr.astype(np.int64)
+        self.indices = pattern.indices.astype(np.int64)
+
+        def on_pattern(M):
+            M = M.tocsr()
+            out = np.zeros(pattern.nnz)
+            rows = np.repeat(np.arange(M.shape[0]), np.diff(M.indptr))
+            pos = {(int(r), int(c)): i for i, (r, c) in
+                   enumerate(zip(np.repeat(np.arange(pattern.shape[0]), np.diff(pattern.indptr)),
+                                 pattern.indices))}
+            for r, c, val in zip(rows, M.indices, M.data):
+                out[pos[(int(r), int(c))]] += val
+            return out
+
+        self.d0 = on_pattern(st.A0)
+        self.dp = np.array([on_pattern(p) for p in st.A_p])
+        self.bv0 = st.Bv0.toarray()
+        self.bvp = np.array([p.toarray() for p in st.Bv_p])
+        self.n_phys = len(st.A_p)
+        self.rooms = np.ascontiguousarray(model._rooms, dtype=np.int64)
+        self.bxu = np.ascontiguousarray(model._bxu, dtype=float)
+        self.capacity = st.capacity
+        self.u_max = np.max(np.vstack([data.u[a:b] for a, b in spans]), axis=0)
+        self.B_ig = model.B_ig
+        self.C = model.C
 
     def simulate(self, theta: np.ndarray) -> list[np.ndarray]:
-        m = self.model.with_params(theta)
+        import scipy.sparse as sp
+
+        from .integrate import _run, chebyshev_coefficients, tight_bound
+        theta = np.asarray(theta, float)
+        phys, c_ig = theta[:self.n_phys], theta[self.n_phys:]
+        data_vals = self.d0 + phys @ self.dp
+        n = len(self.capacity)
+        A = sp.csr_matrix((data_vals, self.indices, self.indptr), shape=(n, n))
+        L = tight_bound(A, self.rooms, self.bxu, self.u_max[None, :], self.capacity)
+        r = L * self.model.step / 2.0
+        coef = chebyshev_coefficients(r)
+        Bv = self.bv0 + np.tensordot(phys, self.bvp, axes=1)
         out = []
         for (a, b), x0 in zip(self.spans, self.x0s):
-            out.append(m.simulate(x0, self.data.u[a:b], self.data.v[a:b]).y[1:])
+            u, v = self.data.u[a:b], self.data.v[a:b]
+            forcing = v @ Bv.T + c_ig @ self.B_ig.T
+            xs = np.empty((b - a + 1, n))
+            _run(self.indptr, self.indices, data_vals, self.rooms, self.bxu,
+                 np.ascontiguousarray(x0, float), np.ascontiguousarray(u, float),
+                 np.ascontiguousarray(forcing), np.ascontiguousarray(v[:, 1]),
+                 float(self.model.step), float(r), coef, xs)
+            out.append(xs[1:] @ self.C.T)
         self.n_evaluations += 1
         return out
 
@@ -166,10 +226,28 @@ class _Problem:
         res = []
         for (a, b), y in zip(self.spans, self.simulate(theta)):
             # x(k+1) is driven by row k, so y from simulation row k+1 meets measurement row k+1
-            meas = self.data.y[a + 1:b + 1] if b < len(self.data) else self.data.y[a + 1:b]
+            meas = self.data.y[a + 1:b + 1]
             e = y[:len(meas)] - meas
             res.append(np.where(np.isfinite(e), e, 0.0).ravel())
         return np.concatenate(res)
+
+    def jacobian(self, theta: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                 rel_step: float = 1e-4) -> np.ndarray:
+        """Forward differences inside the bounds, columns computed on ``threads`` threads."""
+        from concurrent.futures import ThreadPoolExecutor
+        theta = np.asarray(theta, float)
+        f0 = self.residuals(theta)
+        steps = rel_step * np.maximum(np.abs(theta), 1.0)
+        steps = np.where(theta + steps > hi, -steps, steps)   # step backwards at the upper bound
+
+        def column(i):
+            t = theta.copy()
+            t[i] += steps[i]
+            return (self.residuals(t) - f0) / steps[i]
+
+        with ThreadPoolExecutor(max_workers=self.threads) as pool:
+            cols = list(pool.map(column, range(len(theta))))
+        return np.column_stack(cols)
 
 
 def _starts(params: ParameterSet, n_starts: int, rng: np.random.Generator) -> list[np.ndarray]:
@@ -223,28 +301,34 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     rng = np.random.default_rng([seed, 11])
     train_spans = weekend_spans(data, train)
     val_spans = weekend_spans(data, validation) if validation else []
-    day = 96
+    window = X0_WINDOW
     for a, _ in train_spans + val_spans:
-        if not any(s <= a - day and a <= e for s, e in data.segments):
+        if not any(s <= a - window and a <= e for s, e in data.segments):
             raise IdentificationError(
-                f"the weekend starting {data.local_times()[a].date()} needs the day before it in "
-                "the same contiguous telemetry (the Kalman filter estimates x(0) over it)")
+                f"the weekend starting {data.local_times()[a].date()} needs the "
+                f"{window * 15 // 60} h before it in the same contiguous telemetry (the Kalman "
+                "filter estimates x(0) over them)")
     lo, hi = (np.array(b) for b in zip(*model.params.bounds))
     scale = np.maximum(np.abs(model.params.start_params), 1.0)
 
     def x0s(m, spans):
-        return [kalman_state(m, data, a - day, a) for a, _ in spans]
+        return [kalman_state(m, data, a - window, a) for a, _ in spans]
 
     best = None
     starts_report = []
+    progress("x(0) of the training weekends")
+    x0_first = x0s(model, train_spans)   # round 1 of every start: x_KF(0) of the start model
     for i, theta0 in enumerate(_starts(model.params, n_starts, rng)):
         progress(f"start {i + 1}/{n_starts}")
         theta = theta0
         m = model.with_params(theta)
         for _round in range(2):
-            problem = _Problem(model, data, train_spans, x0s(m, train_spans))
+            problem = _Problem(model, data, train_spans,
+                               x0_first if _round == 0 else x0s(m, train_spans))
             sol = least_squares(problem.residuals, theta, bounds=(lo, hi), x_scale=scale,
-                                method="trf", max_nfev=max_nfev, diff_step=1e-4)
+                                method="trf", max_nfev=max_nfev,
+                                jac=lambda t, p=problem: p.jacobian(t, lo, hi),
+                                ftol=1e-6, xtol=1e-6, gtol=1e-8)
             theta = sol.x
             m = model.with_params(theta)
         cost = float(np.sum(sol.fun ** 2))

@@ -53,7 +53,7 @@ def chebyshev_coefficients(r: float, tol: float = TOL) -> np.ndarray:
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _step(indptr, indices, data, rooms, bxu, x, u, b_fixed, ts, h, r, coef, out):
     n = x.shape[0]
     dd = np.zeros(n)
@@ -89,7 +89,7 @@ def _step(indptr, indices, data, rooms, bxu, x, u, b_fixed, ts, h, r, coef, out)
         w_prev, w_cur, w_next = w_cur, w_next, w_prev
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _run(indptr, indices, data, rooms, bxu, x0, u, b_fixed, ts, h, r, coef, xs):
     xs[0] = x0
     for k in range(u.shape[0]):

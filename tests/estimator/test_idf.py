@@ -189,18 +189,59 @@ def test_energyplus_not_found(tmp_path, monkeypatch):
 
 
 def test_old_version_without_transitions(tmp_path):
+    """A 9.4 file: surfaces lack the Space field that 9.6 inserted after the zone."""
     idf = tmp_path / "old.idf"
     idf.write_text(
-        "Version, 9.4;\nZone, Z1;\nMaterial, M1, Rough, 0.1, 1.0, 2000, 900;\n"
+        "Version, 9.4;\nBuilding, B;\nGlobalGeometryRules, UpperLeftCorner, Counterclockwise, "
+        "Relative;\nZone, Z1;\nMaterial, M1, Rough, 0.1, 1.0, 2000, 900;\n"
         "Construction, C1, M1;\n"
         "BuildingSurface:Detailed, S1, Wall, C1, Z1, Outdoors, , SunExposed, WindExposed, 0.5, 4,"
         " 0,0,3, 0,0,0, 10,0,0, 10,0,3;\n"
+        "Schedule:Constant, AlwaysOn, , 1;\n"
     )
     install = find_energyplus()
     if install.transitions is not None:
         pytest.skip("this EnergyPlus has transition programs")
-    with pytest.raises(UnsupportedVersionError, match="IDFVersionUpdater"):
-        read_building(idf)
+    b = read_building(idf)
+    (surf,) = b.surfaces.values()
+    assert surf.zone.upper() == "Z1" and surf.area == pytest.approx(30.0)
+    assert surf.boundary.lower() == "outdoors"
+    assert any("9.4" in n and "without transition" in n for n in b.notes)
     idf.write_text(idf.read_text().replace("9.4", "8.9"))
     with pytest.raises(UnsupportedVersionError, match="9.0 or newer"):
         read_building(idf)
+
+
+def test_pre96_file_reads_like_its_current_version(tmp_path, five_zone_path, five_zone):
+    """NREL's 23.1 example written back in pre-9.6 field order (Space fields removed) and
+    declared 9.5 gives the same building."""
+    from zonecast.estimator.idf import _PRE96_SPACE_FIELD, idf_objects
+
+    install = find_energyplus()
+    if install.transitions is not None:
+        pytest.skip("this EnergyPlus has transition programs")
+    lines = []
+    for obj in idf_objects(five_zone_path.read_text(encoding="latin-1")):
+        cls, fields = obj[0], obj[1:]
+        if cls.lower() == "version":
+            fields = ["9.5"]
+        pos = _PRE96_SPACE_FIELD.get(cls.lower())
+        if pos is not None and len(fields) > pos:
+            assert fields[pos] == ""        # the example leaves Space Name blank
+            fields = fields[:pos] + fields[pos + 1:]
+        lines.append(cls + ", " + ", ".join(fields) + ";")
+    old = tmp_path / "five_95.idf"
+    old.write_text("\n".join(lines))
+    b = read_building(old)
+    assert any("9.5" in n for n in b.notes)
+
+    def key(x):
+        return {z.name: (round(z.volume, 6), round(z.floor_area, 6)) for z in x.zones.values()}
+    assert key(b) == key(five_zone)
+    surf = {s.name: (s.zone, round(s.area, 6), s.boundary, s.boundary_object, round(s.tilt, 6), round(s.azimuth, 6), s.construction)
+            for s in b.surfaces.values()}
+    assert surf == {s.name: (s.zone, round(s.area, 6), s.boundary, s.boundary_object, round(s.tilt, 6), round(s.azimuth, 6), s.construction)
+                    for s in five_zone.surfaces.values()}
+    assert {w.name: round(w.area, 6) for w in b.windows.values()} == \
+        {w.name: round(w.area, 6) for w in five_zone.windows.values()}
+    assert b.internal_masses == five_zone.internal_masses

@@ -208,6 +208,30 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     typer.echo(f"wrote {out}")
 
 
+@app.command("reproduce")
+def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Path("report"),
+                  campaign: Annotated[Path | None, typer.Option(
+                      help="campaign folder to reuse (default: run it into REPORT/campaign)")] = None,
+                  seed: Seed = 0,
+                  starts: Annotated[int, typer.Option(min=1, help="identification starts")] = 3) -> None:
+    """The paper's tables and figures on the virtual building: campaign, identification,
+    internal gains, forecasts; writes results.json, figures and report.md."""
+    from zonecast.reproduce import run
+    try:
+        with _progress() as prog:
+            task = prog.add_task("reproduce", total=None)
+            res = run(out, campaign, seed, starts,
+                      progress=lambda m: prog.update(task, description=f"reproduce: {m}"))
+    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+        _fail(exc)
+    t2, t3 = res.table2, res.table3
+    typer.echo(f"Table 2 mean RMS: training {t2['training']['mean']:.3f}, validation "
+               f"{t2['validation']['mean']:.3f} (paper 0.333, 0.413)")
+    typer.echo("Table 3 mean RMS: " + ", ".join(f"{k} {v['mean']:.3f}" for k, v in t3.items())
+               + " (paper fixed 0.485, online 0.308)")
+    typer.echo(f"wrote {out}/results.json, {out}/report.md ({res.timings_s.get('total', 0):.0f} s)")
+
+
 @app.command("demo")
 def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-out"),
          seed: Seed = 0) -> None:

@@ -1,0 +1,178 @@
+"""`zonecast reproduce`: the paper's tables and figures on a site's data (the main job).
+
+Runs (or reuses) the virtual building's campaign, identifies the parameters (paper 4-A),
+estimates the internal gains and forecasts (4-B, 5), and writes ``results.json`` (schema
+below), figures (PNG) and ``report.md`` with Tables 1-3 beside the paper's numbers.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+RESULTS_SCHEMA_VERSION = 1
+
+#: the paper's numbers (Hu et al., Tables 2 and 3), for the report
+PAPER = {
+    "table2": {"training": {"NW": 0.46, "W": 0.41, "S": 0.24, "E": 0.34, "NE": 0.27, "C": 0.28,
+                            "mean": 0.333},
+               "validation": {"NW": 0.62, "W": 0.57, "S": 0.31, "E": 0.28, "NE": 0.39, "C": 0.31,
+                              "mean": 0.413}},
+    "table3": {"fixed": {"NW": 0.84, "W": 0.42, "S": 0.48, "E": 0.43, "NE": 0.36, "C": 0.38,
+                         "mean": 0.485},
+               "online_paper": {"NW": 0.50, "W": 0.31, "S": 0.15, "E": 0.41, "NE": 0.32,
+                                "C": 0.16, "mean": 0.308}},
+}
+
+ZoneRms = dict[str, float]
+
+
+class Parameter(BaseModel):
+    value: float
+    unit: str
+    stderr: float | None = None
+
+
+class Results(BaseModel):
+    """Schema of ``results.json`` (validated when written and in the tests)."""
+
+    model_config = ConfigDict(extra="allow")
+    schema_version: int = RESULTS_SCHEMA_VERSION
+    seed: int
+    parameters: dict[str, Parameter]
+    table2: dict[str, ZoneRms | None] = Field(description="training, validation: zone -> RMS [K]")
+    table3: dict[str, ZoneRms] = Field(description="fixed, online_paper, dayahead: zone -> RMS [K]")
+    horizon_rms: dict[str, dict[str, list[float]]] = Field(
+        description="method -> zone -> RMS [K] per horizon step (15 min ... 24 h)")
+    gains_truth: dict[str, Any] = Field(description="zone -> correlation with the true gains")
+    coverage_90: Any = Field(description="empirical coverage of the 90 % forecast intervals")
+    split: dict[str, Any] = Field(description="identification weekends and gains/forecast weeks")
+    timings_s: dict[str, float] = Field(default_factory=dict)
+
+
+def _table(rows: dict[str, ZoneRms | None], zones: list[str], paper: dict | None = None) -> list[str]:
+    head = "| | " + " | ".join(zones) + " | mean |"
+    out = [head, "|---" * (len(zones) + 2) + "|"]
+    for name, r in rows.items():
+        if r is None:
+            continue
+        out.append(f"| {name} | " + " | ".join(f"{r.get(z, float('nan')):.3f}" for z in zones)
+                   + f" | **{r['mean']:.3f}** |")
+        if paper and name in paper:
+            p = paper[name]
+            out.append(f"| paper {name} | " + " | ".join(f"{p.get(z, float('nan')):.2f}"
+                                                       for z in zones) + f" | {p['mean']:.3f} |")
+    return out
+
+
+def write_report(results: Results, out: Path, figures: list[str], zones: list[str]) -> Path:
+    """``report.md`` with Tables 1-3 beside the paper's figures."""
+    lines = ["# zonecast reproduce: Hu et al., tables and figures on the virtual building", "",
+             f"Seed {results.seed}. Split: {json.dumps(results.split)}.", "",
+             "## Table 1: identified parameters", "", "| parameter | value | std. error | unit |",
+             "|---|---|---|---|"]
+    for n, p in results.parameters.items():
+        se = "" if p.stderr is None else f"{p.stderr:.3g}"
+        lines.append(f"| {n} | {p.value:.4g} | {se} | {p.unit} |")
+    lines += ["", "## Table 2: identification RMS [°C] (weekend data, f_IG = 0)", ""]
+    lines += _table(results.table2, zones, PAPER["table2"])
+    lines += ["", "## Table 3: 24-hour prediction RMS [°C]", ""]
+    lines += _table(results.table3, zones, PAPER["table3"])
+    lines += ["", f"Coverage of the 90 % intervals: {json.dumps(results.coverage_90)}", "",
+              "## Internal gains against the truth (r per zone)", "",
+              "```", json.dumps(results.gains_truth, indent=1)[:4000], "```", ""]
+    lines += [f"![{f}]({f})" for f in figures]
+    lines += ["", f"Timings [s]: {json.dumps(results.timings_s)}"]
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def plot_horizon(horizon: dict[str, dict[str, list[float]]], zones: list[str], path: Path) -> None:
+    """Fig. 3: RMS versus prediction horizon, per zone, one panel per method."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    methods = list(horizon)
+    fig, axes = plt.subplots(1, len(methods), figsize=(4.5 * len(methods), 3.6), sharey=True)
+    for ax, m in zip(np.atleast_1d(axes), methods):
+        for z in zones + ["mean"]:
+            vals = horizon[m].get(z)
+            if vals is None:
+                continue
+            h = (np.arange(len(vals)) + 1) * 0.25
+            ax.plot(h, vals, label=z, lw=2.0 if z == "mean" else 1.0,
+                    color="k" if z == "mean" else None)
+        ax.set_title(m)
+        ax.set_xlabel("horizon [h]")
+    np.atleast_1d(axes)[0].set_ylabel("RMS [°C]")
+    np.atleast_1d(axes)[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
+        progress=lambda s: None) -> Results:
+    """The main job; see the module docstring."""
+    from zonecast.estimator.dataset import model_data
+    from zonecast.estimator.identify import excitation_saturdays, identify
+    from zonecast.estimator.idf import read_building
+    from zonecast.estimator.model import build_model
+    from zonecast.estimator.site import load_site
+    from zonecast.estimator.telemetry import load_telemetry
+
+    out.mkdir(parents=True, exist_ok=True)
+    timings = {}
+    t0 = time.perf_counter()
+    if campaign is None or not (campaign / "telemetry.csv").is_file():
+        from zonecast.testbed.run import run_campaign
+        campaign = campaign or out / "campaign"
+        progress("virtual building campaign (EnergyPlus)")
+        run_campaign(campaign, seed=seed, progress=lambda s: progress(f"campaign: {s}"))
+    timings["campaign"] = time.perf_counter() - t0
+    site = load_site(campaign / "site.yaml")
+    tel = load_telemetry(campaign / "telemetry.csv", site)
+    model = build_model(read_building(site.idf_path), site.zones,
+                        {b: s.room for b, s in site.boxes.items()})
+    data = model_data(tel, model.room_weights())
+    sats = [str(s.date()) for s in excitation_saturdays(data)]
+    t = time.perf_counter()
+    progress("identification")
+    ident = identify(model, data, sats[1:3], sats[:1], n_starts=starts, seed=seed,
+                     progress=lambda s: progress(f"identification: {s}"))
+    timings["identification"] = time.perf_counter() - t
+    fitted = model.with_params(ident.params)
+    truth = None
+    if (campaign / "truth.csv").is_file():
+        import pandas as pd
+        truth = pd.read_csv(campaign / "truth.csv", index_col=0)
+    t = time.perf_counter()
+    progress("internal gains and forecasts")
+    from zonecast.estimator.forecast import forecast_study
+    study = forecast_study(fitted, data, truth=truth, seed=seed)
+    timings["gains_and_forecasts"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+    res = Results(seed=seed,
+                  parameters={n: {"value": float(v), "unit": u, "stderr": float(s)}
+                              for n, v, u, s in zip(ident.param_names, ident.params, ident.units,
+                                                    ident.stderr)},
+                  table2={"training": ident.train_rms, "validation": ident.validation_rms},
+                  table3=study["table3"], horizon_rms=study["horizon_rms"],
+                  gains_truth=study.get("gains_truth") or {},
+                  coverage_90=study.get("coverage_90"),
+                  split={"identification": {"train": ident.train_weekends,
+                                            "validation": ident.validation_weekends},
+                         "gains": study.get("split")},
+                  timings_s={k: round(v, 1) for k, v in timings.items()})
+    (out / "results.json").write_text(res.model_dump_json(indent=2))
+    figures = []
+    plot_horizon(res.horizon_rms, list(site.zones), out / "fig3_horizon_rms.png")
+    figures.append("fig3_horizon_rms.png")
+    write_report(res, out, figures, list(site.zones))
+    return res

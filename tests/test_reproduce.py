@@ -1,0 +1,52 @@
+"""results.json validates against its schema; the report shows the paper's numbers beside ours."""
+
+import json
+
+import pytest
+from pydantic import ValidationError
+
+from zonecast.reproduce import PAPER, Results, plot_horizon, write_report
+
+ZONES = ["NW", "NE", "W", "E", "S", "C"]
+
+
+def rms(x):
+    return {**{z: x for z in ZONES}, "mean": x}
+
+
+def results(**over):
+    data = {"seed": 0,
+            "parameters": {"gamma_EW": {"value": 10.5, "unit": "W/(m2 K)", "stderr": 0.4}},
+            "table2": {"training": rms(0.3), "validation": rms(0.4)},
+            "table3": {"fixed": rms(0.5), "online_paper": rms(0.3), "dayahead": rms(0.45)},
+            "horizon_rms": {"fixed": {z: [0.1, 0.2, 0.3] for z in [*ZONES, "mean"]}},
+            "gains_truth": {"NW": {"total": {"r": 0.8, "scale": 0.9}}},
+            "coverage_90": {"fixed": 0.88},
+            "split": {"identification": {"train": ["2015-04-18"], "validation": ["2014-10-11"]}}}
+    data.update(over)
+    return Results.model_validate(data)
+
+
+def test_schema_accepts_a_complete_result_and_round_trips():
+    r = results()
+    again = Results.model_validate(json.loads(r.model_dump_json()))
+    assert again == r
+    assert "table3" in Results.model_json_schema()["required"]
+
+
+@pytest.mark.parametrize("missing", ["table3", "parameters", "horizon_rms", "seed", "split"])
+def test_schema_rejects_missing_parts(missing):
+    data = json.loads(results().model_dump_json())
+    data.pop(missing)
+    with pytest.raises(ValidationError, match=missing):
+        Results.model_validate(data)
+
+
+def test_report_puts_the_papers_numbers_beside_ours(tmp_path):
+    r = results()
+    plot_horizon(r.horizon_rms, ZONES, tmp_path / "fig3.png")
+    text = write_report(r, tmp_path, ["fig3.png"], ZONES).read_text()
+    assert "| fixed | 0.500 |" in text
+    assert f"| paper fixed | {PAPER['table3']['fixed']['NW']:.2f} |" in text
+    assert "**0.300**" in text and "0.333" in text and "![fig3.png](fig3.png)" in text
+    assert (tmp_path / "fig3.png").stat().st_size > 1000

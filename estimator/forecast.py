@@ -71,6 +71,9 @@ FORECAST_METHODS = ("fixed", "dayahead", "persistence")
 SIGMA_MEAS = 0.2  # [K] measurement noise of the filter and of the forecast intervals
 SIGMA_AIR_FORECAST = 0.3  # [K per step] air-state process noise propagated in the forecast
 SIGMA_WALL_FORECAST = 0.01  # [K per step] element-state process noise in the forecast
+#: day-ahead offset: decay time and averaging window (chosen on the training weeks, docs)
+DAYAHEAD_TAU = pd.Timedelta("1h")
+DAYAHEAD_WINDOW = pd.Timedelta("1h")
 
 
 # --------------------------------------------------------------------------- split
@@ -180,34 +183,40 @@ class FilterDay:
 
 
 def filter_day(model: BilinearModel, data: ModelData, start: int, issue: int, *,
-               sigma_air: float = SIGMA_AIR_X0, sigma_meas: float = SIGMA_MEAS) -> FilterDay:
-    """Kalman filter (f_IG = 0 in its model) over rows [start, issue]; reads y only there.
+               prior: np.ndarray | None = None, sigma_air: float = SIGMA_AIR_X0,
+               sigma_wall: float = SIGMA_WALL_FORECAST,
+               sigma_meas: float = SIGMA_MEAS) -> FilterDay:
+    """Kalman filter over rows [start, issue]; reads y only there.
 
-    The air states' process noise ``sigma_air`` (3 K, as :func:`~.identify.kalman_state`)
-    lets the filtered air follow the measurements, so the innovations are unbiased
-    residuals ȳ(k) - ỹ(k) of paper Eq:xnoig_ynoig and give f_IG(k-1) by Eq:ig(k-1).
+    The filter's model uses the internal gains ``prior`` (rows [start, issue), W/m2;
+    default 0, as :func:`~.identify.kalman_state`). The air states' process noise
+    ``sigma_air`` (3 K) lets the filtered air follow the measurements; the innovations are
+    then the residuals of paper Eq:xnoig_ynoig with the prior's gains, and Eq:ig(k-1) on
+    them gives f_IG(k-1) - prior(k-1), returned added to the prior.
     """
     air = np.flatnonzero([lab.kind.endswith("air") for lab in model.structure.labels])
     y = data.y[start:issue + 1]
     y0 = y[0] if np.isfinite(y[0]).any() else np.nanmean(y, axis=0)
     x0 = initial_state_from_measurement(np.where(np.isfinite(y0), y0, np.nanmean(y0)),
                                         model.state_zones())
-    Q = air_wall_covariance(model.n, air, sigma_air, 0.01)
+    Q = air_wall_covariance(model.n, air, sigma_air, sigma_wall)
     kf = ZoneStateFilter(x0, default_initial_covariance(model.n, air), model.C, Q,
                          np.full(model.n_zones, sigma_meas**2))
     kf.update(y[0])
     f = np.full((issue - start, model.n_zones), np.nan)
     c_ig = model.params.c_ig
+    prior = np.zeros_like(f) if prior is None else np.asarray(prior, float)
     for i in range(issue - start):
         k = start + i
         phi, gv, gi = model.step_matrices(data.u[k])
-        kf.predict(phi, gv @ data.v[k] + gi @ c_ig)
+        kf.predict(phi, gv @ data.v[k] + gi @ (c_ig + prior[i]))
         inn = kf.update(y[i + 1])
         if inn.dof:
             resid = np.full(model.n_zones, np.nan)
             resid[inn.observed] = inn.innovation
             try:
-                f[i] = estimate_gains_step(model.C @ gi, resid, np.zeros(model.n_zones)).f_ig
+                f[i] = prior[i] + estimate_gains_step(model.C @ gi, resid,
+                                                      np.zeros(model.n_zones)).f_ig
             except RankDeficientError:
                 pass
     return FilterDay(kf.x, kf.P, f)
@@ -245,14 +254,13 @@ class Forecast:
 
 
 def _gains(method: str, data: ModelData, issue: int, horizon: int, profile: WeeklyProfile,
-           fd: FilterDay, dayahead: DayAheadGains | None) -> np.ndarray:
+           fd: FilterDay, dayahead: DayAheadGains) -> np.ndarray:
     times = pd.date_range(data.times[issue], periods=horizon, freq=profile.step)
     if method == "fixed":
         return np.nan_to_num(profile(times))
     hist = pd.DataFrame(fd.f_ig, index=data.times[issue - len(fd.f_ig):issue], columns=data.zones)
     if method == "dayahead":
-        issuer = dayahead or DayAheadGains(profile, horizon=horizon)
-        return issuer.issue(data.times[issue], hist).to_numpy()
+        return dayahead.issue(data.times[issue], hist).to_numpy()[:horizon]
     if method == "persistence":  # paper eq:online_ig held over the horizon
         last = hist.ffill().iloc[-1].to_numpy() if len(hist) else np.zeros(len(data.zones))
         return np.tile(np.nan_to_num(last), (horizon, 1))
@@ -277,29 +285,47 @@ def propagate_std(model: BilinearModel, P: np.ndarray, u: np.ndarray, *,
 def issue_forecast(model: BilinearModel, data: ModelData, issue: int, profile: WeeklyProfile,
                    methods=("fixed",), *, horizon: int = HORIZON,
                    dayahead: DayAheadGains | None = None, intervals: bool = True,
-                   sigma_air_forecast: float = SIGMA_AIR_FORECAST) -> dict[str, Forecast]:
+                   filter_prior: str = "profile", sigma_air_filter: float = SIGMA_AIR_X0,
+                   sigma_air_forecast: float = SIGMA_AIR_FORECAST,
+                   sigma_wall: float = SIGMA_WALL_FORECAST,
+                   sigma_meas: float = SIGMA_MEAS) -> dict[str, Forecast]:
     """Forecasts issued at row ``issue`` (one per method, sharing the filter and covariance).
 
     The state x(issue|issue) and its covariance come from :func:`filter_day` over the
-    previous day (rows [issue - 1 day, issue]); y after ``issue`` is never read. The model
-    then runs ``horizon`` steps with the measured u and v of rows [issue, issue + horizon)
-    and the method's internal gains:
+    previous day (rows [issue - 1 day, issue]) with the profile's gains in the filter's
+    model (``filter_prior="profile"``; ``"zero"``: f_IG = 0 as
+    :func:`~.identify.kalman_state`); y after ``issue`` is never read. The model then runs
+    ``horizon`` steps (cut at the end of the data segment) with the measured u and v of rows
+    [issue, issue + horizon) and the method's internal gains:
 
     - ``fixed``: the weekly profile (paper Eq:fixed_ig);
     - ``dayahead``: profile + decaying offset learned from the previous day's per-step
-      estimates (:class:`~.gains.DayAheadGains`);
+      estimates (:class:`~.gains.DayAheadGains`, default :data:`DAYAHEAD_TAU`,
+      :data:`DAYAHEAD_WINDOW`);
     - ``persistence``: the newest per-step estimate held (paper eq:online_ig over 24 h).
+
+    Intervals: P(issue|issue) propagated exactly, P <- Phi P Phi' + Q with the forecast
+    noise (``sigma_air_forecast``, ``sigma_wall``), std = sqrt(C P C' + sigma_meas^2).
     """
     day = _rows_per_day(data)
     start = max(issue - day, 0)
-    horizon = min(horizon, len(data) - issue)
-    fd = filter_day(model, data, start, issue)
+    seg_stop = next((b for a, b in data.segments if a <= issue < b), len(data))
+    horizon = min(horizon, seg_stop - issue)  # inputs exist up to the segment's end
+    if filter_prior not in ("profile", "zero"):
+        raise ValueError(f"filter_prior must be 'profile' or 'zero', got {filter_prior!r}")
+    prior = (np.nan_to_num(profile(data.times[start:issue])) if filter_prior == "profile"
+             else None)
+    fd = filter_day(model, data, start, issue, prior=prior, sigma_air=sigma_air_filter,
+                    sigma_wall=sigma_wall, sigma_meas=sigma_meas)
     u, v = data.u[issue:issue + horizon], data.v[issue:issue + horizon]
-    std = (propagate_std(model, fd.P, u, sigma_air=sigma_air_forecast) if intervals
+    std = (propagate_std(model, fd.P, u, sigma_air=sigma_air_forecast, sigma_wall=sigma_wall,
+                         sigma_meas=sigma_meas) if intervals
            else np.full((horizon, model.n_zones), np.nan))
+    issuer = dayahead or DayAheadGains(profile, tau=DAYAHEAD_TAU, window=DAYAHEAD_WINDOW,
+                                       horizon=HORIZON)
     out = {}
     for m in methods:
-        f = _gains(m, data, issue, horizon, profile, fd, dayahead)
+        f = _gains(m, data, issue, horizon, profile, fd, issuer)
         out[m] = Forecast(issue, model.simulate(fd.x, u, v, f).y[1:], std, f)
     return out
 

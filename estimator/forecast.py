@@ -421,7 +421,8 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
     -------
     results : dict (JSON-ready)
         ``split``, ``table3`` {fixed, online_paper, online_paper_validation, dayahead,
-        persistence: zone -> RMS [K] + mean}, ``horizon_rms`` {method -> zone -> list over
+        persistence, fixed_kf0: zone -> RMS [K] + mean} (``fixed_kf0``: the fixed forecast
+        from the f_IG = 0 filter, a sensitivity), ``horizon_rms`` {method -> zone -> list over
         leads 15 min ... 24 h}, ``coverage_90`` {fixed, dayahead: zone -> fraction + all},
         ``gains_truth`` (zone -> part -> {r, scale}; empty without ``truth``), ``seed``,
         ``seconds``.
@@ -448,20 +449,23 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
               "online_paper_validation": online(split["validation"])}
 
     methods = ("fixed", "dayahead", "persistence")
-    preds = {m: [] for m in methods}
+    preds = {m: [] for m in (*methods, "fixed_kf0")}
     stds, meas = [], []
     for i in split["validation"]:
         for r in issue_rows(data, weeks[i]["rows"]):
             fc = issue_forecast(model, data, r, profile, methods, dayahead=dayahead,
                                 sigma_air_forecast=sigma_air_forecast)
+            # sensitivity: the fixed forecast from the f_IG = 0 filter (as kalman_state)
+            fc["fixed_kf0"] = issue_forecast(model, data, r, profile, ("fixed",),
+                                             filter_prior="zero", intervals=False)["fixed"]
             ymeas = np.full((HORIZON, len(zones)), np.nan)
             stop = min(r + 1 + HORIZON, weeks[i]["rows"][1])
             ymeas[:stop - r - 1] = data.y[r + 1:stop]
             pad = np.full((HORIZON, len(zones)), np.nan)
-            for m in methods:
+            for m, lst in preds.items():
                 p = pad.copy()
                 p[:len(fc[m].mean)] = fc[m].mean
-                preds[m].append(p)
+                lst.append(p)
             s = pad.copy()
             s[:len(fc["fixed"].std)] = fc["fixed"].std
             stds.append(s)
@@ -469,11 +473,11 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
     meas_a, std_a = np.array(meas), np.array(stds)
     hrms = {}
     cov = {}
-    for m in methods:
-        pa = np.array(preds[m])
+    for m, lst in preds.items():
+        pa = np.array(lst)
         table3[m] = rms_by_zone(pa.reshape(-1, len(zones)), meas_a.reshape(-1, len(zones)), zones)
         hrms[m] = horizon_rms(pa, meas_a, zones)
-        if m != "persistence":
+        if m in ("fixed", "dayahead"):
             cov[m] = coverage(pa, std_a, meas_a, zones)
 
     # figure 2: temperature increase due to internal gains per training week and mean

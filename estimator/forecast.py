@@ -244,13 +244,10 @@ class Forecast:
     std: np.ndarray
     f_ig: np.ndarray
 
-    @property
-    def lower(self) -> np.ndarray:
-        return self.mean - Z90 * self.std
-
-    @property
-    def upper(self) -> np.ndarray:
-        return self.mean + Z90 * self.std
+    def interval(self, z: float = Z90) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) ends of the interval mean -+ z std [degC]; default 90 %."""
+        half = z * self.std
+        return self.mean - half, self.mean + half
 
 
 def _gains(method: str, data: ModelData, issue: int, horizon: int, profile: WeeklyProfile,

@@ -94,16 +94,18 @@ def week_split(data: ModelData, seed: int = 0, n_train: int = 8) -> dict:
     Returns
     -------
     dict
-        ``weeks``: list of {index, start (local date), rows [start, stop)};
+        ``weeks``: list of {index, segment (index in ``data.segments``), start (local
+        date), rows [start, stop)};
         ``train``, ``validation``: sorted week indices; ``train_starts``,
         ``validation_starts``: their local start dates; ``seed``.
     """
     per_week = 7 * _rows_per_day(data)
     local = data.local_times()
     weeks = []
-    for a, b in data.segments:
+    for seg, (a, b) in enumerate(data.segments):
         for s in range(a, b - per_week + 1, per_week):
-            weeks.append({"index": len(weeks), "start": str(local[s].date()), "rows": [s, s + per_week]})
+            weeks.append({"index": len(weeks), "segment": seg, "start": str(local[s].date()),
+                          "rows": [s, s + per_week]})
     if len(weeks) <= n_train:
         raise ValueError(f"{len(weeks)} whole weeks in the data; need more than {n_train}")
     rng = np.random.default_rng([seed, 21])
@@ -490,8 +492,10 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
     fig2["profile_w_m2"] = {z: profile.values[:, j].tolist() for j, z in enumerate(zones)}
 
     results = {
-        "split": {k: split[k] for k in ("train", "validation", "train_starts",
-                                        "validation_starts", "seed")},
+        "split": {**{k: split[k] for k in ("train", "validation", "train_starts",
+                                           "validation_starts", "seed")},
+                  "train_segments": [weeks[i]["segment"] for i in split["train"]],
+                  "validation_segments": [weeks[i]["segment"] for i in split["validation"]]},
         "table3": table3,
         "horizon_rms": hrms,
         "coverage_90": cov,

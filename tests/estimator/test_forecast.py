@@ -64,6 +64,7 @@ def test_week_split_is_seeded_and_disjoint():
     assert set(a["train"]).isdisjoint(a["validation"])
     assert sorted(a["train"] + a["validation"]) == list(range(11))
     assert a["train"] != c["train"]
+    assert [w["segment"] for w in a["weeks"]] == list(range(11))
     assert a["train_starts"][0] == str(d.local_times()[a["weeks"][a["train"][0]]["rows"][0]].date())
 
 

@@ -1,0 +1,515 @@
+"""Internal-gains profile and 24-hour zone-temperature forecasts, paper sections 4-B and 5.
+
+Pure numerics (docs/forecasts.md has the method, the readings chosen and the numbers):
+
+- :func:`week_split` — 8 training / 3 validation weeks, seeded;
+- :func:`fixed_profile` — paper Eq:fixed_ig from per-week tracks (:func:`track_week`);
+- :func:`issue_forecast` — one 24-h forecast issued at a row: Kalman state over the
+  previous day (f_IG = 0 in the filter, air states following the measurements), internal
+  gains from the fixed profile, the day-ahead blend (:class:`~.gains.DayAheadGains`) or
+  persistence (paper eq:online_ig held over the horizon), the measured u and v over the
+  horizon, and the filter covariance propagated through the model;
+- :func:`online_paper_predictions` — paper section 5 as implemented here: one-step-ahead
+  predictions with f_IG(k) = f_IG(k-1) and the state carried by the gains tracker;
+- :func:`forecast_study` — everything above on a campaign, as JSON-ready numbers.
+
+Only rows up to the issue row of y are read by a forecast; u and v over the horizon are
+the measured ones (as the paper's forecasts; no weather or HVAC forecast is modelled).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from .dataset import ModelData
+from .evaluate import horizon_rms, rms_by_zone
+from .gains import (
+    DayAheadGains,
+    RankDeficientError,
+    WeeklyProfile,
+    estimate_gains_step,
+    fit_weekly_profile,
+)
+from .identify import SIGMA_AIR_X0, kalman_state
+from .internal_gains import GainsTrack, track_gains, truth_correlation, zone_gain_heat
+from .kalman import (
+    ZoneStateFilter,
+    air_wall_covariance,
+    default_initial_covariance,
+    initial_state_from_measurement,
+)
+from .model import BilinearModel
+
+__all__ = [
+    "FORECAST_METHODS",
+    "FilterDay",
+    "Forecast",
+    "WeekTrack",
+    "coverage",
+    "fill_profile",
+    "filter_day",
+    "fixed_profile",
+    "forecast_study",
+    "gains_truth",
+    "issue_forecast",
+    "issue_rows",
+    "online_paper_predictions",
+    "propagate_std",
+    "track_week",
+    "week_split",
+    "zone_floor_area",
+]
+
+Z90 = 1.6448536269514722  # two-sided 90 % interval of a standard normal
+HORIZON = 96
+#: forecast methods of :func:`issue_forecast`
+FORECAST_METHODS = ("fixed", "dayahead", "persistence")
+SIGMA_MEAS = 0.2  # [K] measurement noise of the filter and of the forecast intervals
+SIGMA_AIR_FORECAST = 0.3  # [K per step] air-state process noise propagated in the forecast
+SIGMA_WALL_FORECAST = 0.01  # [K per step] element-state process noise in the forecast
+#: day-ahead offset: decay time and averaging window (chosen on the training weeks, docs)
+DAYAHEAD_TAU = pd.Timedelta("1h")
+DAYAHEAD_WINDOW = pd.Timedelta("1h")
+
+
+# --------------------------------------------------------------------------- split
+
+
+def _rows_per_day(data: ModelData) -> int:
+    step = data.times[1] - data.times[0]
+    return int(pd.Timedelta("1D") / step)
+
+
+def week_split(data: ModelData, seed: int = 0, n_train: int = 8) -> dict:
+    """Seeded split of the data's weeks into training and validation weeks.
+
+    Weeks are consecutive 7-day blocks of rows from the start of each contiguous segment
+    (the campaign has one segment per week). ``n_train`` of them are drawn at random with
+    ``numpy.random.default_rng([seed, 21])``; the rest are validation weeks.
+
+    Returns
+    -------
+    dict
+        ``weeks``: list of {index, segment (index in ``data.segments``), start (local
+        date), rows [start, stop)};
+        ``train``, ``validation``: sorted week indices; ``train_starts``,
+        ``validation_starts``: their local start dates; ``seed``.
+    """
+    per_week = 7 * _rows_per_day(data)
+    local = data.local_times()
+    weeks = []
+    for seg, (a, b) in enumerate(data.segments):
+        for s in range(a, b - per_week + 1, per_week):
+            weeks.append({"index": len(weeks), "segment": seg, "start": str(local[s].date()),
+                          "rows": [s, s + per_week]})
+    if len(weeks) <= n_train:
+        raise ValueError(f"{len(weeks)} whole weeks in the data; need more than {n_train}")
+    rng = np.random.default_rng([seed, 21])
+    train = sorted(int(i) for i in rng.choice(len(weeks), n_train, replace=False))
+    val = [w["index"] for w in weeks if w["index"] not in train]
+    return {"weeks": weeks, "train": train, "validation": val,
+            "train_starts": [weeks[i]["start"] for i in train],
+            "validation_starts": [weeks[i]["start"] for i in val], "seed": int(seed)}
+
+
+# --------------------------------------------------------------------------- profile
+
+
+@dataclass
+class WeekTrack:
+    """Per-step gains of one week (paper Eq:ig(k-1)), tracked from x_KF after its first day.
+
+    Attributes
+    ----------
+    start : int
+        First tracked row (the week's first row + one day).
+    track : GainsTrack
+        ``track.f_ig[i]`` is f_IG at row ``start + i``.
+    """
+
+    start: int
+    track: GainsTrack
+
+    @property
+    def rows(self) -> np.ndarray:
+        return np.arange(self.start, self.start + len(self.track.f_ig))
+
+
+def track_week(model: BilinearModel, data: ModelData, rows) -> WeekTrack:
+    """Gains of a week: x(0) = :func:`~.identify.kalman_state` over the week's first day,
+    then :func:`~.internal_gains.track_gains` to the week's last row."""
+    a, b = rows
+    day = _rows_per_day(data)
+    x0 = kalman_state(model, data, a, a + day)
+    return WeekTrack(a + day, track_gains(model, data, a + day, b - 1, x0))
+
+
+def fill_profile(profile: WeeklyProfile) -> WeeklyProfile:
+    """Bins without data take the mean of the same time of day over the days that have it.
+
+    Weeks tracked from their second day leave the first day's bins empty; a forecast and
+    the day-ahead offset need a value there (a workday takes the other days' mean).
+    """
+    per_day = int(pd.Timedelta("1D") / profile.step)
+    v = profile.values.reshape(7, per_day, -1)
+    tod = _nanmean0(v)
+    filled = np.where(np.isnan(v), tod[None], v).reshape(profile.values.shape)
+    return WeeklyProfile(np.nan_to_num(filled), profile.counts, profile.timezone, profile.step)
+
+
+def fixed_profile(data: ModelData, tracks: list[WeekTrack]) -> WeeklyProfile:
+    """Paper Eq:fixed_ig: the mean of the weeks' f_IG on the local time-of-week axis
+    (empty bins filled by :func:`fill_profile`)."""
+    rows = np.concatenate([t.rows for t in tracks])
+    f = np.concatenate([t.track.f_ig for t in tracks])
+    step = data.times[1] - data.times[0]
+    return fill_profile(fit_weekly_profile(data.times[rows], f, data.timezone, step=step))
+
+
+# --------------------------------------------------------------------------- filter
+
+
+@dataclass
+class FilterDay:
+    """The filter over rows [start, issue]: state and covariance at ``issue`` and the
+    per-step f_IG estimates (paper Eq:ig(k-1) from the filtered x(k-1)) of rows
+    [start, issue)."""
+
+    x: np.ndarray
+    P: np.ndarray
+    f_ig: np.ndarray
+
+
+def filter_day(model: BilinearModel, data: ModelData, start: int, issue: int, *,
+               prior: np.ndarray | None = None, sigma_air: float = SIGMA_AIR_X0,
+               sigma_wall: float = SIGMA_WALL_FORECAST,
+               sigma_meas: float = SIGMA_MEAS) -> FilterDay:
+    """Kalman filter over rows [start, issue]; reads y only there.
+
+    The filter's model uses the internal gains ``prior`` (rows [start, issue), W/m2;
+    default 0, as :func:`~.identify.kalman_state`). The air states' process noise
+    ``sigma_air`` (3 K) lets the filtered air follow the measurements; the innovations are
+    then the residuals of paper Eq:xnoig_ynoig with the prior's gains, and Eq:ig(k-1) on
+    them gives f_IG(k-1) - prior(k-1), returned added to the prior.
+    """
+    air = np.flatnonzero([lab.kind.endswith("air") for lab in model.structure.labels])
+    y = data.y[start:issue + 1]
+    y0 = y[0] if np.isfinite(y[0]).any() else np.nanmean(y, axis=0)
+    x0 = initial_state_from_measurement(np.where(np.isfinite(y0), y0, np.nanmean(y0)),
+                                        model.state_zones())
+    Q = air_wall_covariance(model.n, air, sigma_air, sigma_wall)
+    kf = ZoneStateFilter(x0, default_initial_covariance(model.n, air), model.C, Q,
+                         np.full(model.n_zones, sigma_meas**2))
+    kf.update(y[0])
+    f = np.full((issue - start, model.n_zones), np.nan)
+    c_ig = model.params.c_ig
+    prior = np.zeros_like(f) if prior is None else np.asarray(prior, float)
+    for i in range(issue - start):
+        k = start + i
+        phi, gv, gi = model.step_matrices(data.u[k])
+        kf.predict(phi, gv @ data.v[k] + gi @ (c_ig + prior[i]))
+        inn = kf.update(y[i + 1])
+        if inn.dof:
+            resid = np.full(model.n_zones, np.nan)
+            resid[inn.observed] = inn.innovation
+            try:
+                f[i] = prior[i] + estimate_gains_step(model.C @ gi, resid,
+                                                      np.zeros(model.n_zones)).f_ig
+            except RankDeficientError:
+                pass
+    return FilterDay(kf.x, kf.P, f)
+
+
+# --------------------------------------------------------------------------- forecast
+
+
+@dataclass(frozen=True)
+class Forecast:
+    """A 24-h forecast issued at row ``issue``.
+
+    Attributes
+    ----------
+    issue : int
+        Row of the issue time; y is read up to this row only.
+    mean : (H, n_zones) predicted y(issue + 1 ... issue + H) [degC]
+    std : (H, n_zones) standard deviation of a measured zone temperature [K]
+        (state covariance propagated through the model, plus measurement noise)
+    f_ig : (H, n_zones) internal gains used [W/m2]
+    """
+
+    issue: int
+    mean: np.ndarray
+    std: np.ndarray
+    f_ig: np.ndarray
+
+    def interval(self, z: float = Z90) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) ends of the interval mean -+ z std [degC]; default 90 %."""
+        half = z * self.std
+        return self.mean - half, self.mean + half
+
+
+def _gains(method: str, data: ModelData, issue: int, horizon: int, profile: WeeklyProfile,
+           fd: FilterDay, dayahead: DayAheadGains) -> np.ndarray:
+    times = pd.date_range(data.times[issue], periods=horizon, freq=profile.step)
+    if method == "fixed":
+        return np.nan_to_num(profile(times))
+    hist = pd.DataFrame(fd.f_ig, index=data.times[issue - len(fd.f_ig):issue], columns=data.zones)
+    if method == "dayahead":
+        return dayahead.issue(data.times[issue], hist).to_numpy()[:horizon]
+    if method == "persistence":  # paper eq:online_ig held over the horizon
+        last = hist.ffill().iloc[-1].to_numpy() if len(hist) else np.zeros(len(data.zones))
+        return np.tile(np.nan_to_num(last), (horizon, 1))
+    raise ValueError(f"method must be one of {FORECAST_METHODS}, got {method!r}")
+
+
+def propagate_std(model: BilinearModel, P: np.ndarray, u: np.ndarray, *,
+                  sigma_air: float = SIGMA_AIR_FORECAST, sigma_wall: float = SIGMA_WALL_FORECAST,
+                  sigma_meas: float = SIGMA_MEAS) -> np.ndarray:
+    """Std of C x(h) + e over the horizon: P <- Phi(u_h) P Phi(u_h)' + Q, var = C P C' + R."""
+    air = np.flatnonzero([lab.kind.endswith("air") for lab in model.structure.labels])
+    q = np.diag(air_wall_covariance(model.n, air, sigma_air, sigma_wall))
+    out = np.empty((len(u), model.n_zones))
+    for h in range(len(u)):
+        phi = model.step_matrices(u[h])[0]
+        P = phi @ P @ phi.T
+        P[np.diag_indices_from(P)] += q
+        out[h] = np.einsum("ij,jk,ik->i", model.C, P, model.C) + sigma_meas**2
+    return np.sqrt(np.maximum(out, 0.0))
+
+
+def issue_forecast(model: BilinearModel, data: ModelData, issue: int, profile: WeeklyProfile,
+                   methods=("fixed",), *, horizon: int = HORIZON,
+                   dayahead: DayAheadGains | None = None, intervals: bool = True,
+                   filter_prior: str = "profile", sigma_air_filter: float = SIGMA_AIR_X0,
+                   sigma_air_forecast: float = SIGMA_AIR_FORECAST,
+                   sigma_wall: float = SIGMA_WALL_FORECAST,
+                   sigma_meas: float = SIGMA_MEAS) -> dict[str, Forecast]:
+    """Forecasts issued at row ``issue`` (one per method, sharing the filter and covariance).
+
+    The state x(issue|issue) and its covariance come from :func:`filter_day` over the
+    previous day (rows [issue - 1 day, issue]) with the profile's gains in the filter's
+    model (``filter_prior="profile"``; ``"zero"``: f_IG = 0 as
+    :func:`~.identify.kalman_state`); y after ``issue`` is never read. The model then runs
+    ``horizon`` steps (cut at the end of the data segment) with the measured u and v of rows
+    [issue, issue + horizon) and the method's internal gains:
+
+    - ``fixed``: the weekly profile (paper Eq:fixed_ig);
+    - ``dayahead``: profile + decaying offset learned from the previous day's per-step
+      estimates (:class:`~.gains.DayAheadGains`, default :data:`DAYAHEAD_TAU`,
+      :data:`DAYAHEAD_WINDOW`);
+    - ``persistence``: the newest per-step estimate held (paper eq:online_ig over 24 h).
+
+    Intervals: P(issue|issue) propagated exactly, P <- Phi P Phi' + Q with the forecast
+    noise (``sigma_air_forecast``, ``sigma_wall``), std = sqrt(C P C' + sigma_meas^2).
+    """
+    day = _rows_per_day(data)
+    start = max(issue - day, 0)
+    seg_stop = next((b for a, b in data.segments if a <= issue < b), len(data))
+    horizon = min(horizon, seg_stop - issue)  # inputs exist up to the segment's end
+    if filter_prior not in ("profile", "zero"):
+        raise ValueError(f"filter_prior must be 'profile' or 'zero', got {filter_prior!r}")
+    prior = (np.nan_to_num(profile(data.times[start:issue])) if filter_prior == "profile"
+             else None)
+    fd = filter_day(model, data, start, issue, prior=prior, sigma_air=sigma_air_filter,
+                    sigma_wall=sigma_wall, sigma_meas=sigma_meas)
+    u, v = data.u[issue:issue + horizon], data.v[issue:issue + horizon]
+    std = (propagate_std(model, fd.P, u, sigma_air=sigma_air_forecast, sigma_wall=sigma_wall,
+                         sigma_meas=sigma_meas) if intervals
+           else np.full((horizon, model.n_zones), np.nan))
+    issuer = dayahead or DayAheadGains(profile, tau=DAYAHEAD_TAU, window=DAYAHEAD_WINDOW,
+                                       horizon=HORIZON)
+    out = {}
+    for m in methods:
+        f = _gains(m, data, issue, horizon, profile, fd, issuer)
+        out[m] = Forecast(issue, model.simulate(fd.x, u, v, f).y[1:], std, f)
+    return out
+
+
+def issue_rows(data: ModelData, rows) -> list[int]:
+    """Local-midnight rows of a week from its second day on (the forecast issue times)."""
+    a, b = rows
+    local = data.local_times()
+    day = _rows_per_day(data)
+    return [r for r in range(a + day, b) if local[r].hour == 0 and local[r].minute == 0]
+
+
+def coverage(pred: np.ndarray, std: np.ndarray, meas: np.ndarray, zones) -> dict:
+    """Fraction of measured values inside the 90 % interval, per zone and overall."""
+    inside = np.abs(meas - pred) <= Z90 * std
+    ok = np.isfinite(meas) & np.isfinite(pred) & np.isfinite(std)
+    out = {z: float(inside[..., j][ok[..., j]].mean()) for j, z in enumerate(zones)}
+    out["all"] = float(inside[ok].mean())
+    return out
+
+
+# --------------------------------------------------------------------------- online (paper)
+
+
+def online_paper_predictions(model: BilinearModel, wt: WeekTrack) -> tuple[np.ndarray, np.ndarray]:
+    """Paper section 5: y(k+1) predicted with f_IG(k) = f_IG(k-1) from the tracker's x(k).
+
+    The tracker's x(k+1) = x~(k+1) + Gamma_IG f_IG(k), so the prediction with the online
+    value f_IG(k-1) is C x(k+1) - C Gamma_IG (f_IG(k) - f_IG(k-1)).
+
+    Returns
+    -------
+    rows : (N,) int, the rows k + 1 predicted (from the second tracked step on)
+    pred : (N, n_zones) the one-step-ahead predictions [degC]
+    """
+    tr = wt.track
+    df = tr.f_ig[1:] - tr.f_ig[:-1]
+    pred = tr.x[2:] @ model.C.T - np.einsum("kij,kj->ki", tr.cb[1:], df)
+    return wt.rows[1:] + 1, pred
+
+
+# --------------------------------------------------------------------------- study
+
+
+def zone_floor_area(model: BilinearModel) -> np.ndarray:
+    """Floor area per zone [m2], recovered from B_IG (paper eq:q_ig: a_floor / capacity)."""
+    return model.structure.capacity @ model.B_ig
+
+
+TRUTH_PARTS = ("people", "lights", "equipment", "reheat")
+
+
+def gains_truth(model: BilinearModel, data: ModelData, tracks: list[WeekTrack],
+                truth: pd.DataFrame) -> dict:
+    """Per zone r and scale of the estimated gains heat a_floor (c_IG + f_IG) [W] against the
+    true people + lights + equipment + reheat heat, and each part alone (issue item 5)."""
+    rows = np.concatenate([t.rows for t in tracks])
+    f = np.concatenate([t.track.f_ig for t in tracks])
+    est = zone_gain_heat(f, model.params.c_ig, zone_floor_area(model))
+    tr = truth.copy()
+    tr.index = pd.to_datetime(tr.index, utc=True)
+    tr = tr.reindex(data.times[rows])
+    out = {}
+    for j, z in enumerate(data.zones):
+        parts = {p: tr.get(f"{p}:zone:{z}", pd.Series(np.nan, index=tr.index)).to_numpy(float)
+                 for p in TRUTH_PARTS}
+        total = np.sum([np.nan_to_num(parts[p]) for p in TRUTH_PARTS], axis=0)
+        res = {"total": truth_correlation(est[:, j], total)}
+        res.update({p: truth_correlation(est[:, j], parts[p]) for p in TRUTH_PARTS})
+        out[z] = {k: {"r": v["r"], "scale": v["scale"]} for k, v in res.items()}
+    return out
+
+
+def _clean(obj):
+    """JSON-ready: NaN -> None, numpy scalars -> float."""
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, float | np.floating):
+        return None if not np.isfinite(obj) else float(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | None = None,
+                   seed: int = 0, *, dayahead: DayAheadGains | None = None,
+                   sigma_air_forecast: float = SIGMA_AIR_FORECAST) -> tuple[dict, dict]:
+    """Paper sections 4-B and 5 on a campaign: profile, forecasts, intervals, truth check.
+
+    Returns
+    -------
+    results : dict (JSON-ready)
+        ``split``, ``table3`` {fixed, online_paper, online_paper_validation, dayahead,
+        persistence, fixed_kf0: zone -> RMS [K] + mean} (``fixed_kf0``: the fixed forecast
+        from the f_IG = 0 filter, a sensitivity), ``horizon_rms`` {method -> zone -> list over
+        leads 15 min ... 24 h}, ``coverage_90`` {fixed, dayahead: zone -> fraction + all},
+        ``gains_truth`` (zone -> part -> {r, scale}; empty without ``truth``), ``seed``,
+        ``seconds``.
+    figures : dict (JSON-ready)
+        ``fig2``: per zone, the temperature increase C Gamma_IG (c_IG + f_IG,w) [K per
+        step] on the 672 time-of-week bins for each training week and their mean;
+        ``fig3``: horizon RMS per method (same as results); ``lead_minutes``.
+    """
+    t0 = time.perf_counter()
+    zones = data.zones
+    split = week_split(data, seed)
+    weeks = split["weeks"]
+    tracks = {w["index"]: track_week(model, data, w["rows"]) for w in weeks}
+    train = [tracks[i] for i in split["train"]]
+    profile = fixed_profile(data, train)
+
+    # paper section 5 reading: one-step-ahead predictions, all weeks and validation weeks
+    def online(idx):
+        rows, preds = zip(*(online_paper_predictions(model, tracks[i]) for i in idx))
+        rows, preds = np.concatenate(rows), np.concatenate(preds)
+        return rms_by_zone(preds, data.y[rows], zones)
+
+    table3 = {"online_paper": online([w["index"] for w in weeks]),
+              "online_paper_validation": online(split["validation"])}
+
+    methods = ("fixed", "dayahead", "persistence")
+    preds = {m: [] for m in (*methods, "fixed_kf0")}
+    stds, meas = [], []
+    for i in split["validation"]:
+        for r in issue_rows(data, weeks[i]["rows"]):
+            fc = issue_forecast(model, data, r, profile, methods, dayahead=dayahead,
+                                sigma_air_forecast=sigma_air_forecast)
+            # sensitivity: the fixed forecast from the f_IG = 0 filter (as kalman_state)
+            fc["fixed_kf0"] = issue_forecast(model, data, r, profile, ("fixed",),
+                                             filter_prior="zero", intervals=False)["fixed"]
+            ymeas = np.full((HORIZON, len(zones)), np.nan)
+            stop = min(r + 1 + HORIZON, weeks[i]["rows"][1])
+            ymeas[:stop - r - 1] = data.y[r + 1:stop]
+            pad = np.full((HORIZON, len(zones)), np.nan)
+            for m, lst in preds.items():
+                p = pad.copy()
+                p[:len(fc[m].mean)] = fc[m].mean
+                lst.append(p)
+            s = pad.copy()
+            s[:len(fc["fixed"].std)] = fc["fixed"].std
+            stds.append(s)
+            meas.append(ymeas)
+    meas_a, std_a = np.array(meas), np.array(stds)
+    hrms = {}
+    cov = {}
+    for m, lst in preds.items():
+        pa = np.array(lst)
+        table3[m] = rms_by_zone(pa.reshape(-1, len(zones)), meas_a.reshape(-1, len(zones)), zones)
+        hrms[m] = horizon_rms(pa, meas_a, zones)
+        if m in ("fixed", "dayahead"):
+            cov[m] = coverage(pa, std_a, meas_a, zones)
+
+    # figure 2: temperature increase due to internal gains per training week and mean
+    step = data.times[1] - data.times[0]
+    per_week = []
+    for t in train:
+        rise = np.einsum("kij,kj->ki", t.track.cb, t.track.f_ig + model.params.c_ig)
+        per_week.append(fit_weekly_profile(data.times[t.rows], rise, data.timezone, step=step).values)
+    fig2 = {z: {"weeks": [w[:, j].tolist() for w in per_week],
+                "mean": _nanmean0(np.array(per_week)[..., j]).tolist()}
+            for j, z in enumerate(zones)}
+    fig2["week_starts"] = split["train_starts"]
+    fig2["profile_w_m2"] = {z: profile.values[:, j].tolist() for j, z in enumerate(zones)}
+
+    results = {
+        "split": {**{k: split[k] for k in ("train", "validation", "train_starts",
+                                           "validation_starts", "seed")},
+                  "train_segments": [weeks[i]["segment"] for i in split["train"]],
+                  "validation_segments": [weeks[i]["segment"] for i in split["validation"]]},
+        "table3": table3,
+        "horizon_rms": hrms,
+        "coverage_90": cov,
+        "gains_truth": ({} if truth is None else
+                        gains_truth(model, data, list(tracks.values()), truth)),
+        "n_forecasts": len(meas),
+        "seed": int(seed),
+    }
+    results["seconds"] = time.perf_counter() - t0
+    figures = {"fig2": fig2, "fig3": hrms, "lead_minutes": [15 * (h + 1) for h in range(HORIZON)]}
+    return _clean(results), _clean(figures)
+
+
+def _nanmean0(a: np.ndarray) -> np.ndarray:
+    """Mean over axis 0 skipping NaN; NaN (no warning) where a column has no value."""
+    n = np.isfinite(a).sum(axis=0)
+    return np.where(n > 0, np.nansum(a, axis=0) / np.maximum(n, 1), np.nan)

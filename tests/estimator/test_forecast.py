@@ -1,0 +1,138 @@
+"""Forecasts (paper 4-B, 5): week split, fixed profile, no look-ahead, interval coverage."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from zonecast.estimator.dataset import ModelData
+from zonecast.estimator.forecast import (
+    Z90,
+    WeekTrack,
+    fixed_profile,
+    issue_forecast,
+    online_paper_predictions,
+    week_split,
+)
+from zonecast.estimator.gains import fit_weekly_profile
+from zonecast.estimator.internal_gains import track_gains
+from zonecast.estimator.telemetry import segments_of
+
+ZONES = {"South": ["SPACE1-1"], "East": ["SPACE2-1"], "North": ["SPACE3-1"],
+         "West": ["SPACE4-1"], "Core": ["SPACE5-1"]}
+BOXES = [f"VAV-{i}" for i in range(1, 6)]
+TZ = "America/Los_Angeles"
+DAY = 96
+
+
+@pytest.fixture(scope="module")
+def model(five_zone):
+    from zonecast.estimator.model import build_model
+    return build_model(five_zone, ZONES, {f"VAV-{i}": f"SPACE{i}-1" for i in range(1, 6)})
+
+
+def _weekly(n, seed=1):
+    """Inputs and gains that repeat every week (so identical weeks give identical f_IG)."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(n) % (7 * DAY)
+    day = k / DAY
+    u_week = np.repeat(rng.uniform(0.05, 0.5, (7 * DAY // 4, 5)), 4, axis=0)
+    u = u_week[k]
+    v = np.column_stack([14 + 4 * np.sin(2 * np.pi * day), np.full(n, 13.0),
+                         np.zeros((n, 4)) + 100 * (np.sin(2 * np.pi * day) > 0)[:, None]])
+    scale = rng.uniform(0.5, 1.5, 5)
+    f = np.clip(20 * np.sin(2 * np.pi * (day - 0.3)), 0, None)[:, None] * scale
+    f[(day >= 5)] *= 0.3  # quieter weekends
+    return u, v, f
+
+
+def _data(times, u, v, y):
+    return ModelData(times, u, v, y, list(ZONES), BOXES, segments_of(times, pd.Timedelta("15min")),
+                     np.zeros(len(times), bool), TZ)
+
+
+def _times(n):
+    return pd.date_range(pd.Timestamp("2015-04-13", tz=TZ), periods=n, freq="15min").tz_convert("UTC")
+
+
+def test_week_split_is_seeded_and_disjoint():
+    n = 11 * 7 * DAY
+    times = pd.DatetimeIndex(np.concatenate([_times(7 * DAY) + pd.Timedelta(weeks=3 * w)
+                                             for w in range(11)]))
+    d = _data(times, np.zeros((n, 5)), np.zeros((n, 6)), np.zeros((n, 5)))
+    a, b, c = week_split(d, 0), week_split(d, 0), week_split(d, 1)
+    assert a == b
+    assert len(a["weeks"]) == 11 and len(a["train"]) == 8 and len(a["validation"]) == 3
+    assert set(a["train"]).isdisjoint(a["validation"])
+    assert sorted(a["train"] + a["validation"]) == list(range(11))
+    assert a["train"] != c["train"]
+    assert [w["segment"] for w in a["weeks"]] == list(range(11))
+    assert a["train_starts"][0] == str(d.local_times()[a["weeks"][a["train"][0]]["rows"][0]].date())
+
+
+def test_fixed_profile_of_identical_weeks_is_the_injected_gains(model):
+    n = 2 * 7 * DAY
+    u, v, f = _weekly(n)
+    sim = model.simulate(model.steady_state(u[0], v[0]), u, v, f)
+    d = _data(_times(n), u, v, sim.y[:-1])
+    tracks = [WeekTrack(s, track_gains(model, d, s, e, sim.x[s]))
+              for s, e in ((DAY, 7 * DAY - 1), (8 * DAY, n - 1))]
+    prof = fixed_profile(d, tracks)
+    rows = np.arange(8 * DAY, n - 1)  # Tuesday ... Sunday of the second week
+    np.testing.assert_allclose(prof(d.times[rows]), f[rows], atol=1e-6)
+    # both weeks alike, and the online (paper) one-step predictions reproduce y exactly
+    np.testing.assert_allclose(tracks[0].track.f_ig, tracks[1].track.f_ig, atol=1e-6)
+    rows1, pred = online_paper_predictions(model, tracks[0])
+    err = pred - d.y[rows1]
+    assert np.abs(err).max() < 0.2  # only the 15-min change of f_IG is missed
+
+
+@pytest.mark.parametrize("corrupt", [1e6, np.nan])
+def test_forecast_never_reads_y_after_the_issue_time(model, corrupt):
+    n = 3 * DAY
+    u, v, f = _weekly(n, seed=3)
+    sim = model.simulate(model.steady_state(u[0], v[0]), u, v, f)
+    times = _times(n)
+    prof = fit_weekly_profile(times, 0.8 * f, TZ)
+    d = _data(times, u, v, sim.y[:-1].copy())
+    issue = 2 * DAY - 8
+    methods = ("fixed", "dayahead", "persistence")
+    ref = issue_forecast(model, d, issue, prof, methods)
+    d.y[issue + 1:] = corrupt
+    new = issue_forecast(model, d, issue, prof, methods)
+    for m in methods:
+        np.testing.assert_array_equal(ref[m].mean, new[m].mean)
+        np.testing.assert_array_equal(ref[m].std, new[m].std)
+        assert np.isfinite(ref[m].mean).all() and len(ref[m].mean) == DAY
+    d.y[issue] += 1.0  # the newest measurement does matter
+    assert not np.allclose(issue_forecast(model, d, issue, prof, methods)["dayahead"].mean,
+                           ref["dayahead"].mean)
+
+
+def test_interval_coverage_is_near_nominal_on_model_data(model):
+    """Model-simulated data with known process and measurement noise; the filter and the
+    forecast use the same noise, the gains are known: 90 % intervals hold ~90 %."""
+    sa, sw, sm = 0.1, 0.01, 0.1
+    rng = np.random.default_rng(7)
+    n = 8 * DAY
+    u, v, f = _weekly(n, seed=5)
+    air = np.flatnonzero([lab.kind.endswith("air") for lab in model.structure.labels])
+    q = np.full(model.n, sw)
+    q[air] = sa
+    x = model.steady_state(u[0], v[0], f[0])
+    ys = np.empty((n, model.n_zones))
+    for k in range(n):
+        ys[k] = model.C @ x + sm * rng.standard_normal(model.n_zones)
+        phi, gv, gi = model.step_matrices(u[k])
+        x = phi @ x + gv @ v[k] + gi @ (model.params.c_ig + f[k]) + q * rng.standard_normal(model.n)
+    times = _times(n)
+    prof = fit_weekly_profile(times, f, TZ)
+    d = _data(times, u, v, ys)
+    inside, total = 0, 0
+    for issue in range(DAY, n - DAY, DAY // 2):
+        fc = issue_forecast(model, d, issue, prof, ("fixed",), sigma_air_filter=sa,
+                            sigma_air_forecast=sa, sigma_wall=sw, sigma_meas=sm)["fixed"]
+        meas = d.y[issue + 1:issue + 1 + len(fc.mean)]
+        lo, hi = fc.interval()
+        np.testing.assert_allclose(hi - fc.mean, Z90 * fc.std)
+        inside += int(((meas >= lo) & (meas <= hi)).sum())
+        total += meas.size
+    assert 0.84 <= inside / total <= 0.96, inside / total

@@ -235,74 +235,27 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
 @app.command("demo")
 def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-out"),
          seed: Seed = 0) -> None:
-    """The main job on embedded defaults: run the virtual building's campaign and write a
-    report with plots."""
-    from zonecast.testbed.config import load_config
-    from zonecast.testbed.effects import Effects
+    """The main job on embedded defaults: the virtual building's campaign (with its own
+    report in OUT/campaign) and `zonecast reproduce` on it (OUT/report.md)."""
+    from zonecast.reproduce import run
     from zonecast.testbed.report import write_report
     from zonecast.testbed.run import run_campaign
-    cfg = load_config("office6")
+    campaign = out / "campaign"
     with _progress() as prog:
-        task = prog.add_task("campaign", total=None)
-        res = run_campaign(out / "campaign", seed=seed, effects=Effects(), config=cfg,
+        task = prog.add_task("demo", total=None)
+        res = run_campaign(campaign, seed=seed,
                            progress=lambda s: prog.update(task, description=f"campaign: {s}"))
-        prog.update(task, description="report")
-        path = write_report(res.out, out)
-    typer.echo(f"campaign in {res.out} ({res.timings['total_s']:.1f} s); report: {path}")
-
-
-@app.command("serve")
-def serve(config: Annotated[Path | None, typer.Option(
-              help="Settings YAML (e.g. configs/service.yaml); the environment (ZONECAST_...) "
-                   "overrides it.")] = None,
-          host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
-          port: Annotated[int, typer.Option(help="TCP port.")] = 8000,
-          log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info") -> None:
-    """Run the online service: MQTT ingest, one runner per building, REST API."""
-    import os
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads BLAS
-    import uvicorn
-
-    from zonecast.service.app import create_app
-    from zonecast.service.settings import load_settings
-    try:
-        settings = load_settings(config)
-    except ValueError as exc:
-        _fail(exc)
-    uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level)
-
-
-@app.command("replay")
-def replay_cmd(data: Annotated[Path, typer.Option(help="Folder with telemetry.csv (and "
-                                                  "site.yaml), or a telemetry file.")],
-               broker: Annotated[str, typer.Option(help="mqtt://HOST:PORT or mqtts://HOST:PORT")],
-               building: Annotated[str, typer.Option(help="Building id of the topic.")],
-               speed: Annotated[float, typer.Option(
-                   min=0, help="Time-lapse factor (1 = real time, 96 = a day per 15 min); "
-                               "0 = as fast as the broker acknowledges.")] = 0.0,
-               start: Annotated[str | None, typer.Option(help="First time (ISO-8601 with "
-                                                         "offset).")] = None,
-               end: Annotated[str | None, typer.Option(help="End time, exclusive.")] = None,
-               username: Annotated[str | None, typer.Option(help="Broker user name.")] = None,
-               password: Annotated[str | None, typer.Option(
-                   envvar="ZONECAST_REPLAY_PASSWORD", help="Broker password (or the "
-                   "environment variable ZONECAST_REPLAY_PASSWORD).")] = None,
-               protocol: Annotated[str, typer.Option(help="MQTT version: 5 or 3.1.1.")] = "5",
-               prefix: Annotated[str, typer.Option(help="Topic prefix.")] = "zonecast") -> None:
-    """Publish recorded telemetry like a BMS: one QoS-1 message per row on
-    <prefix>/<building>/telemetry."""
-    from zonecast.service.mqtt import MqttSettings, TLSSettings
-    from zonecast.service.replay import parse_broker_url, replay
-    try:
-        host, port, tls = parse_broker_url(broker)
-        settings = MqttSettings(host=host, port=port, username=username, password=password,
-                                tls=TLSSettings() if tls else None, protocol=protocol,
-                                topic_prefix=prefix)
-        res = replay(data, settings, building, speed=speed, start=start, end=end)
-    except (ValueError, ConnectionError) as exc:
-        _fail(exc)
-    typer.echo(f"published {res['messages']} messages ({res['readings']} readings) from "
-               f"{res['first']} to {res['last']} in {res['seconds']:.1f} s")
+        prog.update(task, description="campaign report")
+        write_report(res.out, campaign)
+        results = run(out, campaign, seed,
+                      progress=lambda m: prog.update(task, description=f"reproduce: {m}"))
+    t2, t3 = results.table2, results.table3
+    typer.echo(f"campaign: {campaign}/report.md ({res.timings['total_s']:.0f} s)")
+    typer.echo(f"Table 2 mean RMS: training {t2['training']['mean']:.3f}, validation "
+               f"{t2['validation']['mean']:.3f} (paper 0.333, 0.413); Table 3: fixed "
+               f"{t3['fixed']['mean']:.3f}, online {t3['online_paper']['mean']:.3f} "
+               "(paper 0.485, 0.308)")
+    typer.echo(f"report: {out}/report.md, results: {out}/results.json")
 
 
 def main() -> None:  # pragma: no cover - console entry

@@ -93,6 +93,26 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
     return path
 
 
+def plot_gains(fig2: dict, zones: list[str], path: Path) -> None:
+    """Fig. 2: temperature rise per step due to internal gains, C B_IG (c_IG + f_IG,w), per
+    zone on the local time-of-week axis: each training week in grey, their mean in red."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(len(zones), 1, figsize=(10, 1.5 * len(zones)), sharex=True)
+    for ax, z in zip(np.atleast_1d(axes), zones):
+        days = np.arange(len(fig2[z]["mean"])) / 96.0
+        for w in fig2[z]["weeks"]:
+            ax.plot(days, np.asarray(w, dtype=float), color="0.75", lw=0.6)
+        ax.plot(days, np.asarray(fig2[z]["mean"], dtype=float), color="red", lw=1.2)
+        ax.set_ylabel(f"{z} [K]")
+    np.atleast_1d(axes)[-1].set_xlabel("day of week (0 = Monday 00:00 local)")
+    fig.suptitle("Temperature rise per 15-min step due to internal gains: weeks grey, mean red")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def plot_horizon(horizon: dict[str, dict[str, list[float]]], zones: list[str], path: Path) -> None:
     """Fig. 3: RMS versus prediction horizon, per zone, one panel per method."""
     import matplotlib
@@ -155,7 +175,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
     t = time.perf_counter()
     progress("internal gains and forecasts")
     from zonecast.estimator.forecast import forecast_study
-    study = forecast_study(fitted, data, truth=truth, seed=seed)
+    study, figs = forecast_study(fitted, data, truth=truth, seed=seed)
     timings["gains_and_forecasts"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     res = Results(seed=seed,
@@ -172,6 +192,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
                   timings_s={k: round(v, 1) for k, v in timings.items()})
     (out / "results.json").write_text(res.model_dump_json(indent=2))
     figures = []
+    plot_gains(figs["fig2"], list(site.zones), out / "fig2_internal_gains.png")
+    figures.append("fig2_internal_gains.png")
     plot_horizon(res.horizon_rms, list(site.zones), out / "fig3_horizon_rms.png")
     figures.append("fig3_horizon_rms.png")
     write_report(res, out, figures, list(site.zones))

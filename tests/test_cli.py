@@ -55,3 +55,29 @@ def test_model_on_nrels_five_zone_building(tmp_path):
     assert "Shading:Zone:Detailed" in res.output   # reported, not silently skipped
     res = runner.invoke(app, ["model", "--site", str(site), "--out", str(out), "--params", "paper"])
     assert res.exit_code == 2 and "needs the paper's zones" in res.output
+
+
+def test_forecast_offline_from_a_model_file(tmp_path):
+    import datetime as dt
+    import json
+
+    import pandas as pd
+
+    from zonecast.testbed.run import run_weeks
+
+    run = run_weeks([dt.date(2015, 4, 13)], tmp_path / "week", seed=3)
+    model = tmp_path / "model.json"
+    model.write_text(json.dumps({"schema_version": 1, "site": "week/site.yaml", "parameters": {}}))
+    csv = tmp_path / "fc.csv"
+    args = ["forecast", "--model", str(model), "--data", str(run.out),
+            "--at", "2015-04-15T00:00:00-07:00", "--horizon", "6h", "--out", str(csv)]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 0, res.output
+    table = pd.read_csv(csv)
+    assert len(table) == 24 * 6 and set(table.zone) == {"NW", "NE", "W", "E", "S", "C"}
+    assert (table.p05_degC < table.mean_degC).all() and (table.mean_degC < table.p95_degC).all()
+    assert pd.Timestamp(table.time.iloc[0]) == pd.Timestamp("2015-04-15T00:15:00-07:00")
+    res = runner.invoke(app, args[:6] + ["2015-04-15T00:00:00"])
+    assert res.exit_code == 2 and "UTC offset" in res.output
+    res = runner.invoke(app, args[:8] + ["48h"])
+    assert res.exit_code == 2 and "between 15min and 24h" in res.output

@@ -208,6 +208,47 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     typer.echo(f"wrote {out}")
 
 
+@app.command("forecast")
+def forecast_cmd(model: Annotated[Path, typer.Option(help="identified-model file (zonecast identify)")],
+                 data: Annotated[Path, typer.Option(help="telemetry file, or a folder holding "
+                                                         "telemetry.csv")],
+                 at: Annotated[str, typer.Option(help="issue time, ISO-8601 with offset; nothing "
+                                                      "measured after it is used")],
+                 horizon: Annotated[str, typer.Option(help="up to 24h, e.g. 24h, 6h, 90min")] = "24h",
+                 out: Annotated[Path | None, typer.Option(help="CSV of the forecast (time, zone, "
+                                                              "mean, 5 % and 95 % bounds)")] = None) -> None:
+    """The day-ahead forecast the service would issue at AT, computed offline from recorded
+    telemetry (same code as the online runner): zone temperatures with 90 % intervals."""
+    import pandas as pd
+
+    from zonecast.estimator.site import parse_step
+    from zonecast.service.offline import offline_forecasts
+    try:
+        t = pd.Timestamp(at)
+        if t.tzinfo is None:
+            raise ValueError(f"--at {at}: give a UTC offset, e.g. 2015-05-12T00:00:00-07:00")
+        steps = int(parse_step(horizon.strip()).total_seconds() // 900)
+        if not 1 <= steps <= 96:
+            raise ValueError(f"--horizon {horizon}: between 15min and 24h")
+        fc = offline_forecasts(model, data / "telemetry.csv" if data.is_dir() else data, [t])
+        (f,) = fc.values()
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(exc)
+    lo, hi = f.lower[:steps], f.upper[:steps]
+    rows = [{"time": tt.isoformat(), "zone": z, "mean_degC": f.mean[k, j], "p05_degC": lo[k, j],
+             "p95_degC": hi[k, j]} for k, tt in enumerate(f.times[:steps]) for j, z in enumerate(f.zones)]
+    table = pd.DataFrame(rows)
+    if out is not None:
+        table.to_csv(out, index=False, float_format="%.3f")
+    typer.echo(f"forecast issued {f.issued.isoformat()} (model {f.model_version}), {steps} steps")
+    for h in sorted({min(steps, 4), min(steps, 48), steps}):
+        k = h - 1
+        typer.echo(f"+{h * 15 / 60:g} h: " + ", ".join(
+            f"{z} {f.mean[k, j]:.1f} [{lo[k, j]:.1f}, {hi[k, j]:.1f}]" for j, z in enumerate(f.zones)))
+    if out is not None:
+        typer.echo(f"wrote {out}")
+
+
 @app.command("reproduce")
 def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Path("report"),
                   campaign: Annotated[Path | None, typer.Option(

@@ -62,7 +62,6 @@ def test_forecast_offline_from_a_model_file(tmp_path):
     import json
 
     import pandas as pd
-
     from zonecast.testbed.run import run_weeks
 
     run = run_weeks([dt.date(2015, 4, 13)], tmp_path / "week", seed=3)

@@ -80,3 +80,11 @@ def test_forecast_offline_from_a_model_file(tmp_path):
     assert res.exit_code == 2 and "UTC offset" in res.output
     res = runner.invoke(app, args[:8] + ["48h"])
     assert res.exit_code == 2 and "between 15min and 24h" in res.output
+
+
+def test_every_documented_command_exists():
+    res = runner.invoke(app, ["--help"])
+    assert res.exit_code == 0
+    for cmd in ("testbed", "check", "model", "identify", "forecast", "reproduce", "demo", "serve",
+                "replay"):
+        assert cmd in res.output, cmd

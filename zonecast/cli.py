@@ -299,5 +299,59 @@ def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-
     typer.echo(f"report: {out}/report.md, results: {out}/results.json")
 
 
+@app.command("serve")
+def serve(config: Annotated[Path | None, typer.Option(
+              help="Settings YAML (e.g. configs/service.yaml); the environment (ZONECAST_...) "
+                   "overrides it.")] = None,
+          host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+          port: Annotated[int, typer.Option(help="TCP port.")] = 8000,
+          log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info") -> None:
+    """Run the online service: MQTT ingest, one runner per building, REST API."""
+    import os
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads BLAS
+    import uvicorn
+
+    from zonecast.service.app import create_app
+    from zonecast.service.settings import load_settings
+    try:
+        settings = load_settings(config)
+    except ValueError as exc:
+        _fail(exc)
+    uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level)
+
+
+@app.command("replay")
+def replay_cmd(data: Annotated[Path, typer.Option(help="Folder with telemetry.csv (and "
+                                                  "site.yaml), or a telemetry file.")],
+               broker: Annotated[str, typer.Option(help="mqtt://HOST:PORT or mqtts://HOST:PORT")],
+               building: Annotated[str, typer.Option(help="Building id of the topic.")],
+               speed: Annotated[float, typer.Option(
+                   min=0, help="Time-lapse factor (1 = real time, 96 = a day per 15 min); "
+                               "0 = as fast as the broker acknowledges.")] = 0.0,
+               start: Annotated[str | None, typer.Option(help="First time (ISO-8601 with "
+                                                         "offset).")] = None,
+               end: Annotated[str | None, typer.Option(help="End time, exclusive.")] = None,
+               username: Annotated[str | None, typer.Option(help="Broker user name.")] = None,
+               password: Annotated[str | None, typer.Option(
+                   envvar="ZONECAST_REPLAY_PASSWORD", help="Broker password (or the "
+                   "environment variable ZONECAST_REPLAY_PASSWORD).")] = None,
+               protocol: Annotated[str, typer.Option(help="MQTT version: 5 or 3.1.1.")] = "5",
+               prefix: Annotated[str, typer.Option(help="Topic prefix.")] = "zonecast") -> None:
+    """Publish recorded telemetry like a BMS: one QoS-1 message per row on
+    <prefix>/<building>/telemetry."""
+    from zonecast.service.mqtt import MqttSettings, TLSSettings
+    from zonecast.service.replay import parse_broker_url, replay
+    try:
+        host, port, tls = parse_broker_url(broker)
+        settings = MqttSettings(host=host, port=port, username=username, password=password,
+                                tls=TLSSettings() if tls else None, protocol=protocol,
+                                topic_prefix=prefix)
+        res = replay(data, settings, building, speed=speed, start=start, end=end)
+    except (ValueError, ConnectionError) as exc:
+        _fail(exc)
+    typer.echo(f"published {res['messages']} messages ({res['readings']} readings) from "
+               f"{res['first']} to {res['last']} in {res['seconds']:.1f} s")
+
+
 def main() -> None:  # pragma: no cover - console entry
     app(sys.argv[1:])

@@ -88,3 +88,10 @@ def test_every_documented_command_exists():
     for cmd in ("testbed", "check", "model", "identify", "forecast", "reproduce", "demo", "serve",
                 "replay"):
         assert cmd in res.output, cmd
+
+
+def test_diagnose_fails_with_a_clear_message_on_a_missing_model(tmp_path):
+    res = runner.invoke(app, ["diagnose", "--model", str(tmp_path / "none.json"), "--data",
+                              str(tmp_path), "--out", str(tmp_path / "d")])
+    assert res.exit_code == 2
+    assert "none.json" in res.output

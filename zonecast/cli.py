@@ -273,6 +273,36 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
     typer.echo(f"wrote {out}/results.json, {out}/report.md ({res.timings_s.get('total', 0):.0f} s)")
 
 
+@app.command("diagnose")
+def diagnose_cmd(model: Annotated[Path, typer.Option(help="identified-model file (zonecast identify)")],
+                 data: Annotated[Path, typer.Option(help="telemetry file, or a folder holding "
+                                                         "telemetry.csv")],
+                 out: Annotated[Path, typer.Option(help="report folder")] = Path("diagnosis"),
+                 site: Annotated[Path | None, typer.Option(
+                     help="site.yaml (default: the model file's)")] = None,
+                 gains: Annotated[str, typer.Option(
+                     help="internal gains of the base model: 'profile' (weekly profile fitted "
+                          "on the training weeks) or 'constant' (c_IG only)")] = "profile",
+                 seed: Annotated[int, typer.Option(help="seed of the week split")] = 0) -> None:
+    """Where the model's error lies, which unmodelled effect causes it and how much adding it
+    helps on held-out weeks: writes diagnosis.json, diagnosis.md and plots."""
+    from zonecast.diagnosis import run
+    try:
+        with _progress() as prog:
+            task = prog.add_task("diagnose", total=None)
+            res = run(model, data, out, site_path=site, seed=seed, gains=gains,
+                      progress=lambda m: prog.update(task, description=f"diagnose: {m}"))
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(exc)
+    for i, c in enumerate(res.ranked[:3], 1):
+        typer.echo(f"{i}. {c.effect} in {', '.join(c.zones)}: score {c.score:.3f}, confidence "
+                   f"{c.confidence:.3f}{' (confident)' if c.confident else ''}; held-out RMS "
+                   f"{c.heldout_rms_before['mean']:.3f} -> {c.heldout_rms_after['mean']:.3f} K")
+    if not any(c.confident for c in res.ranked):
+        typer.echo("no confident attribution")
+    typer.echo(f"wrote {out}/diagnosis.json, {out}/diagnosis.md ({res.seconds:.0f} s)")
+
+
 @app.command("demo")
 def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-out"),
          seed: Seed = 0) -> None:

@@ -1,0 +1,582 @@
+"""Sim-to-real diagnosis: where the model's error lies, which unmodelled effect causes it, and
+how much it shrinks once the effect is added, on weeks withheld from the search.
+
+Pipeline (docs/diagnosis.md has the method and the measured numbers):
+
+1. :func:`baseline` — the model's 24-h forecasts with the fixed internal-gains profile (paper
+   Eq:fixed_ig fitted on the training weeks), issued every local midnight, on every week, and
+   a week-long open-loop simulation; residuals = measured − model. The state at an issue is
+   the gains tracker's (paper Eq:ig(k-1) every step from x_KF after the week's first day:
+   its zone temperatures equal the measured ones), which reads nothing after the issue and is
+   ten times cheaper than a Kalman filter over the previous day.
+2. :func:`where` — the residuals by zone, hour of day, weekday/weekend, season, operating
+   regime (airflow above minimum or not, airflow level, solar level, outdoor temperature,
+   excitation vs normal operation) and forecast lead.
+3. :func:`sensitivities` — for every candidate effect of :mod:`.effects`, zone and variant,
+   the change of the forecasts per unit of its parameter (exact for the heat and output
+   terms given the base prediction, finite difference for the capacity scaling). Heat terms
+   are taken net of their training-week time-of-week mean: a refitted weekly profile would
+   absorb that part.
+4. :func:`score_candidates` — each candidate's parameter fitted by least squares on the
+   training weeks' residuals; its score is the share of the training sum of squares it
+   removes under leave-one-week-out cross-validation, its confidence a one-sided t-test over
+   the per-day reductions (days are roughly independent; 15-min residuals are not).
+5. :func:`diagnose` — effects ranked by score; each with its confident zones refitted on
+   all training weeks and scored on the held-out weeks, which no step above has read.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+import scipy.sparse as sp
+from scipy import optimize, stats
+
+from .dataset import ModelData
+from .effects import (
+    SPECS,
+    box_zone_matrix,
+    heat_regressor,
+    minimum_airflow_fraction,
+    time_of_week_mean,
+)
+from .forecast import (
+    HORIZON,
+    fill_profile,
+    fixed_profile,
+    issue_rows,
+    track_week,
+    week_split,
+    zone_floor_area,
+)
+from .gains import WeeklyProfile
+from .internal_gains import stepper_for
+from .model import BilinearModel
+
+__all__ = [
+    "CONFIDENCE",
+    "MIN_SCORE",
+    "Baseline",
+    "Candidate",
+    "Diagnosis",
+    "baseline",
+    "diagnose",
+    "scaled_capacity",
+    "score_candidates",
+    "sensitivities",
+    "where",
+]
+
+#: a candidate is a confident attribution when its cross-validated confidence and score
+#: reach these (set before the blind benchmark was run; docs/diagnosis.md)
+CONFIDENCE = 0.99
+MIN_SCORE = 0.02
+#: relative capacity step of the thermal-mass finite difference
+MASS_STEP = 0.1
+#: state kinds whose capacity the thermal-mass effect scales
+MASS_KINDS = ("room_air", "internal_mass")
+
+
+class DiagnosisError(ValueError):
+    """The data cannot be diagnosed as asked (too few weeks, no forecasts)."""
+
+
+# --------------------------------------------------------------------------- baseline
+
+
+@dataclass
+class Baseline:
+    """Base forecasts and simulation of the model on every week.
+
+    Attributes
+    ----------
+    split : dict from :func:`~.forecast.week_split` (training / held-out weeks)
+    profile : WeeklyProfile used as f_IG [W/m2]
+    issues : issue rows (local midnights from each week's second day)
+    horizon : (n_issues,) steps forecast from each issue
+    x0 : (n_issues, n) filtered states at the issues [degC]
+    pred : (N, n_zones) forecast of row k from its issue (NaN outside forecasts) [degC]
+    lead : (N,) steps since the issue (0 outside forecasts)
+    issue_of_row : (N,) index into ``issues`` (-1 outside forecasts)
+    sim : (N, n_zones) week-long open-loop simulation from x_KF after each week's first day
+    week_of_row : (N,) week index (-1 outside whole weeks)
+    """
+
+    split: dict
+    profile: WeeklyProfile
+    issues: list[int]
+    horizon: np.ndarray
+    x0: np.ndarray
+    pred: np.ndarray
+    lead: np.ndarray
+    issue_of_row: np.ndarray
+    sim: np.ndarray
+    week_of_row: np.ndarray
+    gains: str = "profile"
+
+    def rows_of(self, weeks: Sequence[int]) -> np.ndarray:
+        """Boolean (N,) mask of forecast rows in the given weeks."""
+        return np.isin(self.week_of_row, list(weeks)) & (self.lead > 0)
+
+
+def _profile_at(profile: WeeklyProfile, times) -> np.ndarray:
+    return np.nan_to_num(profile(times))
+
+
+def baseline(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str = "profile",
+             progress: Callable[[str], None] | None = None) -> Baseline:
+    """Forecast and simulate the model on every week (see the module docstring).
+
+    ``gains="profile"``: f_IG is the weekly profile fitted on the training weeks (paper
+    Eq:fixed_ig); ``"constant"``: f_IG = 0 (only the model's c_IG), the identification's
+    model.
+    """
+    if gains not in ("profile", "constant"):
+        raise ValueError(f"gains must be 'profile' or 'constant', got {gains!r}")
+    split = week_split(data, seed)
+    weeks = split["weeks"]
+    N, nz = len(data), model.n_zones
+    step = data.times[1] - data.times[0]
+    say = progress or (lambda m: None)
+    tracks = []
+    for w in weeks:
+        say(f"tracking the state, week {w['index'] + 1}/{len(weeks)}")
+        tracks.append(track_week(model, data, w["rows"]))
+    if gains == "profile":
+        profile = fixed_profile(data, [tracks[i] for i in split["train"]])
+    else:
+        nb = int(pd.Timedelta("7D") / step)
+        profile = fill_profile(WeeklyProfile(np.zeros((nb, nz)), np.zeros(nb, int),
+                                             data.timezone, step))
+    week_of_row = np.full(N, -1)
+    pred = np.full((N, nz), np.nan)
+    sim = np.full((N, nz), np.nan)
+    lead = np.zeros(N, int)
+    issue_of_row = np.full(N, -1)
+    issues, horizons, x0s = [], [], []
+    for w, tr in zip(weeks, tracks):
+        a, b = w["rows"]
+        week_of_row[a:b] = w["index"]
+        say(f"base forecasts, week {w['index'] + 1}/{len(weeks)}")
+        for r in issue_rows(data, (a, b)):
+            H = min(HORIZON, b - 1 - r)
+            if H < 1 or r < tr.start:
+                continue
+            x0 = tr.track.x[r - tr.start]
+            f = _profile_at(profile, data.times[r:r + H])
+            pred[r + 1:r + 1 + H] = model.simulate(x0, data.u[r:r + H], data.v[r:r + H], f).y[1:]
+            lead[r + 1:r + 1 + H] = np.arange(1, H + 1)
+            issue_of_row[r + 1:r + 1 + H] = len(issues)
+            issues.append(r)
+            horizons.append(H)
+            x0s.append(x0)
+        s0 = tr.start
+        f = _profile_at(profile, data.times[s0:b])
+        sim[s0:b] = model.simulate(tr.track.x[0], data.u[s0:b], data.v[s0:b], f).y[:-1]
+    if not issues:
+        raise DiagnosisError("no forecast could be issued: the data need whole weeks with "
+                             "local midnights after their first day")
+    return Baseline(split, profile, issues, np.array(horizons), np.array(x0s), pred, lead,
+                    issue_of_row, sim, week_of_row, gains)
+
+
+# --------------------------------------------------------------------------- sensitivities
+
+
+def scaled_capacity(model: BilinearModel, scale: np.ndarray) -> BilinearModel:
+    """The model with each state's heat capacity multiplied by ``scale`` (conductances kept):
+    every row of A, B_v and B_IG is divided by it."""
+    st = model.structure
+    scale = np.asarray(scale, float)
+    D = sp.diags(1.0 / scale)
+    new = dataclasses.replace(
+        st, capacity=st.capacity * scale, A0=(D @ st.A0).tocsr(),
+        A_p=[(D @ a).tocsr() for a in st.A_p], Bv0=(D @ st.Bv0).tocsr(),
+        Bv_p=[(D @ b).tocsr() for b in st.Bv_p], B_ig=st.B_ig / scale[:, None])
+    return BilinearModel(new, model.params, model.step, model.method, model.u_nominal)
+
+
+def _forecast_windows(base: Baseline):
+    for i, (r, H) in enumerate(zip(base.issues, base.horizon)):
+        yield i, r, int(H)
+
+
+def _heat_response(model: BilinearModel, data: ModelData, base: Baseline, q: np.ndarray,
+                   stepper) -> np.ndarray:
+    """(N, nz, nz) zone outputs per zone-source of heat ``q`` (N, nz) [W], from zero state
+    at every issue (superposition: the forecasts' change when q is added)."""
+    nz, n = model.n_zones, model.n
+    area = zone_floor_area(model)
+    out = np.full((len(data), nz, nz), np.nan)
+    for j in range(nz):
+        bcol = model.B_ig[:, j] / area[j]
+        for _, r, H in _forecast_windows(base):
+            x = np.zeros(n)
+            for h in range(H):
+                k = r + h
+                qk = q[k, j]
+                x = stepper.step(x, data.u[k], bcol * (qk if np.isfinite(qk) else 0.0), 0.0)
+                out[k + 1, :, j] = model.C @ x
+    return out
+
+
+def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
+                  effects: Sequence[str] | None = None,
+                  progress: Callable[[str], None] | None = None) -> dict:
+    """Forecast sensitivities of every candidate.
+
+    Returns
+    -------
+    dict
+        (effect, variant) -> (N, n_zones, n_zones) array: ``[k, i, j]`` is the change of
+        zone i's forecast at row k per unit of zone j's parameter.
+    """
+    effects = list(effects or SPECS)
+    unknown = [e for e in effects if e not in SPECS]
+    if unknown:
+        raise DiagnosisError(f"unknown effects {unknown}; known: {list(SPECS)}")
+    train_rows = np.flatnonzero(np.isin(base.week_of_row, base.split["train"]))
+    stepper = stepper_for(model, data.u)
+    temps = np.where(np.isfinite(base.pred), base.pred, base.sim)
+    # rows before a week's first issue: the measurement of that row, else the training mean
+    temps = np.where(np.isfinite(temps), temps, data.y)
+    temps = np.where(np.isfinite(temps), temps, np.nanmean(data.y[train_rows], axis=0)[None, :])
+    out = {}
+    for e in effects:
+        spec = SPECS[e]
+        if progress:
+            progress(f"sensitivities: {e}")
+        for var in spec.variants:
+            if spec.kind == "heat":
+                q = heat_regressor(e, var, model, data, temps)
+                if base.gains == "profile":
+                    q = q - time_of_week_mean(q, data, train_rows)
+                out[(e, var)] = _heat_response(model, data, base, q, stepper)
+            elif spec.kind == "output":
+                out[(e, var)] = _bias_response(model, data, base, stepper)
+            else:
+                out[(e, var)] = _mass_response(model, data, base)
+    return out
+
+
+def _zone_states(model: BilinearModel, kinds: Sequence[str]) -> list[np.ndarray]:
+    st = model.structure
+    zone_of_room = {r: j for j, z in enumerate(st.zones) for r in st.zones[z]}
+    out = []
+    for j in range(model.n_zones):
+        out.append(np.array([i for i, lab in enumerate(st.labels)
+                             if lab.kind in kinds and zone_of_room.get(lab.room) == j]))
+    return out
+
+
+def _bias_response(model: BilinearModel, data: ModelData, base: Baseline, stepper) -> np.ndarray:
+    """A sensor offset θ_j: ȳ_j = C_j x + θ_j. The filter puts the offset into the zone's air
+    states at the issue; the model then relaxes them, so the forecast error is
+    θ_j (1 − C_j x_δ(h)) with x_δ the free response to a unit offset of those air states."""
+    nz, n = model.n_zones, model.n
+    air = _zone_states(model, ("room_air",))
+    out = np.full((len(data), nz, nz), np.nan)
+    for j in range(nz):
+        for _, r, H in _forecast_windows(base):
+            x = np.zeros(n)
+            x[air[j]] = 1.0
+            for h in range(H):
+                k = r + h
+                x = stepper.step(x, data.u[k], np.zeros(n), 0.0)
+                col = -(model.C @ x)
+                col[j] += 1.0
+                out[k + 1, :, j] = col
+    return out
+
+
+def _mass_response(model: BilinearModel, data: ModelData, base: Baseline) -> np.ndarray:
+    """Finite difference of the forecasts in the capacity scale of each zone's air and
+    internal mass (step :data:`MASS_STEP`)."""
+    nz = model.n_zones
+    states = _zone_states(model, MASS_KINDS)
+    out = np.full((len(data), nz, nz), np.nan)
+    for j in range(nz):
+        scale = np.ones(model.n)
+        scale[states[j]] = 1.0 + MASS_STEP
+        m = scaled_capacity(model, scale)
+        for i, r, H in _forecast_windows(base):
+            f = _profile_at(base.profile, data.times[r:r + H])
+            y = m.simulate(base.x0[i], data.u[r:r + H], data.v[r:r + H], f).y[1:]
+            out[r + 1:r + 1 + H, :, j] = (y - base.pred[r + 1:r + 1 + H]) / MASS_STEP
+    return out
+
+
+# --------------------------------------------------------------------------- scoring
+
+
+@dataclass
+class Candidate:
+    """One effect in a set of zones, fitted and scored.
+
+    Attributes
+    ----------
+    effect, variant : the effect and its searched hyper-parameter (setpoint, lag) or None
+    zones : zone names with a parameter
+    parameters : zone -> fitted value on all training weeks [effect's unit]
+    score : share of the training sum of squares removed under leave-one-week-out fits
+    confidence : 1 − p of a one-sided t-test of the per-day reductions
+    heldout_rms_before, heldout_rms_after : zone -> RMS on the held-out weeks, + ``mean``
+    """
+
+    effect: str
+    variant: float | None
+    zones: list[str]
+    parameters: dict[str, float]
+    score: float
+    confidence: float
+    n_days: int
+    heldout_rms_before: dict[str, float] = field(default_factory=dict)
+    heldout_rms_after: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def confident(self) -> bool:
+        return self.confidence >= CONFIDENCE and self.score >= MIN_SCORE
+
+    def to_dict(self) -> dict:
+        spec = SPECS[self.effect]
+        return {"effect": self.effect, "variant": self.variant, "zones": self.zones,
+                "parameters": self.parameters, "unit": spec.unit,
+                "score": self.score, "confidence": self.confidence,
+                "confident": self.confident, "n_days": self.n_days,
+                "heldout_rms_before": self.heldout_rms_before,
+                "heldout_rms_after": self.heldout_rms_after}
+
+
+def _fit(S: np.ndarray, r: np.ndarray, sign: int) -> np.ndarray:
+    """Least squares θ for r ≈ S θ (rows with NaN dropped); θ ≥ 0 when ``sign`` is +1."""
+    ok = np.isfinite(r) & np.isfinite(S).all(axis=1)
+    if not ok.any():
+        return np.zeros(S.shape[1])
+    A, b = S[ok], r[ok]
+    if sign > 0:
+        return optimize.nnls(A, b)[0]
+    return np.linalg.lstsq(A, b, rcond=None)[0]
+
+
+def _flat(base: Baseline, sens: np.ndarray, resid: np.ndarray, rows: np.ndarray, zones_idx):
+    """Stack rows x zones into a design matrix (one column per parameter zone)."""
+    S = sens[rows][:, :, zones_idx].reshape(-1, len(zones_idx))
+    r = resid[rows].reshape(-1)
+    return S, r
+
+
+def _day_reductions(base: Baseline, sens, resid, cols, sign, train_weeks) -> tuple[np.ndarray, float]:
+    """Per-day SSE reductions with θ fitted on the other training weeks, and base SSE."""
+    red = []
+    total = 0.0
+    for w in train_weeks:
+        fit_rows = base.rows_of([x for x in train_weeks if x != w])
+        S, r = _flat(base, sens, resid, fit_rows, cols)
+        theta = _fit(S, r, sign)
+        test = np.flatnonzero(base.rows_of([w]))
+        for i in np.unique(base.issue_of_row[test]):
+            rows = test[base.issue_of_row[test] == i]
+            e0 = resid[rows]
+            e1 = e0 - sens[rows][:, :, cols] @ theta
+            ok = np.isfinite(e0) & np.isfinite(e1)
+            sse0 = float(np.sum(e0[ok] ** 2))
+            total += sse0
+            red.append(sse0 - float(np.sum(e1[ok] ** 2)))
+    return np.array(red), total
+
+
+def _rms(e: np.ndarray, zones: Sequence[str]) -> dict[str, float]:
+    out = {z: float(np.sqrt(np.nanmean(e[:, j] ** 2))) for j, z in enumerate(zones)}
+    out["mean"] = float(np.mean([out[z] for z in zones]))
+    return out
+
+
+def _evaluate(base: Baseline, data: ModelData, sens: np.ndarray, resid: np.ndarray, effect: str,
+              variant, cols: list[int], zones: Sequence[str]) -> Candidate:
+    spec = SPECS[effect]
+    train = base.split["train"]
+    red, total = _day_reductions(base, sens, resid, cols, spec.sign, train)
+    score = float(red.sum() / total) if total > 0 else 0.0
+    if len(red) > 1 and red.std(ddof=1) > 0:
+        t = red.mean() / (red.std(ddof=1) / np.sqrt(len(red)))
+        conf = float(stats.t.cdf(t, len(red) - 1))
+    else:
+        conf = 0.0
+    S, r = _flat(base, sens, resid, base.rows_of(train), cols)
+    theta = _fit(S, r, spec.sign)
+    return Candidate(effect, variant, [zones[c] for c in cols],
+                     {zones[c]: float(t) for c, t in zip(cols, theta)}, score, conf, len(red))
+
+
+def score_candidates(base: Baseline, data: ModelData, sens: dict, zones: Sequence[str],
+                     resid: np.ndarray | None = None) -> dict[str, dict[str, Candidate]]:
+    """Best variant of every effect in every zone: effect -> zone -> :class:`Candidate`."""
+    resid = data.y - base.pred if resid is None else resid
+    out: dict[str, dict[str, Candidate]] = {}
+    for (effect, variant), s in sens.items():
+        for j, z in enumerate(zones):
+            c = _evaluate(base, data, s, resid, effect, variant, [j], zones)
+            best = out.setdefault(effect, {}).get(z)
+            if best is None or c.score > best.score:
+                out[effect][z] = c
+    return out
+
+
+def _heldout(base: Baseline, data: ModelData, sens: np.ndarray, resid: np.ndarray,
+             cand: Candidate, zones: Sequence[str]) -> Candidate:
+    rows = base.rows_of(base.split["validation"])
+    cols = [list(zones).index(z) for z in cand.zones]
+    theta = np.array([cand.parameters[z] for z in cand.zones])
+    before = resid[rows]
+    after = before - sens[rows][:, :, cols] @ theta
+    cand.heldout_rms_before = _rms(before, zones)
+    cand.heldout_rms_after = _rms(after, zones)
+    return cand
+
+
+# --------------------------------------------------------------------------- where
+
+
+def _season(month: np.ndarray) -> np.ndarray:
+    names = np.array(["winter", "winter", "spring", "spring", "spring", "summer", "summer",
+                      "summer", "autumn", "autumn", "autumn", "winter"])
+    return names[month - 1]
+
+
+def _slice_table(e: np.ndarray, labels: np.ndarray, zone_wise: bool = False) -> list[dict]:
+    """RMS, rows and share of the squared error per label; labels (N,) or (N, nz)."""
+    sq = e ** 2
+    ok = np.isfinite(sq)
+    lab = labels if zone_wise else np.broadcast_to(labels[:, None], e.shape)
+    total = sq[ok].sum()
+    n_all = ok.sum()
+    rows = []
+    for value in sorted(set(lab[ok].tolist()), key=str):
+        m = ok & (lab == value)
+        n = int(m.sum())
+        if n == 0:
+            continue
+        s = float(sq[m].sum())
+        rows.append({"slice": str(value), "n": n, "rms": float(np.sqrt(s / n)),
+                     "share_of_error": s / total if total else 0.0,
+                     "share_of_rows": n / n_all})
+    return rows
+
+
+def where(base: Baseline, data: ModelData, zones: Sequence[str], bz: np.ndarray) -> dict:
+    """Residuals of the forecasts and the simulation by slice.
+
+    Returns ``{"forecast": {dimension: [slice rows]}, "simulation": {...}, "carriers":
+    [...]}``; ``bz`` is the box-zone incidence (:func:`~.effects.box_zone_matrix`). A slice *carries* the error when its share of the squared error is at least
+    1.25 times its share of the rows and at least 10 % of the total.
+    """
+    local = data.local_times()
+    hour = np.asarray(local.hour)
+    weekend = np.where(np.asarray(local.day_of_week) >= 5, "weekend", "weekday")
+    season = _season(np.asarray(local.month))
+    at_min = minimum_airflow_fraction(data.u, bz)
+    regime = np.where(at_min >= 0.5, "minimum airflow", "cooling (above minimum)")
+    flow = data.u @ bz
+    flow_level = np.empty(flow.shape, dtype=object)
+    for j in range(flow.shape[1]):
+        q = np.quantile(flow[:, j], [1 / 3, 2 / 3])
+        flow_level[:, j] = np.where(flow[:, j] <= q[0], "low", np.where(flow[:, j] <= q[1],
+                                                                       "mid", "high"))
+    sol = np.max(data.v[:, 2:6], axis=1)
+    solar = np.where(sol < 10, "night/dark", np.where(sol < 300, "low (<300 W/m2)",
+                                                      "high (>=300 W/m2)"))
+    ta = data.v[:, 0]
+    oat = np.where(ta < 10, "<10 C", np.where(ta < 15, "10-15 C", np.where(ta < 20, "15-20 C",
+                                                                          ">=20 C")))
+    exc = np.where(data.excitation, "excitation", "normal operation")
+    lead_h = np.where(base.lead > 0, (base.lead - 1) // 24 * 6, -1)
+    lead_lab = np.array([f"{h}-{h + 6} h" if h >= 0 else "none" for h in lead_h])
+    out = {}
+    for name, pred in (("forecast", base.pred), ("simulation", base.sim)):
+        e = data.y - pred
+        zone_lab = np.broadcast_to(np.array(zones)[None, :], e.shape)
+        dims = {"zone": _slice_table(e, zone_lab, True), "hour_of_day": _slice_table(e, hour),
+                "weekday_weekend": _slice_table(e, weekend), "season": _slice_table(e, season),
+                "regime": _slice_table(e, regime, True),
+                "airflow_level": _slice_table(e, flow_level, True),
+                "solar_level": _slice_table(e, solar), "outdoor_temperature": _slice_table(e, oat),
+                "operation": _slice_table(e, exc)}
+        if name == "forecast":
+            dims["lead"] = _slice_table(e, lead_lab)
+        out[name] = dims
+    out["carriers"] = [{"residual": name, "dimension": d, **row}
+                       for name in ("forecast", "simulation")
+                       for d, rows in out[name].items() for row in rows
+                       if row["share_of_error"] >= 0.10
+                       and row["share_of_error"] >= 1.25 * row["share_of_rows"]]
+    return out
+
+
+# --------------------------------------------------------------------------- orchestration
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`diagnose` (JSON via :meth:`to_dict`)."""
+
+    where: dict
+    ranked: list[Candidate]
+    per_zone: dict[str, list[Candidate]]
+    split: dict
+    gains: str
+    seconds: float
+    base: Baseline | None = None
+
+    def to_dict(self) -> dict:
+        return {
+            "where": self.where,
+            "ranked_effects": [c.to_dict() for c in self.ranked],
+            "per_zone": {z: [c.to_dict() for c in cs] for z, cs in self.per_zone.items()},
+            "split": {k: self.split[k] for k in ("train", "validation", "train_starts",
+                                                 "validation_starts", "seed")},
+            "gains": self.gains,
+            "thresholds": {"confidence": CONFIDENCE, "min_score": MIN_SCORE},
+            "seconds": self.seconds,
+        }
+
+
+def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str = "profile",
+             effects: Sequence[str] | None = None,
+             progress: Callable[[str], None] | None = None) -> Diagnosis:
+    """Where, which and how much (module docstring); ``seed`` draws the week split."""
+    t0 = time.perf_counter()
+    zones = list(data.zones)
+    if zones != list(model.structure.zones):
+        raise DiagnosisError(f"data zones {zones} differ from model zones "
+                             f"{list(model.structure.zones)}")
+    base = baseline(model, data, seed=seed, gains=gains, progress=progress)
+    if progress:
+        progress("residual slices")
+    wh = where(base, data, zones, box_zone_matrix(model))
+    sens = sensitivities(model, data, base, effects, progress)
+    resid = data.y - base.pred
+    if progress:
+        progress("scoring candidates")
+    per = score_candidates(base, data, sens, zones, resid)
+    ranked = []
+    for effect, by_zone in per.items():
+        conf_zones = [z for z, c in by_zone.items() if c.confident]
+        if not conf_zones:
+            best = max(by_zone.values(), key=lambda c: c.score)
+            cand = dataclasses.replace(best)
+        else:
+            # one variant for the effect: the one of its best confident zone
+            lead = max((by_zone[z] for z in conf_zones), key=lambda c: c.score)
+            cols = [zones.index(z) for z in conf_zones]
+            cand = _evaluate(base, data, sens[(effect, lead.variant)], resid, effect,
+                             lead.variant, cols, zones)
+        ranked.append(_heldout(base, data, sens[(effect, cand.variant)], resid, cand, zones))
+    ranked.sort(key=lambda c: (c.confident, c.score), reverse=True)
+    per_zone = {z: sorted((per[e][z] for e in per), key=lambda c: c.score, reverse=True)
+                for z in zones}
+    return Diagnosis(wh, ranked, per_zone, base.split, gains, time.perf_counter() - t0, base)

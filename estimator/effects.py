@@ -1,0 +1,252 @@
+"""Candidate unmodelled effects for the sim-to-real diagnosis (``zonecast diagnose``).
+
+Each effect is a physically meaningful term the paper's 13-parameter model lacks, with one
+parameter per model zone:
+
+========================  ==========  ====================================================
+name                      parameter   extra term in zone z
+========================  ==========  ====================================================
+``reheat``                W/K         heat q = θ · m_z(k) · max(0, T_h − T_z): reheat coils of
+                                      boxes at minimum airflow (fraction m_z of the zone's
+                                      boxes) acting as proportional heating to T_h; T_h is
+                                      searched over :data:`REHEAT_SETPOINTS`
+``infiltration``          W/K         heat q = θ · (T_a − T_z) (outdoor air leaking in)
+``window_solar``          -           heat q = θ · Σ_f a_win,z,f · I_f(k) through a first-order
+                                      lag τ (transmitted solar stored in floors and
+                                      furniture before it reaches the air); τ in
+                                      :data:`SOLAR_LAGS`
+``occupancy_gains``       W/m2        heat q = θ · a_floor,z · 1[workday, 08:00–18:00 local]
+``supply_offset``         K           heat q = θ · c_p · Σ_{boxes of z} u_j (supply air at the
+                                      boxes θ warmer than the AHU sensor reads)
+``interzone_air``         W/K         heat q = θ · Σ_{n adjacent to z} (T_n − T_z)
+``sensor_bias``           K           measured ȳ_z = C_z x + θ (output equation)
+``thermal_mass``          -           capacity of the zone's room air and internal mass
+                                      scaled by (1 + θ)
+========================  ==========  ====================================================
+
+The heat terms enter the model like internal gains (spread over the zone's rooms by floor
+area, paper eq:q_ig), so every term is linear in its parameter once the temperatures T_z in
+the regressor are taken from the model's own prediction (Gauss-Newton linearisation around
+the base model; nothing measured after a forecast's issue time enters a regressor).
+
+Pure functions of the data and the model structure; :mod:`.diagnose` turns them into
+output sensitivities and scores. Names are stable: they are keys of ``diagnosis.json``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from .dataset import ModelData
+from .model import BilinearModel
+from .rc.network import CP_AIR as C_P
+
+__all__ = [
+    "EFFECTS",
+    "REHEAT_SETPOINTS",
+    "SOLAR_LAGS",
+    "SPECS",
+    "EffectSpec",
+    "adjacent_zones",
+    "box_zone_matrix",
+    "first_order_lag",
+    "heat_regressor",
+    "minimum_airflow_fraction",
+    "time_of_week_mean",
+    "window_area_by_facade",
+]
+
+#: heating setpoints searched for the reheat term [degC]
+REHEAT_SETPOINTS = (19.0, 20.0, 21.0, 22.0)
+#: lags of transmitted solar reaching the air [h] (0: at once)
+SOLAR_LAGS = (0.0, 2.0, 6.0)
+#: a box counts as at its minimum when its airflow is within this factor of its 1st percentile
+MIN_FLOW_FACTOR = 1.05
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """One candidate effect.
+
+    Attributes
+    ----------
+    name : stable identifier
+    kind : ``"heat"`` (extra heat into the zone's air), ``"output"`` (measurement model) or
+        ``"capacity"`` (scaled heat capacity)
+    unit : unit of the per-zone parameter
+    sign : +1 when only a non-negative parameter is physical, 0 when either sign is
+    variants : hyper-parameter values searched (setpoint, lag), ``(None,)`` if none
+    description : one line for reports
+    """
+
+    name: str
+    kind: str
+    unit: str
+    sign: int
+    variants: tuple
+    description: str
+
+
+SPECS: dict[str, EffectSpec] = {s.name: s for s in (
+    EffectSpec("reheat", "heat", "W/K", +1, REHEAT_SETPOINTS,
+               "VAV reheat at minimum airflow, proportional to the shortfall below a setpoint"),
+    EffectSpec("infiltration", "heat", "W/K", +1, (None,),
+               "outdoor air leaking in, proportional to outdoor minus zone temperature"),
+    EffectSpec("window_solar", "heat", "-", 0, SOLAR_LAGS,
+               "transmitted window solar reaching the air through floor/furniture storage"),
+    EffectSpec("occupancy_gains", "heat", "W/m2", 0, (None,),
+               "a gain on workdays 08:00-18:00 local (office occupancy)"),
+    EffectSpec("supply_offset", "heat", "K", 0, (None,),
+               "supply air at the boxes warmer or colder than the AHU sensor reads"),
+    EffectSpec("interzone_air", "heat", "W/K", +1, (None,),
+               "air exchanged with adjacent zones (open doors, transfer grilles)"),
+    EffectSpec("sensor_bias", "output", "K", 0, (None,),
+               "constant offset of the zone temperature sensors"),
+    EffectSpec("thermal_mass", "capacity", "-", 0, (None,),
+               "room air and internal mass heat capacity scaled by (1 + parameter)"),
+)}
+#: effect names in a stable order
+EFFECTS = tuple(SPECS)
+
+
+def box_zone_matrix(model: BilinearModel) -> np.ndarray:
+    """(n_boxes, n_zones) 1 where a box serves a room of the zone."""
+    st = model.structure
+    zone_of_room = {r: j for j, z in enumerate(st.zones) for r in st.zones[z]}
+    M = np.zeros((len(st.boxes), len(st.zones)))
+    for i, room in enumerate(st.boxes.values()):
+        M[i, zone_of_room[room]] = 1.0
+    return M
+
+
+def minimum_airflow_fraction(u: np.ndarray, bz: np.ndarray) -> np.ndarray:
+    """(N, n_zones) fraction of each zone's boxes running at their minimum airflow.
+
+    A box's minimum is the 1st percentile of its positive airflow readings; readings within
+    :data:`MIN_FLOW_FACTOR` of it count as at minimum.
+    """
+    u = np.asarray(u, float)
+    lo = np.array([np.percentile(col[col > 0], 1) if (col > 0).any() else 0.0 for col in u.T])
+    at_min = (u <= lo * MIN_FLOW_FACTOR).astype(float)
+    n = bz.sum(axis=0)
+    return (at_min @ bz) / np.where(n > 0, n, 1.0)
+
+
+def window_area_by_facade(model: BilinearModel) -> np.ndarray:
+    """(n_zones, 4) exterior window area of each zone per facade E, S, W, N [m2].
+
+    Read from the structure's window solar term (γ_winSolAbs · a_win · I on room air):
+    the affine part of B_v for γ_winSolAbs times the air capacity.
+    """
+    st = model.structure
+    p = model.params.param_names.index("gamma_winSolAbs")
+    Bp = st.Bv_p[p].toarray()
+    areas = Bp[:, 2:6] * st.capacity[:, None]
+    out = np.zeros((len(st.zones), 4))
+    room_index = {r: i for i, r in enumerate(st.rooms)}
+    for j, z in enumerate(st.zones):
+        for r in st.zones[z]:
+            out[j] += areas[room_index[r]]
+    return out
+
+
+def adjacent_zones(model: BilinearModel) -> np.ndarray:
+    """(n_zones, n_zones) 1 where two zones share an interzone element (wall, floor)."""
+    st = model.structure
+    A = st.A(model.params.physical).tocsc()
+    zone_of_room = {r: j for j, z in enumerate(st.zones) for r in st.zones[z]}
+    air_zone = {i: zone_of_room[r] for i, r in enumerate(st.rooms) if r in zone_of_room}
+    by_element: dict[str, list[int]] = {}
+    for j, lab in enumerate(st.labels):
+        if lab.element:
+            by_element.setdefault(lab.element, []).append(j)
+    nz = len(st.zones)
+    adj = np.zeros((nz, nz))
+    for nodes in by_element.values():
+        rows = set(A[:, nodes].nonzero()[0])
+        zones = {air_zone[i] for i in rows if i in air_zone}
+        for a in zones:
+            for b in zones:
+                if a != b:
+                    adj[a, b] = 1.0
+    return adj
+
+
+def first_order_lag(x: np.ndarray, tau_h: float, step_s: float,
+                    segments: list[tuple[int, int]]) -> np.ndarray:
+    """x through a unit-gain first-order lag of time constant ``tau_h`` [h], restarted at
+    every data segment; ``tau_h = 0`` returns x."""
+    x = np.asarray(x, float)
+    if tau_h <= 0:
+        return x.copy()
+    a = float(np.exp(-step_s / (tau_h * 3600.0)))
+    out = np.empty_like(x)
+    for s0, s1 in segments:
+        acc = x[s0].copy()
+        for k in range(s0, s1):
+            acc = a * acc + (1 - a) * x[k]
+            out[k] = acc
+    return out
+
+
+def _workday_hours(data: ModelData) -> np.ndarray:
+    local = data.local_times()
+    return ((local.day_of_week < 5) & (local.hour >= 8) & (local.hour < 18)).astype(float)
+
+
+def heat_regressor(name: str, variant, model: BilinearModel, data: ModelData,
+                   temps: np.ndarray) -> np.ndarray:
+    """(N, n_zones) extra heat into each zone per unit parameter [W per unit].
+
+    ``temps`` (N, n_zones) are the zone temperatures the regressor uses [degC]: the base
+    model's own prediction (see the module docstring), never measurements after an issue
+    time. Rows where ``temps`` is NaN give NaN.
+    """
+    spec = SPECS.get(name)
+    if spec is None or spec.kind != "heat":
+        heat = [n for n, s in SPECS.items() if s.kind == "heat"]
+        raise ValueError(f"unknown heat effect {name!r}; heat effects are {heat}")
+    N, nz = len(data), model.n_zones
+    temps = np.asarray(temps, float)
+    if temps.shape != (N, nz):
+        raise ValueError(f"temps must have shape {(N, nz)}, got {temps.shape}")
+    bz = box_zone_matrix(model)
+    if name == "reheat":
+        return minimum_airflow_fraction(data.u, bz) * np.maximum(0.0, float(variant) - temps)
+    if name == "infiltration":
+        return data.v[:, [0]] - temps
+    if name == "window_solar":
+        q = data.v[:, 2:6] @ window_area_by_facade(model).T
+        step = (data.times[1] - data.times[0]).total_seconds()
+        return first_order_lag(q, float(variant), step, data.segments)
+    if name == "occupancy_gains":
+        from .forecast import zone_floor_area
+        return _workday_hours(data)[:, None] * zone_floor_area(model)[None, :]
+    if name == "supply_offset":
+        return C_P * (data.u @ bz)
+    if name == "interzone_air":
+        adj = adjacent_zones(model)
+        return temps @ adj.T - temps * adj.sum(axis=1)[None, :]
+    raise AssertionError(name)  # every heat effect is handled above
+
+
+def time_of_week_mean(values: np.ndarray, data: ModelData, rows: np.ndarray) -> np.ndarray:
+    """(N, k) the mean of ``values`` over ``rows`` on the local time-of-week axis, evaluated
+    at every row (bins without data: 0). What a weekly internal-gains profile fitted on
+    ``rows`` absorbs of an extra heat term."""
+    from .gains import time_of_week_bin
+    step = data.times[1] - data.times[0]
+    bins = time_of_week_bin(data.times, data.timezone, step)
+    nb = int(pd.Timedelta("7D") / step)
+    vals = np.asarray(values, float)
+    out = np.zeros((nb, vals.shape[1]))
+    cnt = np.zeros((nb, vals.shape[1]))
+    sel = vals[rows]
+    ok = np.isfinite(sel)
+    np.add.at(out, bins[rows], np.where(ok, sel, 0.0))
+    np.add.at(cnt, bins[rows], ok)
+    mean = np.divide(out, cnt, out=np.zeros_like(out), where=cnt > 0)
+    return mean[bins]

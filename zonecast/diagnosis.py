@@ -1,0 +1,150 @@
+"""`zonecast diagnose`: run the diagnosis on a site's data and write diagnosis.json, plots and
+diagnosis.md (the numerics are in :mod:`zonecast.estimator.diagnose`)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from zonecast.estimator.diagnose import CONFIDENCE, MIN_SCORE, Diagnosis, diagnose
+from zonecast.estimator.effects import SPECS
+
+
+def run(model_path: Path, data_path: Path, out: Path, *, site_path: Path | None = None,
+        seed: int = 0, gains: str = "profile",
+        progress: Callable[[str], None] | None = None) -> Diagnosis:
+    """Load the model file and telemetry, diagnose, write ``out``."""
+    from zonecast.estimator.dataset import model_data
+    from zonecast.estimator.site import load_site
+    from zonecast.estimator.telemetry import load_telemetry
+    from zonecast.service.modelfile import load_model_file
+
+    bundle = load_model_file(model_path)
+    site = load_site(site_path) if site_path is not None else bundle.site
+    if list(site.zones) != list(bundle.site.zones):
+        raise ValueError(f"--site zones {list(site.zones)} differ from the model file's "
+                         f"{list(bundle.site.zones)}: diagnose the model of this site")
+    tel = load_telemetry(data_path / "telemetry.csv" if data_path.is_dir() else data_path, site)
+    data = model_data(tel, bundle.model.room_weights())
+    res = diagnose(bundle.model, data, seed=seed, gains=gains, progress=progress)
+    write(res, out, list(site.zones))
+    return res
+
+
+def write(res: Diagnosis, out: Path, zones: list[str]) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "diagnosis.json").write_text(json.dumps(res.to_dict(), indent=1))
+    figs = [_plot_where(res, out / "where.png", zones), _plot_effects(res, out / "effects.png")]
+    _write_md(res, out, figs)
+
+
+def _plot_where(res: Diagnosis, path: Path, zones: list[str]) -> str:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    dims = ["zone", "hour_of_day", "lead", "season", "regime", "solar_level",
+            "outdoor_temperature", "operation"]
+    fc = res.where["forecast"]
+    fig, axes = plt.subplots(2, 4, figsize=(16, 6.5))
+    for ax, d in zip(axes.flat, dims):
+        rows = fc.get(d, [])
+        ax.bar(range(len(rows)), [r["rms"] for r in rows], color="tab:blue", label="forecast")
+        sim = {r["slice"]: r["rms"] for r in res.where["simulation"].get(d, [])}
+        ax.plot(range(len(rows)), [sim.get(r["slice"], np.nan) for r in rows], "o",
+                color="tab:red", ms=4, label="simulation")
+        ax.set_xticks(range(len(rows)), [r["slice"] for r in rows],
+                      rotation=60 if len(rows) > 6 else 20, fontsize=7, ha="right")
+        ax.set_title(d.replace("_", " "))
+        ax.set_ylabel("RMS [K]")
+    axes.flat[0].legend(fontsize=7)
+    fig.suptitle("Where the error lies: RMS of measured minus model by slice")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path.name
+
+
+def _plot_effects(res: Diagnosis, path: Path) -> str:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    zones = list(res.per_zone)
+    effects = list(SPECS)
+    grid = np.array([[next((c.score for c in res.per_zone[z] if c.effect == e), np.nan)
+                      for z in zones] for e in effects])
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(13, 4.2))
+    im = a1.imshow(np.clip(grid, 0, None), cmap="viridis", aspect="auto")
+    a1.set_xticks(range(len(zones)), zones)
+    a1.set_yticks(range(len(effects)), effects)
+    for i in range(len(effects)):
+        for j in range(len(zones)):
+            c = next(c for c in res.per_zone[zones[j]] if c.effect == effects[i])
+            a1.text(j, i, f"{c.score:.3f}{'*' if c.confident else ''}", ha="center",
+                    va="center", fontsize=7, color="w")
+    fig.colorbar(im, ax=a1, label="cross-validated share of SSE removed")
+    a1.set_title("Effect scores per zone (* confident)")
+    names = [c.effect for c in res.ranked]
+    before = [c.heldout_rms_before.get("mean", np.nan) for c in res.ranked]
+    after = [c.heldout_rms_after.get("mean", np.nan) for c in res.ranked]
+    x = np.arange(len(names))
+    a2.bar(x - 0.2, before, 0.4, label="before", color="grey")
+    a2.bar(x + 0.2, after, 0.4, label="after (effect added)", color="tab:green")
+    a2.set_xticks(x, names, rotation=30, ha="right", fontsize=8)
+    a2.set_ylabel("held-out forecast RMS, mean of zones [K]")
+    lo = np.nanmin(after + before)
+    a2.set_ylim(lo * 0.9, None)
+    a2.legend(fontsize=8)
+    a2.set_title("Held-out weeks (used neither to find nor to fit)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path.name
+
+
+def _write_md(res: Diagnosis, out: Path, figs: list[str]) -> None:
+    d = res.to_dict()
+    sp = d["split"]
+    L = ["# zonecast diagnose", "",
+         (f"Split (seed {sp['seed']}): search and fit on training weeks starting "
+         f"{', '.join(sp['train_starts'])}; held out: {', '.join(sp['validation_starts'])}. "
+         f"Internal gains in the base model: {res.gains}. Thresholds: confidence >= "
+         f"{CONFIDENCE}, cross-validated score >= {MIN_SCORE}. {res.seconds:.0f} s."), ""]
+    conf = [c for c in res.ranked if c.confident]
+    if not conf:
+        L += [("**No candidate effect explains the error with confidence.** The residuals are "
+              "not attributable to any effect in the library at these thresholds."), ""]
+    else:
+        top = conf[0]
+        L += [(f"**Top attribution: `{top.effect}` in {', '.join(top.zones)}** "
+              f"(score {top.score:.3f}, confidence {top.confidence:.3f}); held-out mean RMS "
+              f"{top.heldout_rms_before['mean']:.3f} -> {top.heldout_rms_after['mean']:.3f} K."), ""]
+        helped = [c for c in conf if c.heldout_rms_after["mean"] < c.heldout_rms_before["mean"]]
+        if not helped:
+            L += [("No confident candidate lowers the held-out RMS: the attribution does not "
+                  "generalise to the withheld weeks."), ""]
+    L += ["## Ranked effects", "",
+          "| rank | effect | zones | variant | parameters | score | confidence | held-out RMS before -> after [K] |",
+          "|---|---|---|---|---|---|---|---|"]
+    for i, c in enumerate(res.ranked, 1):
+        par = ", ".join(f"{z} {v:.3g}" for z, v in c.parameters.items())
+        L.append(f"| {i} | {c.effect}{' (confident)' if c.confident else ''} | "
+                 f"{', '.join(c.zones)} | {c.variant if c.variant is not None else ''} | "
+                 f"{par} {SPECS[c.effect].unit} | {c.score:.3f} | {c.confidence:.3f} | "
+                 f"{c.heldout_rms_before['mean']:.3f} -> {c.heldout_rms_after['mean']:.3f} |")
+    L += ["", "## Where the error lies (slices carrying more than their share)", "",
+          "| residual | dimension | slice | RMS [K] | share of error | share of rows |",
+          "|---|---|---|---|---|---|"]
+    for r in res.where["carriers"]:
+        L.append(f"| {r['residual']} | {r['dimension']} | {r['slice']} | {r['rms']:.3f} | "
+                 f"{r['share_of_error']:.2f} | {r['share_of_rows']:.2f} |")
+    L += ["", "## Per zone, best three effects", ""]
+    for z, cs in res.per_zone.items():
+        L.append(f"- **{z}**: " + "; ".join(f"{c.effect} {c.score:.3f} ({c.confidence:.2f})"
+                                             for c in cs[:3]))
+    L += [""] + [f"![{f}]({f})" for f in figs] + [""]
+    (out / "diagnosis.md").write_text("\n".join(L))

@@ -38,7 +38,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 
 from .dataset import ModelData
 from .model import BilinearModel
@@ -234,19 +233,12 @@ def heat_regressor(name: str, variant, model: BilinearModel, data: ModelData,
 
 
 def time_of_week_mean(values: np.ndarray, data: ModelData, rows: np.ndarray) -> np.ndarray:
-    """(N, k) the mean of ``values`` over ``rows`` on the local time-of-week axis, evaluated
-    at every row (bins without data: 0). What a weekly internal-gains profile fitted on
-    ``rows`` absorbs of an extra heat term."""
-    from .gains import time_of_week_bin
+    """(N, k) what a weekly internal-gains profile fitted on ``rows`` absorbs of an extra
+    term: ``values`` averaged as paper Eq:fixed_ig (:func:`~.gains.fit_weekly_profile`,
+    empty bins filled as :func:`~.forecast.fill_profile`), evaluated at every row."""
+    from .forecast import fill_profile
+    from .gains import fit_weekly_profile
     step = data.times[1] - data.times[0]
-    bins = time_of_week_bin(data.times, data.timezone, step)
-    nb = int(pd.Timedelta("7D") / step)
-    vals = np.asarray(values, float)
-    out = np.zeros((nb, vals.shape[1]))
-    cnt = np.zeros((nb, vals.shape[1]))
-    sel = vals[rows]
-    ok = np.isfinite(sel)
-    np.add.at(out, bins[rows], np.where(ok, sel, 0.0))
-    np.add.at(cnt, bins[rows], ok)
-    mean = np.divide(out, cnt, out=np.zeros_like(out), where=cnt > 0)
-    return mean[bins]
+    prof = fit_weekly_profile(data.times[rows], np.asarray(values, float)[rows], data.timezone,
+                              step=step)
+    return np.nan_to_num(fill_profile(prof)(data.times))

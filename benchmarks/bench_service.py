@@ -7,8 +7,10 @@
    Reference in the same run: one exact step propagator for a new airflow vector (the
    eigendecomposition the model caches per distinct u).
 2. **Forecast endpoint**: ``zonecast serve`` in its own process (MQTT off, SQLite),
-   50 concurrent clients (httpx, asyncio) each requesting the cached forecast; reference:
-   ``/healthz`` under the same load (the HTTP stack alone).
+   50 concurrent clients each requesting the cached forecast; reference: ``/healthz``
+   under the same load (the HTTP stack alone). The clients are raw asyncio
+   keep-alive connections in this process (an httpx client would cost more CPU per
+   request than the server on the same two cores).
 
 Usage::
 
@@ -107,25 +109,39 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-async def _load(url: str, clients: int, requests: int, period: float = 0.0) -> list[float]:
+async def _client(port: int, path: str, n: int, period: float, lat: list[float]) -> None:
+    """One keep-alive HTTP/1.1 connection sending ``n`` GETs (raw asyncio streams: an
+    httpx client costs more CPU per request than the server, and client and server share
+    the machine's two cores)."""
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    req = (f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+           f"Authorization: Bearer {TOKEN}\r\n\r\n").encode()
+    await asyncio.sleep(np.random.default_rng().uniform(0, period or 0.001))
+    try:
+        for _ in range(n):
+            t0 = time.perf_counter()
+            writer.write(req)
+            await writer.drain()
+            head = await reader.readuntil(b"\r\n\r\n")
+            status = int(head.split(b" ", 2)[1])
+            length = next(int(line.split(b":", 1)[1]) for line in head.split(b"\r\n")
+                          if line.lower().startswith(b"content-length:"))
+            await reader.readexactly(length)
+            lat.append(time.perf_counter() - t0)
+            if status != 200:
+                raise RuntimeError(f"GET {path}: HTTP {status}")
+            if period:
+                await asyncio.sleep(max(0.0, period - (time.perf_counter() - t0)))
+    finally:
+        writer.close()
+
+
+async def _load(port: int, path: str, clients: int, requests: int,
+                period: float = 0.0) -> list[float]:
     """``clients`` concurrent clients, each sending ``requests`` requests back to back
     (``period`` 0: closed loop, saturation) or one every ``period`` seconds."""
-    import httpx
-
     lat: list[float] = []
-    headers = {"Authorization": f"Bearer {TOKEN}"}
-    limits = httpx.Limits(max_connections=clients)
-    async with httpx.AsyncClient(headers=headers, limits=limits, timeout=30) as client:
-        async def one_client():
-            await asyncio.sleep(np.random.default_rng().uniform(0, period or 0.001))
-            for _ in range(requests):
-                t0 = time.perf_counter()
-                r = await client.get(url)
-                lat.append(time.perf_counter() - t0)
-                r.raise_for_status()
-                if period:
-                    await asyncio.sleep(max(0.0, period - (time.perf_counter() - t0)))
-        await asyncio.gather(*(one_client() for _ in range(clients)))
+    await asyncio.gather(*(_client(port, path, requests, period, lat) for _ in range(clients)))
     return lat
 
 
@@ -162,16 +178,16 @@ def bench_endpoint(data: Path, work: Path, clients: int, requests: int) -> dict:
             httpx.post(base + "/api/v1/buildings/office6/telemetry", json=body, headers=h)
         while httpx.get(base + "/api/v1/buildings/office6/forecast", headers=h).status_code != 200:
             time.sleep(0.2)
-        asyncio.run(_load(base + "/healthz", clients, 2))  # warm up
+        asyncio.run(_load(port, "/healthz", clients, 2))  # warm up
         out = {}
-        fc_url = base + "/api/v1/buildings/office6/forecast?horizon=24h"
-        for name, url in (("healthz", base + "/healthz"), ("forecast", fc_url)):
+        fc_url = "/api/v1/buildings/office6/forecast?horizon=24h"
+        for name, url in (("healthz", "/healthz"), ("forecast", fc_url)):
             t0 = time.perf_counter()
-            lat = asyncio.run(_load(url, clients, requests))
+            lat = asyncio.run(_load(port, url, clients, requests))
             out[f"{name}, closed loop"] = (lat, len(lat) / (time.perf_counter() - t0))
         for period in (1.0, 0.5):
             t0 = time.perf_counter()
-            lat = asyncio.run(_load(fc_url, clients, max(10, requests // 4), period))
+            lat = asyncio.run(_load(port, fc_url, clients, max(10, requests // 4), period))
             out[f"forecast, each client every {period:g} s"] = (
                 lat, len(lat) / (time.perf_counter() - t0))
     finally:
@@ -213,7 +229,7 @@ def main() -> None:
             _report_steps(bench_steps(data, work, args.days))
         e = bench_endpoint(data, work, args.clients, args.requests)
         print(f"\n2. REST under {args.clients} concurrent clients (server: one uvicorn process; "
-              "clients: httpx asyncio in this process, on the same 2 cores)")
+              "clients: raw asyncio connections in this process, on the same 2 cores)")
         for name, (lat, rate) in e.items():
             a = np.asarray(lat) * 1e3
             print(f"   {name:34s} {len(a):5d} requests, {rate:6.0f} req/s: p50 "

@@ -269,11 +269,13 @@ def _local_week_and_bin(times, timezone: str, step) -> tuple[np.ndarray, np.ndar
     idx = _as_times(times)
     minutes = _step_minutes(step)
     local = idx.tz_convert(_check_tz(timezone)).tz_localize(None)  # local wall-clock time
-    minute_of_week = (local.day_of_week * 24 + local.hour) * 60 + local.minute
-    bins = np.asarray(minute_of_week // minutes, dtype=int)
-    days = local.to_numpy().astype("datetime64[D]").astype(np.int64)
-    weeks = (days + 3) // 7  # 1970-01-01 was a Thursday: Monday-based week number
-    return weeks, bins
+    # integer arithmetic on the wall-clock minutes since 1970-01-01 (a Thursday, hence
+    # the 3 days that make the week start on Monday); pandas' field accessors cost ~1 ms
+    minute = local.as_unit("ns").asi8 // 60_000_000_000
+    days = minute // 1440
+    weeks = (days + 3) // 7
+    bins = ((minute + 3 * 1440) % (7 * 1440)) // minutes
+    return np.asarray(weeks, dtype=np.int64), np.asarray(bins, dtype=int)
 
 
 def time_of_week_bin(times, timezone: str, step: str | pd.Timedelta = "15min") -> np.ndarray:

@@ -51,7 +51,6 @@ def track_gains(model: BilinearModel, data: ModelData, start: int, stop: int,
     """Estimate f_IG over rows [start, stop) of ``data`` from the initial state ``x0``."""
     st = stepper or stepper_for(model, data.u[start:stop])
     nz, n = model.n_zones, model.n
-    zero = np.zeros(n)
     base = data.v[start:stop] @ model.Bv.T + model.params.c_ig @ model.B_ig.T
     N = stop - start
     f = np.zeros((N, nz))
@@ -63,7 +62,7 @@ def track_gains(model: BilinearModel, data: ModelData, start: int, stop: int,
     for i in range(N):
         k = start + i
         xt = st.step(x, data.u[k], base[i], data.v[k, 1])
-        gam = np.column_stack([st.step(zero, data.u[k], model.B_ig[:, z], 0.0) for z in range(nz)])
+        gam = st.columns(data.u[k], model.B_ig)
         cb[i] = model.C @ gam
         y_meas = data.y[k + 1] if k + 1 < len(data) else np.full(nz, np.nan)
         if np.isfinite(y_meas).any():

@@ -34,13 +34,16 @@ __all__ = [
     "FilterResult",
     "Innovation",
     "KalmanInputError",
+    "SteadyStateFilter",
     "ZoneStateFilter",
     "air_wall_covariance",
     "default_initial_covariance",
     "default_measurement_noise",
     "default_process_noise",
+    "horizon_output_variances",
     "initial_state_from_measurement",
     "run_filter",
+    "steady_state_covariance",
 ]
 
 StepFn = Callable[[int], tuple[np.ndarray, np.ndarray | None]]
@@ -218,6 +221,131 @@ class ZoneStateFilter:
         S = np.array(self._kf.S, dtype=float)
         nis = float(nu @ np.linalg.solve(S, nu))
         return Innovation(nu, S, nis, obs)
+
+
+def steady_state_covariance(F, H, Q, R) -> np.ndarray:
+    """Prior (predicted) covariance of the time-invariant Kalman filter [K²].
+
+    The fixed point of ``P = F (P - P H' (H P H' + R)^-1 H P) F' + Q``, the discrete
+    algebraic Riccati equation, solved by :func:`scipy.linalg.solve_discrete_are` (the
+    filter form is the control form with F' and H'). The filter with constant F, Q, R
+    converges to it from any positive semidefinite start when (F, H) is detectable.
+
+    Parameters
+    ----------
+    F : (n, n) state transition [-]; H : (m, n) output matrix [-];
+    Q : (n, n) or (n,) process noise [K²]; R : (m, m) or (m,) measurement noise [K²].
+    """
+    from scipy.linalg import solve_discrete_are
+
+    F = np.asarray(F, dtype=float)
+    n = F.shape[0]
+    if F.shape != (n, n):
+        raise KalmanInputError(f"F must be square, got {F.shape}")
+    H = np.asarray(H, dtype=float)
+    if H.ndim != 2 or H.shape[1] != n:
+        raise KalmanInputError(f"H must have shape (m, {n}), got {H.shape}")
+    Q = _square("Q", Q, n)
+    R = _square("R", R, H.shape[0])
+    try:
+        P = solve_discrete_are(F.T, H.T, Q, R)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise KalmanInputError(f"no steady-state filter for this model ({exc}); check that "
+                               "every zone is measured and the model is stable") from exc
+    return 0.5 * (P + P.T)
+
+
+def horizon_output_variances(F, P0, Q, H, steps: int) -> np.ndarray:
+    """Variances of ``H x`` after 1..``steps`` predictions ``x <- F x + w`` [K²].
+
+    ``P_h = F^h P0 F^h' + sum_{j<h} F^j Q F^j'`` is never formed: only the rows
+    ``G_h = H F^h`` are propagated (m x n each), so the cost is O(steps m n²) instead of
+    O(steps n³).
+
+    Returns
+    -------
+    ndarray (steps, m)
+    """
+    F = np.asarray(F, dtype=float)
+    n = F.shape[0]
+    P0, Q = _square("P0", P0, n), _square("Q", Q, n)
+    G = np.asarray(H, dtype=float).copy()
+    acc = np.zeros(G.shape[0])  # sum_{j<h} diag(G_j Q G_j')
+    out = np.empty((steps, G.shape[0]))
+    for h in range(steps):
+        acc += np.einsum("ij,jk,ik->i", G, Q, G)
+        G = G @ F
+        out[h] = np.einsum("ij,jk,ik->i", G, P0, G) + acc
+    return out
+
+
+class SteadyStateFilter:
+    """Measurement update of the time-invariant (steady-state) Kalman filter.
+
+    The prediction is the model's (any exact stepper); the update uses the fixed prior
+    covariance ``P`` of :func:`steady_state_covariance`. With the observed rows ``S`` of
+    ``y`` the gain is ``K_S = P H_S' (H_S P H_S' + R_SS)^-1``; gains are cached per
+    pattern of observed rows, so a partial measurement costs one small solve the first
+    time it occurs. The update is O(n m) instead of the O(n³) of the time-varying filter
+    (:class:`ZoneStateFilter`); the price is that P does not follow the airflows or grow
+    during outages (docs/service.md says how the service reports that).
+
+    Parameters
+    ----------
+    P : (n, n) prior covariance [K²]; H : (m, n) [-]; R : (m, m) or (m,) [K²].
+    """
+
+    def __init__(self, P, H, R):
+        H = np.asarray(H, dtype=float)
+        n = H.shape[1]
+        self.P = _square("P", P, n)
+        self.H = H
+        self.R = _square("R", R, H.shape[0])
+        self._PHt = self.P @ H.T                 # (n, m)
+        self._HPHt = H @ self._PHt              # (m, m)
+        self._cache: dict[bytes, tuple[np.ndarray, ...]] = {}
+
+    def _pattern(self, obs: np.ndarray):
+        key = obs.tobytes()
+        hit = self._cache.get(key)
+        if hit is None:
+            S = self._HPHt[np.ix_(obs, obs)] + self.R[np.ix_(obs, obs)]
+            S = 0.5 * (S + S.T)
+            Sinv = np.linalg.inv(S)
+            K = self._PHt[:, obs] @ Sinv
+            # posterior output covariance H P+ H' = HPH' - HPH'[:, S] S^-1 HPH'[S, :]
+            post = self._HPHt - self._HPHt[:, obs] @ Sinv @ self._HPHt[obs, :]
+            hit = (K, S, Sinv, 0.5 * (post + post.T))
+            self._cache[key] = hit
+        return hit
+
+    def update(self, x_prior, y) -> tuple[np.ndarray, Innovation]:
+        """Posterior state [°C] and innovation statistics for measurement ``y`` (NaN =
+        missing; all missing: the prior is returned and ``nis`` is NaN)."""
+        y = np.asarray(y, dtype=float)
+        if y.shape != (self.H.shape[0],):
+            raise KalmanInputError(f"y must have shape ({self.H.shape[0]},), got {y.shape}")
+        obs = ~np.isnan(y)
+        x_prior = np.asarray(x_prior, dtype=float)
+        if not obs.any():
+            return x_prior.copy(), Innovation(np.empty(0), np.empty((0, 0)), float("nan"), obs)
+        K, S, Sinv, _ = self._pattern(obs)
+        nu = y[obs] - self.H[obs] @ x_prior
+        return x_prior + K @ nu, Innovation(nu, S, float(nu @ Sinv @ nu), obs)
+
+    def output_covariance(self, obs=None) -> np.ndarray:
+        """Posterior covariance of ``H x`` [K²] after an update with the rows ``obs``
+        observed (default all)."""
+        obs = np.ones(self.H.shape[0], bool) if obs is None else np.asarray(obs, bool)
+        if not obs.any():
+            return self._HPHt.copy()
+        return self._pattern(obs)[3].copy()
+
+    def posterior(self) -> np.ndarray:
+        """Posterior state covariance after a complete measurement [K²]."""
+        K = self._pattern(np.ones(self.H.shape[0], bool))[0]
+        P = self.P - K @ self._PHt.T
+        return 0.5 * (P + P.T)
 
 
 @dataclass(frozen=True)

@@ -8,8 +8,8 @@ A *row* is one time t on the 15-min grid with u(t), v(t) and y(t) (docs/data.md:
 holds the zone temperatures at t and the inputs averaged over [t, t + 15 min)).
 :meth:`OnlineEstimator.advance` processes rows in time order; rows with no data may be
 left out (the estimator steps over them with held inputs and no measurement, up to
-``max_gap``). One step t_prev -> t does, with the exact step matrices of the model for
-u(t_prev) (paper eq:model_dt):
+``max_gap``). One step t_prev -> t does, with the model stepped exactly for u(t_prev)
+(paper eq:model_dt; :class:`~zonecast.estimator.integrate.ExactStepper`, no dense matrix):
 
 1. the prediction with zero time-varying gains, paper Eq:xnoig_ynoig:
    ``x~(t) = Phi x(t_prev) + Gamma_v v(t_prev) + Gamma_IG c_IG``;
@@ -20,13 +20,22 @@ u(t_prev) (paper eq:model_dt):
    the observed entries of y(t) (partial measurements allowed; NIS recorded);
 4. the online value becomes the new estimate (eq:online_ig: f_IG(t) = f_IG(t_prev)).
 
-A forecast issued at t starts from the filtered x(t|t), P(t|t) and runs the model 96
-steps with the internal gains of :class:`~zonecast.estimator.gains.DayAheadGains` (weekly
-profile plus the decaying recent offset) and *persistence inputs*: u and v of interval
-t are the measured row t, those of t + h (h >= 1) are the values measured 24 h earlier
-(no weather or HVAC forecast enters; see docs/service.md). The covariance is propagated
-exactly, P <- Phi P Phi' + Q, and the 90 % interval of a zone is
-``C x +- 1.645 sqrt(C P C')`` (state uncertainty; measurement noise not added).
+The Kalman filter is the *steady-state* filter
+(:class:`~zonecast.estimator.kalman.SteadyStateFilter`): its covariance is the solution
+of the Riccati equation at the model's nominal airflows, computed once per model, so a
+step costs O(n) model products instead of the O(n³) covariance propagation of the
+time-varying filter (761 ms -> about 1 ms per step for the 381-state virtual building;
+docs/benchmarks.md has the accuracy comparison).
+
+A forecast issued at t starts from the filtered x(t|t) and runs the model 96 steps with
+the internal gains of :class:`~zonecast.estimator.gains.DayAheadGains` (weekly profile
+plus the decaying recent offset) and *persistence inputs*: u and v of interval t are the
+measured row t, those of t + h (h >= 1) are the values measured 24 h earlier (no weather
+or HVAC forecast enters; see docs/service.md). The 90 % interval of a zone is
+``C x +- 1.645 sqrt(v_h)`` with ``v_h`` the variance of ``C x`` after h steps of the
+nominal model from the steady-state posterior covariance (state uncertainty; measurement
+noise not added); the same table gives the state's standard deviation after steps
+without measurements.
 """
 
 from __future__ import annotations
@@ -122,6 +131,43 @@ def _input_names(bundle: ModelBundle) -> list[str]:
     return [f"u:{b}" for b in bundle.site.boxes] + [f"v:{d}" for d in DISTURBANCES]
 
 
+@dataclass(frozen=True)
+class _SteadyParts:
+    """What the steady-state filter of a model needs, computed once per model."""
+
+    filt: object            # SteadyStateFilter
+    horizon_var: np.ndarray  # (HORIZON, n_zones) [K²]
+
+
+_STEADY: dict[str, _SteadyParts] = {}
+
+
+def _steady_parts(bundle: ModelBundle, Q: np.ndarray, R: np.ndarray) -> _SteadyParts:
+    """Steady-state filter and forecast variances of ``bundle``'s model (cached by the
+    bytes of the nominal transition matrix and the noise, so identical models share it)."""
+    import hashlib
+
+    from zonecast.estimator.kalman import (
+        SteadyStateFilter,
+        horizon_output_variances,
+        steady_state_covariance,
+    )
+
+    m = bundle.model
+    phi = m.step_matrices(m.u_nominal)[0]
+    key = hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes()
+                                  for a in (phi, m.C, Q, R))).hexdigest()
+    hit = _STEADY.get(key)
+    if hit is None:
+        filt = SteadyStateFilter(steady_state_covariance(phi, m.C, Q, R), m.C, R)
+        var = horizon_output_variances(phi, filt.posterior(), Q, m.C, HORIZON)
+        hit = _SteadyParts(filt, var)
+        if len(_STEADY) >= 16:
+            _STEADY.pop(next(iter(_STEADY)))
+        _STEADY[key] = hit
+    return hit
+
+
 class OnlineEstimator:
     """Streaming state, internal gains and forecasts of one building.
 
@@ -136,6 +182,11 @@ class OnlineEstimator:
 
     def __init__(self, bundle: ModelBundle, *, max_gap: pd.Timedelta = MAX_GAP):
         from zonecast.estimator.gains import DayAheadGains
+        from zonecast.estimator.integrate import StepperLadder
+        from zonecast.estimator.kalman import (
+            air_wall_covariance,
+            default_measurement_noise,
+        )
 
         self.bundle = bundle
         self.max_gap = pd.Timedelta(max_gap)
@@ -143,15 +194,13 @@ class OnlineEstimator:
         self._n, self._nz = m.n, m.n_zones
         self._nin = m.n_boxes + 6
         air = np.flatnonzero([lbl.kind == "room_air" for lbl in m.structure.labels])
-        from zonecast.estimator.kalman import (
-            air_wall_covariance,
-            default_measurement_noise,
-        )
-
         ns = bundle.noise
-        self._Q = air_wall_covariance(m.n, air, ns.sigma_air, ns.sigma_wall)
-        self._R = default_measurement_noise(m.n_zones, sigma=ns.sigma_meas)
-        self._P0 = air_wall_covariance(m.n, air, ns.p0_sigma_air, ns.p0_sigma_wall)
+        Q = air_wall_covariance(m.n, air, ns.sigma_air, ns.sigma_wall)
+        R = default_measurement_noise(m.n_zones, sigma=ns.sigma_meas)
+        self._steady = _steady_parts(bundle, Q, R)
+        self._ladder = StepperLadder(m.structure.A(m.params.physical), m._rooms, m._bxu,
+                                     m.step, m.structure.capacity,
+                                     float(np.max(m.u_nominal)))
         self._dayahead = DayAheadGains(bundle.profile, horizon=HORIZON)
         self._names = _input_names(bundle)
         self.reset()
@@ -163,11 +212,13 @@ class OnlineEstimator:
     # --- state ---------------------------------------------------------------------
     def reset(self) -> None:
         """Forget the state (the next row with a measurement starts the filter)."""
-        self._filter = None
+        self._x: np.ndarray | None = None
         self.time: pd.Timestamp | None = None
         self._pending = np.full(self._nin, np.nan)  # inputs of the row at self.time
         self._held = np.full(self._nin, np.nan)  # last finite value of each input
         self._online = np.zeros(self._nz)  # f_IG used for the next prediction [W/m2]
+        self._since = 0  # steps since the last measurement update
+        self._observed = np.ones(self._nz, bool)  # zones observed in that update
         self._gains: deque[tuple[pd.Timestamp, np.ndarray]] = deque(maxlen=8)
         self._inputs: deque[tuple[pd.Timestamp, np.ndarray]] = deque(maxlen=HORIZON)
         self.last_y = np.full(self._nz, np.nan)
@@ -175,15 +226,12 @@ class OnlineEstimator:
 
     @property
     def started(self) -> bool:
-        return self._filter is not None
+        return self._x is not None
 
     @property
     def x(self) -> np.ndarray:
-        return self._filter.x
-
-    @property
-    def P(self) -> np.ndarray:
-        return self._filter.P
+        """Filtered state [degC] (a copy)."""
+        return self._x.copy()
 
     @property
     def online_gains(self) -> np.ndarray:
@@ -191,17 +239,26 @@ class OnlineEstimator:
         return self._online.copy()
 
     def zone_estimate(self) -> tuple[np.ndarray, np.ndarray]:
-        """Filtered zone temperatures C x [degC] and their standard deviations [K]."""
-        C = self.bundle.model.C
-        return C @ self.x, np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", C, self.P, C), 0.0))
+        """Filtered zone temperatures C x [degC] and their standard deviations [K].
+
+        The deviation is the steady-state filter's posterior one for the zones observed
+        at the last update; after steps without any measurement it is the forecast
+        deviation of that many steps.
+        """
+        if self._since == 0:
+            var = np.diag(self._steady.filt.output_covariance(self._observed))
+        else:
+            var = self._steady.horizon_var[min(self._since, HORIZON) - 1]
+        return self.bundle.model.C @ self._x, np.sqrt(np.maximum(var, 0.0))
 
     def _start(self, t: pd.Timestamp, y: np.ndarray) -> None:
-        from zonecast.estimator.kalman import ZoneStateFilter, initial_state_from_measurement
+        from zonecast.estimator.kalman import initial_state_from_measurement
 
-        x0 = initial_state_from_measurement(y, self.bundle.state_zone)
-        self._filter = ZoneStateFilter(x0, self._P0, self.bundle.model.C, self._Q, self._R)
+        self._x = initial_state_from_measurement(y, self.bundle.state_zone)
         self.time = t
         self._online = np.zeros(self._nz)
+        self._since = 0
+        self._observed = np.isfinite(y)
 
     # --- one row ---------------------------------------------------------------------
     def advance(self, t, u, v, y) -> StepReport | None:
@@ -271,25 +328,28 @@ class OnlineEstimator:
             self.resets += 1
             return float("nan"), 0
         u, v = self._pending[:m.n_boxes], self._pending[m.n_boxes:]
-        phi, gv, gig = m.step_matrices(u)
-        c0 = gv @ v + gig @ m.params.c_ig  # Eq:xnoig_ynoig (f_IG = 0)
-        x_prev = self._filter.x
-        y_tilde = m.C @ (phi @ x_prev + c0)
+        st = self._ladder.for_airflows(u)
+        base = m.Bv @ v + m.B_ig @ m.params.c_ig
+        x_tilde = st.step(self._x, u, base, v[1])  # Eq:xnoig_ynoig (f_IG = 0)
+        gig = st.columns(u, m.B_ig)                 # Gamma_IG(u)
         try:
-            f = estimate_gains_step(m.C @ gig, y, y_tilde).f_ig  # Eq:ig(k-1)
+            f = estimate_gains_step(m.C @ gig, y, m.C @ x_tilde).f_ig  # Eq:ig(k-1)
         except RankDeficientError:
             f = np.full(self._nz, np.nan)
-        self._filter.predict(phi, c0 + gig @ self._online)  # eq:online_ig
-        inn = self._filter.update(y)
+        x_prior = x_tilde + gig @ self._online      # eq:online_ig
+        self._x, inn = self._steady.filt.update(x_prior, y)
+        if inn.dof:
+            self._since, self._observed = 0, inn.observed
+            self.nis_sum += inn.nis
+            self.dof_sum += inn.dof
+        else:
+            self._since += 1
         self._gains.append((self.time, f))
         ok = np.isfinite(f)
         self._online[ok] = f[ok]
         self.last_f = f
         self.time = t
         self.steps += 1
-        if inn.dof:
-            self.nis_sum += inn.nis
-            self.dof_sum += inn.dof
         return inn.nis, inn.dof
 
     # --- forecast ---------------------------------------------------------------------
@@ -302,21 +362,21 @@ class OnlineEstimator:
         history = pd.DataFrame([f for _, f in self._gains], columns=self.bundle.zones,
                                index=pd.DatetimeIndex([s for s, _ in self._gains], tz="UTC"))
         f_ig = self._dayahead.issue(t, history).to_numpy()
-        past = {s: row for s, row in self._inputs}
-        current = past[t]
+        # persistence inputs: row t for interval t, the row 24 h earlier for t + h
+        # (integer nanosecond keys: Timestamp arithmetic per lookup costs ~1 ms a forecast)
+        past = {s.value: row for s, row in self._inputs}
+        current = past[t.value]
+        day_ago = t.value - pd.Timedelta("1D").value
         ins = np.empty((HORIZON, self._nin))
-        for h in range(HORIZON):
-            ins[h] = current if h == 0 else past.get(t + h * STEP - pd.Timedelta("1D"), current)
+        ins[0] = current
+        for h in range(1, HORIZON):
+            ins[h] = past.get(day_ago + h * STEP.value, current)
         u, v = ins[:, :m.n_boxes], ins[:, m.n_boxes:]
-        sim = m.simulate(self._filter.x, u, v, f_ig)
-        P = self._filter.P
-        var = np.empty((HORIZON, self._nz))
-        for h in range(HORIZON):
-            phi = m.step_matrices(u[h])[0]
-            P = phi @ P @ phi.T + self._Q
-            var[h] = np.einsum("ij,jk,ik->i", m.C, P, m.C)
+        forcing = v @ m.Bv.T + (f_ig + m.params.c_ig) @ m.B_ig.T
+        xs = self._ladder.for_airflows(u).run(self._x, u, forcing, v[:, 1])
+        std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
         times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
-        return Forecast(t, times, sim.y[1:], np.sqrt(np.maximum(var, 0.0)), f_ig,
+        return Forecast(t, times, xs[1:] @ m.C.T, std, f_ig,
                         self.bundle.zones, self.bundle.version)
 
     # --- checkpoint --------------------------------------------------------------------
@@ -327,21 +387,20 @@ class OnlineEstimator:
                 "nis_sum": self.nis_sum, "dof_sum": self.dof_sum,
                 "gain_times": [s.isoformat() for s, _ in self._gains],
                 "input_times": [s.isoformat() for s, _ in self._inputs],
-                "version": self.bundle.version}
+                "version": self.bundle.version, "since": self._since}
         arrays = {"pending": self._pending, "held": self._held, "online": self._online,
-                  "last_y": self.last_y, "last_f": self.last_f,
+                  "last_y": self.last_y, "last_f": self.last_f, "observed": self._observed,
                   "gains": np.array([f for _, f in self._gains]).reshape(-1, self._nz),
                   "inputs": np.array([r for _, r in self._inputs]).reshape(-1, self._nin)}
         if self.started:
-            arrays["x"], arrays["P"] = self._filter.x, self._filter.P
+            arrays["x"] = self._x
         buf = io.BytesIO()
         np.savez(buf, meta=np.array(json.dumps(meta)), **arrays)
         return buf.getvalue()
 
     def load_bytes(self, data: bytes) -> None:
-        """Restore a state written by :meth:`to_bytes` for the same model."""
-        from zonecast.estimator.kalman import ZoneStateFilter
-
+        """Restore a state written by :meth:`to_bytes` for the same model (a checkpoint
+        of the earlier time-varying filter also loads: its covariance is not needed)."""
         with np.load(io.BytesIO(data), allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
             arr = {k: z[k] for k in z.files if k != "meta"}
@@ -354,6 +413,8 @@ class OnlineEstimator:
         self._gains.extend((pd.Timestamp(s), f) for s, f in zip(meta["gain_times"], arr["gains"]))
         self._inputs.extend((pd.Timestamp(s), r)
                             for s, r in zip(meta["input_times"], arr["inputs"]))
+        self._since = int(meta.get("since", 0))
+        if "observed" in arr:
+            self._observed = arr["observed"].astype(bool)
         if meta["started"]:
-            self._filter = ZoneStateFilter(arr["x"], arr["P"], self.bundle.model.C, self._Q,
-                                           self._R)
+            self._x = arr["x"]

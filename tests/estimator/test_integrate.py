@@ -6,6 +6,8 @@ import scipy.linalg as sl
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from zonecast.estimator.integrate import (
+    ExactStepper,
+    StepperLadder,
     chebyshev_coefficients,
     simulate_exact,
     spectral_bound,
@@ -95,3 +97,54 @@ def test_results_are_bitwise_reproducible():
     runs = [simulate_exact(A, rooms, bxu, np.full(40, 20.0), u, b, ts, 900.0, capacity=cap)
             for _ in range(3)]
     assert all(np.array_equal(runs[0], r) for r in runs[1:])
+
+
+def test_stepper_run_and_columns_equal_single_steps_and_the_dense_reference():
+    rng = np.random.default_rng(5)
+    A, cap, rooms, bxu = random_network(rng, 20, 4)
+    u = rng.uniform(0.0, 1.0, (15, len(rooms)))
+    b = rng.normal(0.0, 1e-3, (15, 20))
+    ts = rng.uniform(10.0, 30.0, 15)
+    x0 = rng.uniform(15.0, 25.0, 20)
+    st_ = ExactStepper(A, rooms, bxu, 900.0, u.max(axis=0), capacity=cap)
+    xs = st_.run(x0, u, b, ts)
+    x = x0
+    for k in range(15):  # one compiled run = the same arithmetic as 15 single steps
+        x = st_.step(x, u[k], b[k], ts[k])
+        assert np.array_equal(xs[k + 1], x)
+    np.testing.assert_allclose(xs, dense_reference(A, rooms, bxu, x0, u, b, ts, 900.0),
+                               atol=1e-8, rtol=0)
+    B = rng.normal(0.0, 1e-4, (20, 3))
+    G = st_.columns(u[0], B)
+    for j in range(3):
+        assert np.array_equal(G[:, j], st_.step(np.zeros(20), u[0], B[:, j], 0.0))
+    # Gamma B against the augmented dense exponential: int_0^h exp(A(u) s) ds B
+    dd = np.zeros(20)
+    np.add.at(dd, rooms, bxu * u[0])
+    M = np.zeros((23, 23))
+    M[:20, :20], M[:20, 20:] = A + np.diag(dd), B
+    np.testing.assert_allclose(G, sl.expm(M * 900.0)[:20, 20:], atol=1e-9, rtol=1e-7)
+    with pytest.raises(ValueError, match="above the stepper's u_max"):
+        st_.columns(u.max(axis=0) * 1.5, B)
+
+
+def test_ladder_level_depends_on_the_airflows_only():
+    rng = np.random.default_rng(8)
+    A, cap, rooms, bxu = random_network(rng, 12, 3)
+    lad = StepperLadder(A, rooms, bxu, 900.0, cap, u_base=0.5)
+    assert [lad.level(np.array([a])) for a in (0.0, 0.5, 0.51, 1.0, 1.01, 7.9)] == [0, 0, 1, 1, 2, 4]
+    x0 = rng.uniform(15.0, 25.0, 12)
+    b = rng.normal(0.0, 1e-3, 12)
+    low = rng.uniform(0.0, 0.5, len(rooms))
+    a = lad.for_airflows(low).step(x0, low, b, 14.0)
+    # a second ladder built in another order returns the same stepper for the same u
+    other = StepperLadder(A, rooms, bxu, 900.0, cap, u_base=0.5)
+    other.for_airflows(np.full(len(rooms), 3.0))
+    assert np.array_equal(other.for_airflows(low).step(x0, low, b, 14.0), a)
+    # a higher level steps the same airflows to round-off
+    high = lad.for_airflows(np.full(len(rooms), 3.0)).step(x0, low, b, 14.0)
+    np.testing.assert_allclose(high, a, atol=1e-9, rtol=0)
+    with pytest.raises(ValueError, match="u_base must be > 0"):
+        StepperLadder(A, rooms, bxu, 900.0, cap, u_base=0.0)
+    with pytest.raises(ValueError, match="finite and >= 0"):
+        lad.level(np.array([-0.1]))

@@ -213,3 +213,58 @@ def test_errors_say_what_to_fix():
                      np.eye(2), np.eye(2), store_covariance="all")
     with pytest.raises(ValueError, match="sigma must be > 0"):
         K.default_measurement_noise(2, sigma=0)
+
+
+# --------------------------------------------------------------------------- steady state
+def test_steady_state_covariance_is_the_limit_of_the_filter():
+    rng = np.random.default_rng(21)
+    n, m = 6, 3
+    F, H, Q, R = random_system(rng, n, m)
+    P = K.steady_state_covariance(F, H, Q, R)
+    f = K.ZoneStateFilter(np.zeros(n), np.eye(n), H, Q, R)
+    for _ in range(400):
+        f.predict(F)
+        prior = f.P
+        f.update(np.zeros(m))
+    np.testing.assert_allclose(prior, P, atol=1e-10, rtol=1e-8)
+    assert np.allclose(P, P.T) and np.linalg.eigvalsh(P).min() > 0
+    with pytest.raises(K.KalmanInputError, match="H must have shape"):
+        K.steady_state_covariance(F, H[:, :2], Q, R)
+
+
+@pytest.mark.parametrize("observed", [[True, True, True], [True, False, True], [False, True, False]])
+def test_steady_filter_update_equals_the_textbook_update_from_its_prior(observed):
+    rng = np.random.default_rng(4)
+    n, m = 5, 3
+    F, H, Q, R = random_system(rng, n, m)
+    P = K.steady_state_covariance(F, H, Q, R)
+    sf = K.SteadyStateFilter(P, H, R)
+    obs = np.array(observed)
+    x = rng.normal(size=n)
+    y = rng.normal(size=m)
+    y[~obs] = np.nan
+    post, inn = sf.update(x, y)
+    Hs, Rs = H[obs], R[np.ix_(obs, obs)]
+    S = Hs @ P @ Hs.T + Rs
+    Kg = P @ Hs.T @ np.linalg.inv(S)
+    np.testing.assert_allclose(post, x + Kg @ (y[obs] - Hs @ x), atol=1e-12)
+    nu = y[obs] - Hs @ x
+    assert inn.dof == obs.sum() and inn.nis == pytest.approx(nu @ np.linalg.solve(S, nu))
+    Ppost = P - Kg @ Hs @ P
+    np.testing.assert_allclose(sf.output_covariance(obs), H @ Ppost @ H.T, atol=1e-12)
+    if obs.all():
+        np.testing.assert_allclose(sf.posterior(), Ppost, atol=1e-12)
+    same, none = sf.update(x, np.full(m, np.nan))
+    assert np.array_equal(same, x) and none.dof == 0 and np.isnan(none.nis)
+
+
+def test_horizon_output_variances_equal_explicit_propagation():
+    rng = np.random.default_rng(9)
+    n, m = 7, 2
+    F, H, Q, _ = random_system(rng, n, m)
+    P0 = np.diag(rng.uniform(0.1, 1.0, n))
+    got = K.horizon_output_variances(F, P0, Q, H, 12)
+    P = P0
+    for h in range(12):
+        P = F @ P @ F.T + Q
+        np.testing.assert_allclose(got[h], np.diag(H @ P @ H.T), rtol=1e-12, atol=1e-14)

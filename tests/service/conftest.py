@@ -169,8 +169,8 @@ def broker(tmp_path_factory) -> Broker:
 # --------------------------------------------------------------------------- virtual building
 @pytest.fixture(scope="session")
 def vb(tmp_path_factory):
-    """One virtual-building week (real EnergyPlus, ~5 s) and a model file with a weekly
-    internal-gains profile (6 W/m2 on weekdays 8-18 h, else 0.5 W/m2)."""
+    """Three consecutive virtual-building weeks (real EnergyPlus, ~10 s) and a model file
+    with a weekly internal-gains profile (6 W/m2 on weekdays 8-18 h, else 0.5 W/m2)."""
     import datetime as dt
 
     import numpy as np
@@ -179,7 +179,7 @@ def vb(tmp_path_factory):
     from zonecast.testbed.run import run_weeks
 
     out = tmp_path_factory.mktemp("vb")
-    run_weeks([dt.date(2015, 4, 13)], out, seed=3)
+    run_weeks([dt.date(2015, 4, 13), dt.date(2015, 4, 20), dt.date(2015, 4, 27)], out, seed=3)
     zones = list(load_site(out / "site.yaml").zones)
     bins = np.arange(672)
     office = ((bins % 96) >= 32) & ((bins % 96) < 72) & (bins < 480)

@@ -61,6 +61,7 @@ __all__ = [
     "propagate_std",
     "track_week",
     "week_split",
+    "whole_weeks",
     "zone_floor_area",
 ]
 
@@ -84,6 +85,19 @@ def _rows_per_day(data: ModelData) -> int:
     return int(pd.Timedelta("1D") / step)
 
 
+def whole_weeks(data: ModelData) -> list[dict]:
+    """Consecutive 7-day blocks of rows from the start of each contiguous segment:
+    {index, segment, start (local date), rows [start, stop)} each."""
+    per_week = 7 * _rows_per_day(data)
+    local = data.local_times()
+    weeks = []
+    for seg, (a, b) in enumerate(data.segments):
+        for s in range(a, b - per_week + 1, per_week):
+            weeks.append({"index": len(weeks), "segment": seg, "start": str(local[s].date()),
+                          "rows": [s, s + per_week]})
+    return weeks
+
+
 def week_split(data: ModelData, seed: int = 0, n_train: int = 8) -> dict:
     """Seeded split of the data's weeks into training and validation weeks.
 
@@ -99,13 +113,7 @@ def week_split(data: ModelData, seed: int = 0, n_train: int = 8) -> dict:
         ``train``, ``validation``: sorted week indices; ``train_starts``,
         ``validation_starts``: their local start dates; ``seed``.
     """
-    per_week = 7 * _rows_per_day(data)
-    local = data.local_times()
-    weeks = []
-    for seg, (a, b) in enumerate(data.segments):
-        for s in range(a, b - per_week + 1, per_week):
-            weeks.append({"index": len(weeks), "segment": seg, "start": str(local[s].date()),
-                          "rows": [s, s + per_week]})
+    weeks = whole_weeks(data)
     if len(weeks) <= n_train:
         raise ValueError(f"{len(weeks)} whole weeks in the data; need more than {n_train}")
     rng = np.random.default_rng([seed, 21])
@@ -428,7 +436,10 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
     figures : dict (JSON-ready)
         ``fig2``: per zone, the temperature increase C Gamma_IG (c_IG + f_IG,w) [K per
         step] on the 672 time-of-week bins for each training week and their mean;
-        ``fig3``: horizon RMS per method (same as results); ``lead_minutes``.
+        ``fig3``: horizon RMS per method (same as results); ``week``: the first validation
+        week's measured zone temperatures with the 24-h forecasts (fixed, day-ahead) laid
+        end to end per issue day and the paper's online one-step predictions (figures 4
+        and 5); ``lead_minutes``.
     """
     t0 = time.perf_counter()
     zones = data.zones
@@ -450,6 +461,10 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
     methods = ("fixed", "dayahead", "persistence")
     preds = {m: [] for m in (*methods, "fixed_kf0")}
     stds, meas = [], []
+    # figures 4 and 5: the first validation week, forecasts laid end to end per day
+    w0 = split["validation"][0]
+    a0, b0 = weeks[w0]["rows"]
+    week_fc = {m: np.full((b0 - a0, len(zones)), np.nan) for m in ("fixed", "dayahead")}
     for i in split["validation"]:
         for r in issue_rows(data, weeks[i]["rows"]):
             fc = issue_forecast(model, data, r, profile, methods, dayahead=dayahead,
@@ -465,6 +480,10 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
                 p = pad.copy()
                 p[:len(fc[m].mean)] = fc[m].mean
                 lst.append(p)
+            if i == w0:
+                for m, wf in week_fc.items():
+                    n_ = min(len(fc[m].mean), b0 - r - 1)
+                    wf[r + 1 - a0:r + 1 - a0 + n_] = fc[m].mean[:n_]
             s = pad.copy()
             s[:len(fc["fixed"].std)] = fc["fixed"].std
             stds.append(s)
@@ -505,7 +524,18 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
         "seed": int(seed),
     }
     results["seconds"] = time.perf_counter() - t0
-    figures = {"fig2": fig2, "fig3": hrms, "lead_minutes": [15 * (h + 1) for h in range(HORIZON)]}
+    rows5, pred5 = online_paper_predictions(model, tracks[w0])
+    online_week = np.full((b0 - a0, len(zones)), np.nan)
+    keep = (rows5 >= a0) & (rows5 < b0)
+    online_week[rows5[keep] - a0] = pred5[keep]
+    week = {"start": weeks[w0]["start"],
+            "times": [t.isoformat() for t in data.local_times()[a0:b0]],
+            "measured": {z: data.y[a0:b0, j].tolist() for j, z in enumerate(zones)},
+            "fixed": {z: week_fc["fixed"][:, j].tolist() for j, z in enumerate(zones)},
+            "dayahead": {z: week_fc["dayahead"][:, j].tolist() for j, z in enumerate(zones)},
+            "online_paper": {z: online_week[:, j].tolist() for j, z in enumerate(zones)}}
+    figures = {"fig2": fig2, "fig3": hrms, "week": week,
+               "lead_minutes": [15 * (h + 1) for h in range(HORIZON)]}
     return _clean(results), _clean(figures)
 
 

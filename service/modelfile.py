@@ -254,18 +254,23 @@ def load_model_file(path: str | Path) -> ModelBundle:
 def write_model_file(path: str | Path, site: str | Path, *,
                      parameters: dict[str, float] | None = None,
                      weekly_profile: dict | None = None,
-                     noise: dict[str, float] | None = None) -> Path:
-    """Write a model file (schema 1) pointing to ``site`` (stored relative when possible).
+                     noise: dict[str, float] | None = None,
+                     extra: dict[str, Any] | None = None) -> Path:
+    """Write a model file (schema 1) pointing to ``site`` (stored relative to the file
+    when both are on one drive, else absolute).
 
-    A stand-in for ``zonecast identify`` in tests and for sites without identification.
+    Used by ``zonecast identify`` and ``zonecast reproduce``, by tests, and for sites
+    without identification. ``extra`` adds informational keys (e.g. ``identification``).
     """
+    import os
+
     path = Path(path)
     site = Path(site).resolve()
     try:
-        ref = str(site.relative_to(path.parent.resolve()))
-    except ValueError:
+        ref = os.path.relpath(site, path.parent.resolve())
+    except ValueError:  # another drive (Windows)
         ref = str(site)
     doc = {"schema_version": SCHEMA_VERSION, "site": ref, "parameters": parameters or {},
-           "weekly_profile": weekly_profile, "noise": noise}
+           "weekly_profile": weekly_profile, "noise": noise, **(extra or {})}
     path.write_text(json.dumps(doc, indent=1))
     return path

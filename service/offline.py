@@ -9,7 +9,7 @@ test checks 1e-9).
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import pandas as pd
@@ -34,7 +34,8 @@ def telemetry_frame(telemetry, bundle: ModelBundle) -> pd.DataFrame:
 
 
 def offline_forecasts(model_file, telemetry, times: Iterable, *,
-                      max_gap: pd.Timedelta = MAX_GAP) -> dict[pd.Timestamp, Forecast]:
+                      max_gap: pd.Timedelta = MAX_GAP,
+                      inputs: Mapping | None = None) -> dict[pd.Timestamp, Forecast]:
     """Forecasts issued at ``times`` by the online estimator run over ``telemetry``.
 
     Parameters
@@ -48,6 +49,9 @@ def offline_forecasts(model_file, telemetry, times: Iterable, *,
         filter's start.
     max_gap : pandas.Timedelta
         As for :class:`OnlineEstimator`.
+    inputs : mapping, optional
+        UTC issue time -> (96, n_boxes + 6) inputs over the horizon for
+        :meth:`OnlineEstimator.forecast` (default persistence inputs).
 
     Returns
     -------
@@ -72,7 +76,7 @@ def offline_forecasts(model_file, telemetry, times: Iterable, *,
             break
         est.advance(t, u[k], v[k], y[k])
         if t in wanted and est.started:
-            out[t] = est.forecast()
+            out[t] = est.forecast(None if inputs is None else inputs.get(t))
     missing = sorted(wanted - set(out))
     if missing:
         raise ValueError(f"no forecast at {len(missing)} requested times (first "

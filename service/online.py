@@ -201,7 +201,12 @@ class OnlineEstimator:
         self._ladder = StepperLadder(m.structure.A(m.params.physical), m._rooms, m._bxu,
                                      m.step, m.structure.capacity,
                                      float(np.max(m.u_nominal)))
-        self._dayahead = DayAheadGains(bundle.profile, horizon=HORIZON)
+        from zonecast.estimator.forecast import DAYAHEAD_TAU, DAYAHEAD_WINDOW
+
+        # the day-ahead offset's decay and window as chosen on the training weeks (the
+        # offline study's; docs/numerics.md)
+        self._dayahead = DayAheadGains(bundle.profile, tau=DAYAHEAD_TAU, window=DAYAHEAD_WINDOW,
+                                       horizon=HORIZON)
         self._names = _input_names(bundle)
         self.reset()
         self.steps = 0
@@ -353,8 +358,16 @@ class OnlineEstimator:
         return inn.nis, inn.dof
 
     # --- forecast ---------------------------------------------------------------------
-    def forecast(self) -> Forecast:
-        """Day-ahead forecast from the current state (see the module docstring)."""
+    def forecast(self, inputs: np.ndarray | None = None) -> Forecast:
+        """Day-ahead forecast from the current state (see the module docstring).
+
+        Parameters
+        ----------
+        inputs : ndarray (96, n_boxes + 6), optional
+            u and v over the 96 forecast intervals (airflows [kg/s], then Ta, Ts [degC],
+            solE, solS, solW, solN [W/m2]) when a site has forecasts of them (or, for an
+            evaluation, the measured ones); default: persistence inputs.
+        """
         if not self.started:
             raise ValueError("no forecast yet: the filter has not received a measurement")
         m = self.bundle.model
@@ -367,10 +380,16 @@ class OnlineEstimator:
         past = {s.value: row for s, row in self._inputs}
         current = past[t.value]
         day_ago = t.value - pd.Timedelta("1D").value
-        ins = np.empty((HORIZON, self._nin))
-        ins[0] = current
-        for h in range(1, HORIZON):
-            ins[h] = past.get(day_ago + h * STEP.value, current)
+        if inputs is None:
+            ins = np.empty((HORIZON, self._nin))
+            ins[0] = current
+            for h in range(1, HORIZON):
+                ins[h] = past.get(day_ago + h * STEP.value, current)
+        else:
+            ins = np.asarray(inputs, dtype=float)
+            if ins.shape != (HORIZON, self._nin) or not np.isfinite(ins).all():
+                raise ValueError(f"inputs must be finite with shape ({HORIZON}, {self._nin}): "
+                                 "u per box, then Ta, Ts, solE, solS, solW, solN per interval")
         u, v = ins[:, :m.n_boxes], ins[:, m.n_boxes:]
         forcing = v @ m.Bv.T + (f_ig + m.params.c_ig) @ m.B_ig.T
         xs = self._ladder.for_airflows(u).run(self._x, u, forcing, v[:, 1])

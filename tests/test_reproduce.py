@@ -5,7 +5,7 @@ import json
 import pytest
 from pydantic import ValidationError
 
-from zonecast.reproduce import PAPER, Results, plot_horizon, write_report
+from zonecast.reproduce import PAPER, Results, plot_horizon, plot_week, write_report
 
 ZONES = ["NW", "NE", "W", "E", "S", "C"]
 
@@ -50,3 +50,20 @@ def test_report_puts_the_papers_numbers_beside_ours(tmp_path):
     assert f"| paper fixed | {PAPER['table3']['fixed']['NW']:.2f} |" in text
     assert "**0.300**" in text and "0.333" in text and "![fig3.png](fig3.png)" in text
     assert (tmp_path / "fig3.png").stat().st_size > 1000
+
+
+def test_week_figure_draws_measured_and_predictions_with_gaps(tmp_path):
+    import numpy as np
+    import pandas as pd
+
+    times = pd.date_range("2015-01-12", periods=96 * 7, freq="15min", tz="America/Los_Angeles")
+    base = 20 + np.sin(np.arange(len(times)) / 15)
+    gap = [None] * 96 + list(base[96:] + 0.2)          # no forecast on the first day
+    week = {"start": "2015-01-12", "times": [t.isoformat() for t in times],
+            "measured": {z: base.tolist() for z in ZONES},
+            "fixed": {z: gap for z in ZONES}, "dayahead": {z: gap for z in ZONES}}
+    path = tmp_path / "fig4.png"
+    plot_week(week, ZONES, ["fixed", "dayahead"], "Fig. 4", path)
+    assert path.stat().st_size > 10_000
+    with pytest.raises(KeyError):
+        plot_week(week, ZONES, ["online_paper"], "Fig. 5", tmp_path / "fig5.png")

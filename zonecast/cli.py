@@ -163,18 +163,20 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                      help="Saturday of a validation weekend (repeatable; default: the earliest "
                           "excitation weekend, as the paper's fall)")] = None,
                  starts: Annotated[int, typer.Option(min=1, help="starting points")] = 3,
+                 profile_weeks: Annotated[bool, typer.Option(
+                     help="also estimate the fixed weekly internal-gains profile (paper "
+                          "section 4-B) from every whole week of the data")] = True,
                  seed: Seed = 0) -> None:
-    """Identify the 13 parameters from excitation weekends (paper section 4-A) and write the
-    model file used by forecasts and the service."""
-    import json
-    import os
-
+    """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
+    the weekly internal-gains profile, and write the model file used by forecasts and the
+    service."""
     from zonecast.estimator.dataset import model_data
     from zonecast.estimator.identify import excitation_saturdays, identify
     from zonecast.estimator.idf import read_building
     from zonecast.estimator.model import build_model
     from zonecast.estimator.site import load_site
     from zonecast.estimator.telemetry import load_telemetry
+    from zonecast.service.modelfile import write_model_file
     try:
         s = load_site(site)
         tel = load_telemetry(data / "telemetry.csv" if data.is_dir() else data, s)
@@ -191,13 +193,27 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
             task = prog.add_task("identification", total=None)
             res = identify(model, d, train, validate, n_starts=starts, seed=seed,
                            progress=lambda m: prog.update(task, description=f"identification: {m}"))
+            profile, used = None, []
+            if profile_weeks:
+                from zonecast.estimator.forecast import fixed_profile, track_week, whole_weeks
+                weeks = whole_weeks(d)
+                if weeks:
+                    fitted = model.with_params(res.params)
+                    task = prog.add_task("weekly internal-gains profile", total=len(weeks))
+                    tracks = []
+                    for w in weeks:
+                        tracks.append(track_week(fitted, d, w["rows"]))
+                        prog.advance(task)
+                    wp = fixed_profile(d, tracks)
+                    profile = {"zones": list(s.zones), "values": wp.values.tolist()}
+                    used = [w["start"] for w in weeks]
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
-    doc = {"schema_version": 1, "site": os.path.relpath(site.resolve(), out.resolve().parent),
-           "parameters": {n: float(v) for n, v in zip(res.param_names, res.params)},
-           "weekly_profile": None, "noise": None, "identification": res.to_dict()}
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(doc, indent=2))
+    write_model_file(out, site, parameters={n: float(v) for n, v in zip(res.param_names,
+                                                                         res.params)},
+                     weekly_profile=profile,
+                     extra={"identification": res.to_dict(), "profile_weeks": used})
     t2 = res.to_dict()["table2"]
     typer.echo(f"identified on {', '.join(res.train_weekends)} in {res.seconds:.1f} s "
                f"({res.n_evaluations} evaluations, {starts} starts)")
@@ -205,6 +221,9 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     if t2["validation"]:
         typer.echo("validation RMS [degC]: "
                    + ", ".join(f"{k} {v:.3f}" for k, v in t2["validation"].items()))
+    if profile is not None:
+        typer.echo(f"weekly internal-gains profile from {len(used)} weeks ({used[0]} ... "
+                   f"{used[-1]})")
     typer.echo(f"wrote {out}")
 
 

@@ -137,6 +137,80 @@ def plot_horizon(horizon: dict[str, dict[str, list[float]]], zones: list[str], p
     plt.close(fig)
 
 
+def plot_week(week: dict, zones: list[str], methods: list[str], title: str, path: Path) -> None:
+    """Figs. 4 and 5: one validation week, measured zone temperatures (black) and the
+    predictions of ``methods`` (24-h forecasts laid end to end per issue day, or the
+    paper's online one-step predictions), one panel per zone."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+    t = pd.to_datetime(week["times"], utc=True)
+    colors = {"fixed": "tab:blue", "dayahead": "tab:orange", "online_paper": "tab:green",
+              "service": "tab:purple"}
+    fig, axes = plt.subplots(len(zones), 1, figsize=(11, 1.7 * len(zones)), sharex=True)
+    for ax, z in zip(np.atleast_1d(axes), zones):
+        meas = np.asarray(week["measured"][z], dtype=float)
+        ax.plot(t, meas, color="k", lw=1.0, label="measured")
+        for m in methods:
+            pred = np.asarray(week[m][z], dtype=float)
+            ok = np.isfinite(pred) & np.isfinite(meas)
+            rms = float(np.sqrt(np.mean((pred[ok] - meas[ok]) ** 2))) if ok.any() else np.nan
+            ax.plot(t, pred, color=colors.get(m), lw=0.9, label=f"{m} (RMS {rms:.2f} °C)")
+        ax.set_ylabel(f"{z} [°C]")
+        ax.legend(fontsize=6, loc="upper right", ncol=len(methods) + 1)
+    np.atleast_1d(axes)[-1].set_xlabel("time (UTC)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def service_check(model_file: Path, telemetry: Path, data, seed: int) -> dict:
+    """The service's day-ahead forecast (:class:`~zonecast.service.online.OnlineEstimator`:
+    steady-state filter, online f_IG, persistence inputs) issued at the same validation
+    midnights as Table 3, computed offline from the telemetry file exactly as
+    ``zonecast forecast`` does, and the same with the measured inputs over the horizon
+    (``service_known_inputs``, comparable with Table 3's rows); RMS per zone, per horizon
+    and interval coverage."""
+    from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
+    from zonecast.estimator.forecast import HORIZON, coverage, issue_rows, week_split
+    from zonecast.service.offline import offline_forecasts
+
+    split = week_split(data, seed)
+    issues = [(r, split["weeks"][i]["rows"][1]) for i in split["validation"]
+              for r in issue_rows(data, split["weeks"][i]["rows"])]
+    t0 = time.perf_counter()
+    times = [data.times[r] for r, _ in issues]
+    # the same forecasts with the measured u and v over the horizon (as Table 3's): what the
+    # steady-state filter and online gains give when the inputs are known
+    measured = {}
+    for r, _ in issues:
+        ins = np.hstack([data.u[r:r + HORIZON], data.v[r:r + HORIZON]])
+        if len(ins) == HORIZON and np.isfinite(ins).all():
+            measured[data.times[r]] = ins
+    runs = {"service": offline_forecasts(model_file, telemetry, times),
+            "service_known_inputs": offline_forecasts(model_file, telemetry, times,
+                                                      inputs=measured)}
+    nz = len(data.zones)
+    out: dict = {"table3": {}, "horizon_rms": {}, "coverage_90": {}}
+    for name, fcs in runs.items():
+        pred, std, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(3))
+        for k, (r, stop) in enumerate(issues):
+            if name == "service_known_inputs" and data.times[r] not in measured:
+                continue
+            fc = fcs[data.times[r]]
+            n = min(HORIZON, stop - r - 1)
+            pred[k], std[k] = fc.mean, fc.std
+            meas[k, :n] = data.y[r + 1:r + 1 + n]
+        out["table3"][name] = rms_by_zone(pred.reshape(-1, nz), meas.reshape(-1, nz), data.zones)
+        out["horizon_rms"][name] = horizon_rms(pred, meas, data.zones)
+        out["coverage_90"][name] = coverage(pred, std, meas, data.zones)
+    out["n_forecasts"] = len(issues)
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
 def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
         progress=lambda s: None) -> Results:
     """The main job; see the module docstring."""
@@ -177,6 +251,25 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
     from zonecast.estimator.forecast import forecast_study
     study, figs = forecast_study(fitted, data, truth=truth, seed=seed)
     timings["gains_and_forecasts"] = time.perf_counter() - t
+    # the model file the service and `zonecast forecast` use: identified parameters and
+    # the fixed weekly profile of the training weeks
+    from zonecast.service.modelfile import write_model_file
+    zones = list(site.zones)
+    prof = figs["fig2"]["profile_w_m2"]
+    model_file = write_model_file(
+        out / "model.json", campaign / "site.yaml",
+        parameters={n: float(v) for n, v in zip(ident.param_names, ident.params)},
+        weekly_profile={"zones": zones, "values": [[prof[z][b] for z in zones]
+                                                   for b in range(len(prof[zones[0]]))]},
+        extra={"identification": ident.to_dict(),
+               "profile_weeks": study["split"]["train_starts"]})
+    t = time.perf_counter()
+    progress("service check: the online estimator's day-ahead forecasts")
+    svc = service_check(model_file, campaign / "telemetry.csv", data, seed)
+    study["table3"].update(svc["table3"])
+    study["horizon_rms"].update(svc["horizon_rms"])
+    study.setdefault("coverage_90", {}).update(svc["coverage_90"])
+    timings["service_check"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     res = Results(seed=seed,
                   parameters={n: {"value": float(v), "unit": u, "stderr": float(s)}
@@ -196,5 +289,15 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
     figures.append("fig2_internal_gains.png")
     plot_horizon(res.horizon_rms, list(site.zones), out / "fig3_horizon_rms.png")
     figures.append("fig3_horizon_rms.png")
-    write_report(res, out, figures, list(site.zones))
+    week = figs["week"]
+    plot_week(week, zones, ["fixed", "dayahead"],
+              f"Fig. 4: 24-h forecasts issued at local midnight, validation week of "
+              f"{week['start']} (fixed profile and day-ahead online f_IG)",
+              out / "fig4_week_fixed.png")
+    figures.append("fig4_week_fixed.png")
+    plot_week(week, zones, ["online_paper"],
+              f"Fig. 5: predictions with online f_IG (paper section 5 reading), validation "
+              f"week of {week['start']}", out / "fig5_week_online.png")
+    figures.append("fig5_week_online.png")
+    write_report(res, out, figures, zones)
     return res

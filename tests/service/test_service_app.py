@@ -264,6 +264,43 @@ def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemet
     assert std[0] > std0[0] and std[0] > std[1:].max() and (std[1:] >= std0[1:] - 1e-12).all()
 
 
+def test_forecast_with_supplied_inputs(bundle, telemetry, tmp_path):
+    """Supplied horizon inputs replace persistence; the persistence inputs passed
+    explicitly give the default forecast bitwise; bad shapes are refused."""
+    from zonecast.service.offline import offline_forecasts
+    from zonecast.service.online import OnlineEstimator, rows_from_frame
+
+    frame = telemetry_si(bundle, telemetry.iloc[:2 * DAY + 10])
+    tt, u, v, y = rows_from_frame(bundle, frame)
+    est = OnlineEstimator(bundle)
+    for k in range(len(tt)):
+        est.advance(tt[k], u[k], v[k], y[k])
+    k = len(tt) - 1
+    persistence = np.vstack([np.hstack([u[k], v[k]])]
+                            + [np.hstack([u[k - DAY + h], v[k - DAY + h]]) for h in range(1, DAY)])
+    a, b = est.forecast(), est.forecast(persistence)
+    assert np.array_equal(a.mean, b.mean) and np.array_equal(a.std, b.std)
+    warmer = persistence.copy()
+    warmer[:, bundle.model.n_boxes] += 5.0  # outdoor air 5 K warmer all day
+    c = est.forecast(warmer)
+    assert (c.mean[-1] > a.mean[-1]).all()
+    with pytest.raises(ValueError, match="inputs must be finite with shape"):
+        est.forecast(persistence[:10])
+    off = offline_forecasts(bundle, frame, [tt[k]], inputs={tt[k]: warmer})[tt[k]]
+    assert np.array_equal(off.mean, c.mean)
+
+
+def test_model_file_site_path_is_relative_across_folders(vb, tmp_path):
+    """A model file written in another folder than the site's stores a relative path
+    that loads from there (reproduce writes REPORT/model.json beside REPORT/campaign)."""
+    out = tmp_path / "report" / "model.json"
+    out.parent.mkdir()
+    write_model_file(out, vb / "site.yaml", extra={"profile_weeks": []})
+    doc = json.loads(out.read_text())
+    assert not doc["site"].startswith("/") and doc["profile_weeks"] == []
+    assert load_model_file(out).building == "office6"
+
+
 # --------------------------------------------------------------------------- REST
 def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
     from fastapi.testclient import TestClient

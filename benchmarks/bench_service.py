@@ -2,8 +2,9 @@
 
 1. **Step latency**: the online estimator of the virtual building (office6, 381 states,
    21 boxes, 6 zones) over two days of its telemetry: the filter + f_IG step alone, the
-   day-ahead forecast alone (mean over 96 steps and exact covariance propagation), and the
-   whole runner step as the service does it (storage read, step, forecast, checkpoint).
+   day-ahead forecast alone (96 exact model steps; the interval widths are a table computed
+   once per model), one row's telemetry conversion (units, zone averages, pvlib facade
+   irradiance), the checkpoint, and the whole runner step as the service does it (storage read, step, forecast, checkpoint).
    Reference in the same run: one exact step propagator for a new airflow vector (the
    eigendecomposition the model caches per distinct u).
 2. **Forecast endpoint**: ``zonecast serve`` in its own process (MQTT off, SQLite),
@@ -86,6 +87,14 @@ def bench_steps(data: Path, work: Path, days: int) -> dict:
             est.forecast()
             fc.append(time.perf_counter() - t0)
     distinct = len(np.unique(u, axis=0))
+    conv, ckpt = [], []
+    for k in range(0, len(frame), 8):
+        t0 = time.perf_counter()
+        rows_from_frame(bundle, frame.iloc[k:k + 1])
+        conv.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        blob = est.to_bytes()
+        ckpt.append(time.perf_counter() - t0)
     # the whole runner step as served: storage read, step, forecast, checkpoint
     store = open_storage(f"sqlite:///{work / 'bench.db'}")
     units = bundle.site.point_units()
@@ -100,6 +109,7 @@ def bench_steps(data: Path, work: Path, days: int) -> dict:
     store.close()
     return {"states": m.n, "boxes": m.n_boxes, "zones": m.n_zones, "steps": len(tt),
             "distinct_u": distinct, "propagator": ref, "step": step[1:], "forecast": fc,
+            "convert": conv, "checkpoint": ckpt, "checkpoint_bytes": len(blob),
             "runner_steps": n, "runner_total": total, "runner": list(runner.latencies)}
 
 
@@ -201,7 +211,10 @@ def _report_steps(s: dict) -> None:
           f"{s['zones']} zones; {s['steps']} steps, {s['distinct_u']} distinct airflow vectors")
     print(f"   reference, one exact propagator for a new u: {_ms(s['propagator'])}")
     print(f"   filter + f_IG step:                          {_ms(s['step'])}")
-    print(f"   day-ahead forecast (96 steps, covariance):   {_ms(s['forecast'])}")
+    print(f"   day-ahead forecast (96 model steps):         {_ms(s['forecast'])}")
+    print(f"   one row's telemetry conversion (pvlib, pandas): {_ms(s['convert'])}")
+    print(f"   checkpoint serialisation ({s['checkpoint_bytes'] / 1e3:.0f} kB):     "
+          f"{_ms(s['checkpoint'])}")
     print(f"   runner step as served (read, step, forecast every step, checkpoint): "
           f"{_ms(s['runner'])}")
     per = float(np.mean(s["runner"]))  # means: propagator cache misses count
@@ -219,6 +232,7 @@ def main() -> None:
     ap.add_argument("--clients", type=int, default=50)
     ap.add_argument("--requests", type=int, default=40, help="requests per client")
     ap.add_argument("--skip-steps", action="store_true", help="only the endpoint benchmark")
+    ap.add_argument("--skip-endpoint", action="store_true", help="only the step benchmark")
     args = ap.parse_args()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
           f"{platform.python_version()}, OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}")
@@ -227,6 +241,8 @@ def main() -> None:
         data = virtual_building(args.data, work)
         if not args.skip_steps:
             _report_steps(bench_steps(data, work, args.days))
+        if args.skip_endpoint:
+            return
         e = bench_endpoint(data, work, args.clients, args.requests)
         print(f"\n2. REST under {args.clients} concurrent clients (server: one uvicorn process; "
               "clients: raw asyncio connections in this process, on the same 2 cores)")

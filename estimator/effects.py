@@ -135,20 +135,13 @@ def minimum_airflow_fraction(u: np.ndarray, bz: np.ndarray) -> np.ndarray:
 
 
 def window_area_by_facade(model: BilinearModel) -> np.ndarray:
-    """(n_zones, 4) exterior window area of each zone per facade E, S, W, N [m2].
-
-    Read from the structure's window solar term (γ_winSolAbs · a_win · I on room air):
-    the affine part of B_v for γ_winSolAbs times the air capacity.
-    """
+    """(n_zones, 4) exterior window area of each zone per facade E, S, W, N [m2]
+    (the structure's window solar weights, :attr:`RCStructure.window_area`)."""
     st = model.structure
-    p = model.params.param_names.index("gamma_winSolAbs")
-    Bp = st.Bv_p[p].toarray()
-    areas = Bp[:, 2:6] * st.capacity[:, None]
     out = np.zeros((len(st.zones), 4))
-    room_index = {r: i for i, r in enumerate(st.rooms)}
     for j, z in enumerate(st.zones):
         for r in st.zones[z]:
-            out[j] += areas[room_index[r]]
+            out[j] += st.window_area.get(r, 0.0)
     return out
 
 

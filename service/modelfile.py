@@ -7,7 +7,11 @@ File format (JSON, ``schema_version`` 1)::
      "parameters": {"gamma_EW": 25.0, ...},    # optional; missing names -> start values
      "weekly_profile": {"zones": ["NW", ...],  # optional; null -> zeros
                         "values": [[...], ...]},   # 672 rows x n_zones [W/m2]
-     "noise": {"sigma_air": 0.3, ...} | null}  # optional filter noise [K]
+     "noise": {"sigma_air": 0.3, ...} | null,  # optional filter noise [K]
+     "model_options": {"window_solar": "floor", "roof_solar": "mean"}}
+                                               # modelling choices (ModelOptions); a file
+                                               # without them was written before they
+                                               # existed: window solar on the room air
 
 Everything that is wrong raises :class:`ModelFileError` (a ``ValueError``) with a
 message naming the field. Loading reads the site description and its EnergyPlus
@@ -188,6 +192,38 @@ def _noise(doc: dict, path: Path) -> NoiseSettings:
     return NoiseSettings(**{k: float(v) for k, v in known.items()})
 
 
+_OPTION_KEYS = ("window_solar", "roof_solar")
+#: what a model file without ``model_options`` was built with (files written before the
+#: key existed put window solar on the room air, the paper's placement)
+LEGACY_OPTIONS = {"window_solar": "air"}
+
+
+def _model_options(doc: dict, path: Path, notes: list[str]):
+    from zonecast.estimator.rc.network import ModelDefinitionError, ModelOptions
+
+    raw = doc.get("model_options")
+    if raw is None:
+        notes.append("no model_options: window solar on the room air (files written before "
+                     "model_options existed)")
+        raw = LEGACY_OPTIONS
+    if not isinstance(raw, dict):
+        raise ModelFileError(f"{path}: 'model_options' must be an object, e.g. "
+                             '{"window_solar": "floor"}')
+    unknown = sorted(set(raw) - set(_OPTION_KEYS))
+    if unknown:
+        raise ModelFileError(f"{path}: unknown model_options {unknown}; known: "
+                             f"{list(_OPTION_KEYS)}")
+    try:
+        return ModelOptions(**raw)
+    except ModelDefinitionError as exc:
+        raise ModelFileError(f"{path}: model_options: {exc}") from None
+
+
+def model_options_dict(options) -> dict:
+    """The ``model_options`` entry of a model file for :class:`ModelOptions` ``options``."""
+    return {k: getattr(options, k) for k in _OPTION_KEYS}
+
+
 def state_zones(structure, zones: list[str]) -> np.ndarray:
     """Zone index of every state: the zone of the room the state belongs to, else -1."""
     room_zone = {r.upper(): i for i, z in enumerate(zones) for r in structure.zones[z]}
@@ -238,12 +274,13 @@ def load_model_file(path: str | Path) -> ModelBundle:
     params = _parameters(doc, zones, path, notes)
     profile = _profile(doc, zones, site.timezone, path, notes)
     noise = _noise(doc, path)
+    options = _model_options(doc, path, notes)
     try:
         building = read_building(site.idf_path)
     except (ValueError, FileNotFoundError) as exc:
         raise ModelFileError(f"{path}: building {site.idf_path}: {exc}") from None
     model = build_model(building, site.zones, {b: box.room for b, box in site.boxes.items()},
-                        params)
+                        params, options=options)
     volume = {name: z.volume for name, z in building.zones.items()}
     return ModelBundle(
         building=site.building, site=site, model=model, profile=profile, noise=noise,
@@ -255,14 +292,19 @@ def write_model_file(path: str | Path, site: str | Path, *,
                      parameters: dict[str, float] | None = None,
                      weekly_profile: dict | None = None,
                      noise: dict[str, float] | None = None,
+                     model_options: dict[str, str] | None = None,
                      extra: dict[str, Any] | None = None) -> Path:
     """Write a model file (schema 1) pointing to ``site`` (stored relative to the file
     when both are on one drive, else absolute).
 
     Used by ``zonecast identify`` and ``zonecast reproduce``, by tests, and for sites
-    without identification. ``extra`` adds informational keys (e.g. ``identification``).
+    without identification. ``model_options`` are the :class:`ModelOptions` the model was
+    built with (default: the current defaults). ``extra`` adds informational keys (e.g.
+    ``identification``).
     """
     import os
+
+    from zonecast.estimator.rc.network import ModelOptions
 
     path = Path(path)
     site = Path(site).resolve()
@@ -271,6 +313,8 @@ def write_model_file(path: str | Path, site: str | Path, *,
     except ValueError:  # another drive (Windows)
         ref = str(site)
     doc = {"schema_version": SCHEMA_VERSION, "site": ref, "parameters": parameters or {},
-           "weekly_profile": weekly_profile, "noise": noise, **(extra or {})}
+           "weekly_profile": weekly_profile, "noise": noise,
+           "model_options": model_options or model_options_dict(ModelOptions()),
+           **(extra or {})}
     path.write_text(json.dumps(doc, indent=1))
     return path

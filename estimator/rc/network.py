@@ -115,14 +115,23 @@ class ModelOptions:
         Air density for room capacities [kg/m3].
     cp_air : float
         c_p of air [J/(kg K)] (paper eq:q_hvac).
+    window_solar : {"air", "floor"}
+        Where the solar heat entering through windows, gamma_winSolAbs a_win v_sol
+        (paper eq:q_bh), is put: on the room air (the paper) or on the inside faces of
+        the room's floors, shared by floor area (where EnergyPlus's full-exterior solar
+        distribution puts transmitted beam radiation); rooms without a floor keep it on
+        the air. Same parameter either way (docs/model.md).
     """
 
     roof_solar: str = "mean"
     ground: str = "adiabatic"
     rho_air: float = RHO_AIR
     cp_air: float = CP_AIR
+    window_solar: str = "floor"
 
     def __post_init__(self):
+        if self.window_solar not in ("air", "floor"):
+            raise ModelDefinitionError("window_solar must be 'air' or 'floor'")
         if self.roof_solar not in ("mean", "none"):
             raise ModelDefinitionError("roof_solar must be 'mean' or 'none'")
         if self.ground != "adiabatic":
@@ -181,6 +190,11 @@ class RCStructure:
     C : ndarray, shape (n_zones, n)
         Air-volume-weighted mean of each zone's rooms.
     notes : list of str
+    options : ModelOptions
+        The modelling choices the structure was built with.
+    window_area : dict
+        Room -> exterior window area seen by each solar column E, S, W, N [m2] (the
+        weights of gamma_winSolAbs a_win v_sol, wherever :class:`ModelOptions` puts it).
     """
 
     labels: list[StateLabel]
@@ -198,6 +212,8 @@ class RCStructure:
     cp_air: float
     notes: list[str] = field(default_factory=list)
     areas: dict[str, float] = field(default_factory=dict)
+    window_area: dict[str, np.ndarray] = field(default_factory=dict)
+    options: ModelOptions = field(default_factory=lambda: ModelOptions())
 
     @property
     def n(self) -> int:
@@ -389,6 +405,12 @@ def build_structure(
     skey = {k.lower(): k for k in surfaces}
     done: set[str] = set()
     area_ext = area_win = 0.0
+    floor_faces: dict[str, list[tuple[int, float]]] = {}   # room -> (inside face node, area)
+
+    def floor_face(surface: Surface, node: int) -> None:
+        if surface.surface_type == "Floor":
+            floor_faces.setdefault(surface.zone, []).append((node, surface.area))
+
     for name in sorted(surfaces):
         if name in done:
             continue
@@ -416,32 +438,44 @@ def build_structure(
             nodes = _add_element(asm, kind, label, room_state, layout, s.area, s.zone, inside_g)
             outer_g = _INSIDE_GAMMA.get(other.surface_type, IW)
             asm.link(nodes[0], room_state[other.zone], s.area, outer_g)
+            floor_face(s, nodes[-1])
+            floor_face(other, nodes[0])
         elif s.boundary == "Zone" and s.boundary_object:
             other_zone = _resolve([s.boundary_object], building.zones, "zone")[0]
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
             mirror = _INSIDE_GAMMA.get(_MIRROR.get(s.surface_type, "Wall"), IW)
             asm.link(nodes[0], room_state[other_zone], s.area, mirror)
+            floor_face(s, nodes[-1])
         elif s.boundary == "Outdoors":
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
+            floor_face(s, nodes[-1])
             asm.to_temperature(nodes[0], 0, s.area, EW)  # paper eq:q_bh, convection
             for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar).items():
                 asm.source(nodes[0], DISTURBANCES.index(col), w * s.area, ABSORP)
             area_ext += s.area
         else:
-            _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
+            nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
+            floor_face(s, nodes[-1])
             if s.boundary not in ("Adiabatic", "Ground"):
                 notes.append(f"surface {name}: boundary {s.boundary} treated as adiabatic")
     if any(s.boundary == "Ground" for s in surfaces.values()):
         notes.append("ground-contact surfaces: outer face adiabatic (ModelOptions.ground)")
 
+    window_area: dict[str, np.ndarray] = {}
     for name in sorted(building.windows):
         w = building.windows[name]
         parent = surfaces[w.surface]
         r = room_state[w.zone]
         if parent.boundary == "Outdoors":
             asm.to_temperature(r, 0, w.area, UWIN)  # paper eq:q_bh, window transmission
+            faces = floor_faces.get(w.zone, []) if opts.window_solar == "floor" else []
+            total = sum(a for _, a in faces)
+            targets = [(node, a / total) for node, a in faces] if total > 0 else [(r, 1.0)]
             for col, wt in facade_of(parent.tilt, parent.azimuth, opts.roof_solar).items():
-                asm.source(r, DISTURBANCES.index(col), wt * w.area, WINSOL)
+                seen_area = window_area.setdefault(w.zone, np.zeros(4))
+                seen_area[DISTURBANCES.index(col) - 2] += wt * w.area
+                for node, share in targets:
+                    asm.source(node, DISTURBANCES.index(col), wt * w.area * share, WINSOL)
             area_win += w.area
         elif parent.boundary == "Surface":
             other = surfaces[skey[parent.boundary_object.lower()]]
@@ -484,4 +518,6 @@ def build_structure(
         cp_air=opts.cp_air,
         notes=notes,
         areas={"exterior_opaque": area_ext, "windows": area_win},
+        window_area=window_area,
+        options=opts,
     )

@@ -108,6 +108,17 @@ def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
     assert bundle.profile.values.shape == (672, len(bundle.zones))
     bare = load_model_file(write_model_file(tmp_path / "m.json", vb / "site.yaml"))
     assert np.all(bare.profile.values == 0) and "no weekly" in " ".join(bare.notes)
+    # model options round-trip; a file from before they existed is read as it was built
+    assert bare.model.structure.options.window_solar == "floor"
+    air = load_model_file(write_model_file(tmp_path / "a.json", vb / "site.yaml",
+                                           model_options={"window_solar": "air"}))
+    assert air.model.structure.options.window_solar == "air"
+    legacy = json.loads((tmp_path / "a.json").read_text())
+    del legacy["model_options"]
+    (tmp_path / "legacy.json").write_text(json.dumps(legacy))
+    old = load_model_file(tmp_path / "legacy.json")
+    assert old.model.structure.options.window_solar == "air"
+    assert any("no model_options" in n for n in old.notes)
     cases = [
         ({"schema_version": 2, "site": str(vb / "site.yaml")}, "schema_version must be 1"),
         ({"schema_version": 1}, "'site' must be the path"),
@@ -120,6 +131,10 @@ def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
           "weekly_profile": {"values": [[1.0]]}}, r"expected \(672, 6\)"),
         ({"schema_version": 1, "site": str(vb / "site.yaml"), "noise": {"sigma_air": 0}},
          "positive number"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"),
+          "model_options": {"window_solar": "wall"}}, "window_solar must be 'air' or 'floor'"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"),
+          "model_options": {"colour": "red"}}, r"unknown model_options \['colour'\]"),
     ]
     for doc, msg in cases:
         path = tmp_path / "bad.json"

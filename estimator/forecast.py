@@ -50,6 +50,8 @@ __all__ = [
     "Forecast",
     "WeekTrack",
     "coverage",
+    "coverage_halfwidth",
+    "empirical_halfwidth",
     "fill_profile",
     "filter_day",
     "fixed_profile",
@@ -337,6 +339,53 @@ def issue_forecast(model: BilinearModel, data: ModelData, issue: int, profile: W
     return out
 
 
+def empirical_halfwidth(model: BilinearModel, data: ModelData, tracks: list[WeekTrack], *,
+                        horizon: int = HORIZON, level: float = 0.9,
+                        pool: int = 2) -> np.ndarray:
+    """Half-widths [K] of ``level`` forecast intervals per lead and zone, from forecast
+    errors on the given (training) weeks, shape (horizon, n_zones).
+
+    Each week is forecast at its local midnights (:func:`issue_rows`) with the fixed
+    profile of the *other* weeks (leave one week out, so the errors are out of sample);
+    the state at an issue is the gains tracker's (its zone temperatures equal the measured
+    ones; no filter is run, which keeps this cheap: one 96-step simulation per issue).
+    The half-width at lead h is the ``level`` quantile of |error| over the issues and the
+    leads h - pool ... h + pool. Gains errors are correlated over hours, which the
+    covariance-propagated intervals do not represent (docs/forecasts.md).
+    """
+    if len(tracks) < 2:
+        raise ValueError("empirical intervals need at least two tracked weeks")
+    errors = []
+    for i, wt in enumerate(tracks):
+        profile = fixed_profile(data, tracks[:i] + tracks[i + 1:])
+        rows = wt.rows
+        seg_stop = rows[-1] + 1
+        week_start = int(rows[0]) - _rows_per_day(data)   # tracks start a day into the week
+        for r in issue_rows(data, (week_start, seg_stop)):
+            h = min(horizon, seg_stop - r - 1)
+            if h <= 0:
+                continue
+            x0 = wt.track.x[r - wt.start]
+            f = np.nan_to_num(profile(data.times[r:r + h]))
+            y = model.simulate(x0, data.u[r:r + h], data.v[r:r + h], f).y[1:]
+            e = np.full((horizon, model.n_zones), np.nan)
+            e[:h] = np.abs(y - data.y[r + 1:r + 1 + h])
+            errors.append(e)
+    if not errors:
+        raise ValueError("no forecast issue time in the given weeks")
+    err = np.array(errors)
+    out = np.empty((horizon, model.n_zones))
+    for h in range(horizon):
+        block = err[:, max(h - pool, 0):h + pool + 1].reshape(-1, model.n_zones)
+        out[h] = np.nanquantile(block, level, axis=0)
+    return out
+
+
+def coverage_halfwidth(pred: np.ndarray, half: np.ndarray, meas: np.ndarray, zones) -> dict:
+    """Fraction of measured values within ``half`` (per lead and zone) of the forecast."""
+    return coverage(pred, np.broadcast_to(half / Z90, pred.shape), meas, zones)
+
+
 def issue_rows(data: ModelData, rows) -> list[int]:
     """Local-midnight rows of a week from its second day on (the forecast issue times)."""
     a, b = rows
@@ -430,7 +479,9 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
         ``split``, ``table3`` {fixed, online_paper, online_paper_validation, dayahead,
         persistence, fixed_kf0: zone -> RMS [K] + mean} (``fixed_kf0``: the fixed forecast
         from the f_IG = 0 filter, a sensitivity), ``horizon_rms`` {method -> zone -> list over
-        leads 15 min ... 24 h}, ``coverage_90`` {fixed, dayahead: zone -> fraction + all},
+        leads 15 min ... 24 h}, ``coverage_90`` {fixed, dayahead: zone -> fraction + all;
+        ``*_empirical``: the same with :func:`empirical_halfwidth` of the training weeks},
+        ``interval_halfwidth_90`` (zone -> half-width [K] per lead),
         ``gains_truth`` (zone -> part -> {r, scale}; empty without ``truth``), ``seed``,
         ``seconds``.
     figures : dict (JSON-ready)
@@ -448,6 +499,7 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
     tracks = {w["index"]: track_week(model, data, w["rows"]) for w in weeks}
     train = [tracks[i] for i in split["train"]]
     profile = fixed_profile(data, train)
+    halfwidth = empirical_halfwidth(model, data, train)
 
     # paper section 5 reading: one-step-ahead predictions, all weeks and validation weeks
     def online(idx):
@@ -497,6 +549,7 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
         hrms[m] = horizon_rms(pa, meas_a, zones)
         if m in ("fixed", "dayahead"):
             cov[m] = coverage(pa, std_a, meas_a, zones)
+            cov[f"{m}_empirical"] = coverage_halfwidth(pa, halfwidth, meas_a, zones)
 
     # figure 2: temperature increase due to internal gains per training week and mean
     step = data.times[1] - data.times[0]
@@ -518,6 +571,7 @@ def forecast_study(model: BilinearModel, data: ModelData, truth: pd.DataFrame | 
         "table3": table3,
         "horizon_rms": hrms,
         "coverage_90": cov,
+        "interval_halfwidth_90": {z: halfwidth[:, j].tolist() for j, z in enumerate(zones)},
         "gains_truth": ({} if truth is None else
                         gains_truth(model, data, list(tracks.values()), truth)),
         "n_forecasts": len(meas),

@@ -136,3 +136,44 @@ def test_interval_coverage_is_near_nominal_on_model_data(model):
         inside += int(((meas >= lo) & (meas <= hi)).sum())
         total += meas.size
     assert 0.84 <= inside / total <= 0.96, inside / total
+
+
+def test_empirical_halfwidth_is_zero_on_exact_weeks_and_grows_with_gains_noise(model):
+    """Weeks that repeat exactly are forecast without error by the other weeks' profile;
+    day-to-day gains noise widens the intervals, and they cover it out of sample."""
+    from zonecast.estimator.forecast import coverage_halfwidth, empirical_halfwidth
+    n = 3 * 7 * DAY
+    u, v, f = _weekly(n)
+    d0 = None
+
+    def tracks_for(f_true):
+        nonlocal d0
+        sim = model.simulate(model.steady_state(u[0], v[0]), u, v, f_true)
+        d0 = _data(_times(n), u, v, sim.y[:-1])
+        return [WeekTrack(w * 7 * DAY + DAY,
+                          track_gains(model, d0, w * 7 * DAY + DAY, (w + 1) * 7 * DAY - 1,
+                                      sim.x[w * 7 * DAY + DAY]))
+                for w in range(3)]
+
+    exact_tracks = tracks_for(f)
+    exact = empirical_halfwidth(model, d0, exact_tracks)
+    assert exact.shape == (DAY, 5)
+    assert np.nanmax(exact) < 1e-6
+    rng = np.random.default_rng(3)
+    noisy_f = f * rng.uniform(0.4, 1.6, (n // DAY, 1, 5)).repeat(DAY, axis=0).reshape(n, 5)
+    tracks = tracks_for(noisy_f)
+    wide = empirical_halfwidth(model, d0, tracks)
+    assert np.nanmin(wide.max(axis=0)) > 0.05  # every zone gets a real width
+    # the widths of weeks 1-2 cover week 3's fixed-profile forecasts near 90 %
+    half = empirical_halfwidth(model, d0, tracks[:2], pool=4)
+    prof = fixed_profile(d0, tracks[:2])
+    preds, meas = [], []
+    for r in range(15 * DAY, n - DAY, DAY):
+        x0 = tracks[2].track.x[r - tracks[2].start]
+        preds.append(model.simulate(x0, u[r:r + DAY], v[r:r + DAY],
+                                    prof(d0.times[r:r + DAY])).y[1:])
+        meas.append(d0.y[r + 1:r + 1 + DAY])
+    cov = coverage_halfwidth(np.array(preds), half, np.array(meas), list(ZONES))
+    assert 0.8 < cov["all"] < 0.99
+    with pytest.raises(ValueError, match="at least two tracked weeks"):
+        empirical_halfwidth(model, d0, tracks[:1])

@@ -1,0 +1,75 @@
+"""Benchmark of the parameter identification (issue 4, paper section 4-A).
+
+In one run, on the virtual building's campaign:
+1. `identify` with the defaults of `zonecast identify` (3 starts, window solar on the floors),
+   repeated ``--repeat`` times: wall time, evaluations, training/validation RMS, spread of the
+   starts' costs;
+2. the reference side by side: the same identification of the paper's model (window solar on
+   the room air), same data, same starts.
+
+Usage: python benchmarks/bench_identify.py [--campaign DIR] [--repeat N] [--starts N]
+(DIR is reused if it holds a campaign, else the campaign is run into it first.)
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads only contend
+
+import argparse
+import platform
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from zonecast.estimator.dataset import model_data
+from zonecast.estimator.identify import excitation_saturdays, identify
+from zonecast.estimator.idf import read_building
+from zonecast.estimator.model import build_model
+from zonecast.estimator.rc.network import ModelOptions
+from zonecast.estimator.site import load_site
+from zonecast.estimator.telemetry import load_telemetry
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--campaign", type=Path)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--starts", type=int, default=3)
+    args = ap.parse_args()
+    camp = args.campaign or Path(tempfile.mkdtemp(prefix="zonecast-bench-")) / "campaign"
+    if not (camp / "telemetry.csv").is_file():
+        from zonecast.testbed.run import run_campaign
+        print(f"running the campaign into {camp} ...", flush=True)
+        run_campaign(camp, seed=0)
+    site = load_site(camp / "site.yaml")
+    tel = load_telemetry(camp / "telemetry.csv", site)
+    building = read_building(site.idf_path)
+    boxes = {b: s.room for b, s in site.boxes.items()}
+    print(f"python {platform.python_version()}, numpy {np.__version__}, {os.cpu_count()} cores, "
+          f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}")
+    for label, placement, repeat in (("default (window solar on floors)", "floor", args.repeat),
+                                     ("reference: paper (window solar on air)", "air", 1)):
+        model = build_model(building, site.zones, boxes,
+                            options=ModelOptions(window_solar=placement))
+        data = model_data(tel, model.room_weights())
+        sats = [str(s.date()) for s in excitation_saturdays(data)]
+        times = []
+        for _ in range(repeat):
+            t = time.perf_counter()
+            res = identify(model, data, sats[1:3], sats[:1], n_starts=args.starts)
+            times.append(time.perf_counter() - t)
+        costs = [s["cost"] for s in res.starts]
+        print(f"{label}: {args.starts} starts, median {statistics.median(times):.1f} s "
+              f"(runs {', '.join(f'{x:.1f}' for x in times)}), {res.n_evaluations} evaluations; "
+              f"training RMS {res.train_rms['mean']:.3f}, validation "
+              f"{res.validation_rms['mean']:.3f} degC; start costs "
+              f"{', '.join(f'{c:.1f}' for c in costs)}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -6,10 +6,11 @@
 
 The data are whole excitation weekends (Saturday and Sunday, local time), when occupancy
 is low and the experiments decorrelate the zones. x(0) of each weekend comes from a Kalman
-filter run over the 24 h before it (the paper's x_KF(0)) with the starting model; the fit
-is repeated once with x(0) re-estimated at the identified parameters. Several
+filter run over the 24 h before it (the paper's x_KF(0)) with the starting model. Several
 starts (the physical starting values, the paper's Table 1 where the zones match, and seeded
-perturbations) guard against local minima; their spread is reported. Standard errors and
+perturbations) guard against local minima; their spread (cost and end point of each) is
+reported. The best start's fit is then repeated once with x(0) re-estimated at its
+parameters. Standard errors and
 correlations come from the Jacobian at the optimum (they assume independent residuals,
 which simulation errors are not, so they are optimistic: read them as a ranking of how
 well each parameter is determined).
@@ -333,29 +334,31 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
             return list(pool.map(lambda sp: kalman_state(m, data, sp[0] - window, sp[0]),
                                  spans))
 
+    def fit(problem, theta):
+        return least_squares(problem.residuals, theta, bounds=(lo, hi), x_scale=scale,
+                             method="trf", max_nfev=max_nfev,
+                             jac=lambda t, p=problem: p.jacobian(t, lo, hi),
+                             ftol=1e-6, xtol=1e-6, gtol=1e-8)
+
     best = None
     starts_report = []
     progress("x(0) of the training weekends")
-    x0_first = x0s(model, train_spans)   # round 1 of every start: x_KF(0) of the start model
+    # round 1, every start: x_KF(0) of the start model
+    first = _Problem(model, data, train_spans, x0s(model, train_spans))
     for i, theta0 in enumerate(_starts(model.params, n_starts, rng)):
         progress(f"start {i + 1}/{n_starts}")
-        theta = theta0
-        m = model.with_params(theta)
-        for _round in range(2):
-            problem = _Problem(model, data, train_spans,
-                               x0_first if _round == 0 else x0s(m, train_spans))
-            sol = least_squares(problem.residuals, theta, bounds=(lo, hi), x_scale=scale,
-                                method="trf", max_nfev=max_nfev,
-                                jac=lambda t, p=problem: p.jacobian(t, lo, hi),
-                                ftol=1e-6, xtol=1e-6, gtol=1e-8)
-            theta = sol.x
-            m = model.with_params(theta)
+        sol = fit(first, theta0)
         cost = float(np.sum(sol.fun ** 2))
-        starts_report.append({"start": theta0.tolist(), "end": theta.tolist(), "cost": cost,
+        starts_report.append({"start": theta0.tolist(), "end": sol.x.tolist(), "cost": cost,
                               "status": int(sol.status), "nfev": int(sol.nfev)})
         if best is None or cost < best[0]:
-            best = (cost, sol, problem, theta)
-    cost, sol, problem, theta = best
+            best = (cost, sol)
+    # round 2, the best start only: x(0) re-estimated with its parameters, then refitted
+    progress("x(0) at the best start's parameters, refit")
+    problem = _Problem(model, data, train_spans, x0s(model.with_params(best[1].x), train_spans))
+    sol = fit(problem, best[1].x)
+    theta = sol.x
+    cost = float(np.sum(sol.fun ** 2))
     J = sol.jac
     dof = max(len(sol.fun) - len(theta), 1)
     sigma2 = cost / dof
@@ -375,4 +378,4 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         list(model.params.param_names), list(model.params.units), theta, se, corr, train_rms,
         val_rms, starts_report, [str(local[a].date()) for a, _ in train_spans],
         [str(local[a].date()) for a, _ in val_spans], len(sol.fun),
-        sum(s["nfev"] for s in starts_report), time.perf_counter() - t0, seed)
+        sum(s["nfev"] for s in starts_report) + int(sol.nfev), time.perf_counter() - t0, seed)

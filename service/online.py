@@ -217,6 +217,7 @@ class OnlineEstimator:
         self._decay = np.exp(-np.asarray((starts - t0) / self._dayahead.tau, dtype=float))
         self._profile = np.nan_to_num(bundle.profile.values)
         self._bin_days: dict[int, np.ndarray] = {}
+        self._gig_cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         self._names = _input_names(bundle)
         self.reset()
         self.steps = 0
@@ -346,9 +347,9 @@ class OnlineEstimator:
         st = self._ladder.for_airflows(u)
         base = m.Bv @ v + m.B_ig @ m.params.c_ig
         x_tilde = st.step(self._x, u, base, v[1])  # Eq:xnoig_ynoig (f_IG = 0)
-        gig = st.columns(u, m.B_ig)                 # Gamma_IG(u)
+        gig, cgig = self._gamma_ig(st, u)           # Gamma_IG(u), C Gamma_IG(u)
         try:
-            f = estimate_gains_step(m.C @ gig, y, m.C @ x_tilde).f_ig  # Eq:ig(k-1)
+            f = estimate_gains_step(cgig, y, m.C @ x_tilde).f_ig  # Eq:ig(k-1)
         except RankDeficientError:
             f = np.full(self._nz, np.nan)
         x_prior = x_tilde + gig @ self._online      # eq:online_ig
@@ -366,6 +367,19 @@ class OnlineEstimator:
         self.time = t
         self.steps += 1
         return inn.nis, inn.dof
+
+    def _gamma_ig(self, st, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Gamma_IG(u) and C Gamma_IG(u), cached by the exact airflow vector (a pure
+        function of it: the airflows repeat, e.g. at minimum flow overnight)."""
+        key = u.tobytes()
+        hit = self._gig_cache.get(key)
+        if hit is None:
+            gig = st.columns(u, self.bundle.model.B_ig)
+            hit = (gig, self.bundle.model.C @ gig)
+            if len(self._gig_cache) >= 64:
+                self._gig_cache.pop(next(iter(self._gig_cache)))
+            self._gig_cache[key] = hit
+        return hit
 
     # --- forecast ---------------------------------------------------------------------
     def forecast(self, inputs: np.ndarray | None = None) -> Forecast:

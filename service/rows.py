@@ -103,6 +103,9 @@ class SolarGeometryCache:
         times_ns = np.asarray(times_ns, dtype=np.int64)
         if np.any(times_ns % self._step_ns):
             return self._compute(pd.DatetimeIndex(times_ns, tz="UTC"))
+        if len(times_ns) == 1:  # the runner's case
+            day, off = divmod(int(times_ns[0]), _DAY_NS)
+            return self._day(day)[:, off // self._step_ns:off // self._step_ns + 1]
         out = np.empty((5, len(times_ns)))
         days = times_ns // _DAY_NS
         for day in np.unique(days):

@@ -118,8 +118,10 @@ class Runner:
     def _checkpoint(self) -> None:
         meta = {"next_time": None if self.next_time is None else self.next_time.isoformat(),
                 "version": self.bundle.version}
+        # not synced to disk per step: if a power cut loses it, the rows after the
+        # previous one are recomputed from readings committed (synced) before them
         self.storage.save_checkpoint(self.building, self.est.time or self.next_time,
-                                     pack_checkpoint(meta, self.est.to_bytes()))
+                                     pack_checkpoint(meta, self.est.to_bytes()), sync=False)
 
     # --- stepping ----------------------------------------------------------------------
     def poll(self) -> int:

@@ -29,7 +29,7 @@ import sqlite3
 import threading
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -207,6 +207,15 @@ class Storage(ABC):
 
     def _sql(self, text: str) -> str:
         return text if self._param == "?" else text.replace("?", self._param)
+
+    def _unsynced(self) -> Any:
+        """Context (entered with the lock held, outside a transaction) in which commits
+        do not wait for the disk; default: nothing to do."""
+        return nullcontext()
+
+    def _unsynced_transaction(self, cur: Any) -> None:
+        """Make the current transaction's commit not wait for the disk (if per
+        transaction)."""
 
     # --- schema ----------------------------------------------------------
     @property
@@ -459,7 +468,8 @@ class Storage(ABC):
         return [DeadLetter(i, b, t, p, r, self._from_db(at)) for i, b, t, p, r, at in rows]
 
     # --- checkpoints ----------------------------------------------------------
-    def save_checkpoint(self, building: str, time: Any, state: bytes) -> None:
+    def save_checkpoint(self, building: str, time: Any, state: bytes, *,
+                        sync: bool = True) -> None:
         """Save the online runner's state for ``building`` after step ``time``.
 
         Only the latest saved checkpoint per building is kept (last write wins,
@@ -473,13 +483,24 @@ class Storage(ABC):
             tz-aware time of the last step the state includes.
         state : bytes
             Opaque serialised state (e.g. UTF-8 JSON).
+        sync : bool, default True
+            False: commit without waiting for the disk (SQLite ``synchronous=NORMAL``
+            for this transaction, PostgreSQL ``synchronous_commit = off``). The write
+            is safe against a crash of the process and the database stays consistent;
+            after a power cut or OS crash it may be lost until the next synchronous
+            commit (any readings write) has flushed the log. The online runner uses
+            this: a checkpoint it loses that way is one whose rows it can recompute
+            from the stored readings, which were committed synchronously before it.
         """
         if not isinstance(state, bytes | bytearray | memoryview):
             raise TypeError(f"state must be bytes, got {type(state).__name__}: "
                             "serialise it (e.g. json.dumps(...).encode())")
         step = self._to_db(_utc(time, "checkpoint time"))
         saved = self._to_db(datetime.now(UTC))
-        with self._transaction() as cur:
+        with self._lock, (nullcontext() if sync else self._unsynced()), \
+                self._transaction() as cur:
+            if not sync:
+                self._unsynced_transaction(cur)
             cur.execute(self._sql(
                 "INSERT INTO checkpoints (building, time, state, saved_at) VALUES (?, ?, ?, ?) "
                 "ON CONFLICT (building) DO UPDATE SET time = excluded.time, "
@@ -568,6 +589,18 @@ class SQLiteStorage(Storage):
     def _lock_schema(self, cur: sqlite3.Cursor) -> None:
         pass  # BEGIN IMMEDIATE already holds the write lock
 
+    @contextmanager
+    def _unsynced(self) -> Iterator[None]:
+        # per connection, set outside a transaction; in WAL mode NORMAL skips the sync at
+        # commit, and the next FULL commit syncs the log with this transaction in it
+        if self._conn is None:
+            raise ValueError(f"{self!r} is closed: open a new storage")
+        self._conn.execute("PRAGMA synchronous=NORMAL")
+        try:
+            yield
+        finally:
+            self._conn.execute("PRAGMA synchronous=FULL")
+
     def _to_db(self, when: datetime) -> int:
         delta = when - _EPOCH
         return (delta.days * 86_400 + delta.seconds) * 1_000_000 + delta.microseconds
@@ -648,6 +681,9 @@ class PostgresStorage(Storage):
 
     def _lock_schema(self, cur: Any) -> None:
         cur.execute("SELECT pg_advisory_xact_lock(hashtext(current_schema() || '.zonecast'))")
+
+    def _unsynced_transaction(self, cur: Any) -> None:
+        cur.execute("SET LOCAL synchronous_commit TO OFF")
 
     def _insert_unique(self, cur: Any, building: str, rows: list[tuple[str, datetime, float]],
                        received_at: datetime) -> tuple[int, int]:

@@ -194,6 +194,25 @@ def test_checkpoints_roundtrip_latest_wins(storage):
     assert storage.load_checkpoint("other") is None
     with pytest.raises(TypeError, match="bytes"):
         storage.save_checkpoint("b", T0, {"x": 1})
+    # without waiting for the disk (the runner's per-step checkpoint): same contents
+    storage.save_checkpoint("b", T0 + timedelta(minutes=30), b"unsynced", sync=False)
+    cp = storage.load_checkpoint("b")
+    assert cp.time == T0 + timedelta(minutes=30) and cp.state == b"unsynced"
+    assert storage.put_readings("b", rows_at(2)) == (2, 0)  # later writes still work
+
+
+def test_unsynced_checkpoint_leaves_readings_synchronous(tmp_path):
+    store = open_storage(f"sqlite:///{tmp_path}/d.db")
+    seen = []
+    store._conn.set_trace_callback(seen.append)
+    store.save_checkpoint("b", T0, b"state", sync=False)
+    store._conn.set_trace_callback(None)
+    assert seen[0] == "PRAGMA synchronous=NORMAL" and seen[-1] == "PRAGMA synchronous=FULL"
+    assert any(s.startswith("INSERT INTO checkpoints") for s in seen)
+    assert store._conn.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL again
+    store.save_checkpoint("b", T0, b"state")  # the default stays synchronous
+    assert store._conn.execute("PRAGMA synchronous").fetchone()[0] == 2
+    store.close()
 
 
 def test_concurrent_writers_share_one_storage(storage):

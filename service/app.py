@@ -10,6 +10,7 @@ plus ``/healthz``, ``/readyz`` and ``/metrics`` at the root.
 from __future__ import annotations
 
 import functools
+import gc
 import hmac
 import json
 import logging
@@ -452,9 +453,16 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         ctx = ServiceContext(settings)
         app.state.zc = ctx
         await run_in_threadpool(ctx.start)
+        # Move what start-up created (modules, models, ~150,000 objects) out of the cyclic
+        # garbage collector's reach: a full collection of them took 90-170 ms, a pause for
+        # every request in flight (the p99 latency under load); later objects are collected
+        # as usual.
+        gc.collect()
+        gc.freeze()
         try:
             yield
         finally:
+            gc.unfreeze()
             await run_in_threadpool(ctx.close)
 
     app = FastAPI(title="zonecast", version="1", lifespan=lifespan,

@@ -329,6 +329,8 @@ def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
 
 
 def test_rest_ingest_state_gains_forecast(tmp_path, vb, bundle, telemetry):
+    import gc
+
     from fastapi.testclient import TestClient
     from zonecast.service.app import create_app
     from zonecast.service.offline import offline_forecasts
@@ -336,6 +338,7 @@ def test_rest_ingest_state_gains_forecast(tmp_path, vb, bundle, telemetry):
     app = create_app(make_settings(tmp_path, vb, forecast_every=4))
     n = 9
     with TestClient(app) as client:
+        assert gc.get_freeze_count() > 0  # start-up objects are out of the collector's way
         for i in range(n):
             r = client.post("/api/v1/buildings/office6/telemetry", json=body_of(telemetry.iloc[i]),
                             headers=AUTH)
@@ -382,6 +385,7 @@ def test_rest_ingest_state_gains_forecast(tmp_path, vb, bundle, telemetry):
         assert 'zonecast_rejected_total{reason="unknown_point",transport="rest"} 1.0' in metrics
         assert "zonecast_step_latency_seconds_count" in metrics
         assert "zonecast_nis_per_dof" in metrics
+    assert gc.get_freeze_count() == 0  # released at shutdown
     off = offline_forecasts(bundle, telemetry_si(bundle, telemetry.iloc[:n]), [issued])
     got = app.state.zc.runners["office6"].forecast
     assert_same_forecast(got, off[pd.Timestamp(issued)])

@@ -427,7 +427,7 @@ class OnlineEstimator:
         prof = self.bundle.profile
         step = pd.Timedelta(prof.step).value
         per_day = _DAY_NS // step
-        if np.any(times_ns % step):
+        if _DAY_NS % step or np.any(times_ns % step):  # not a grid the day cache fits
             return time_of_week_bin(pd.DatetimeIndex(times_ns, tz="UTC"), prof.timezone, prof.step)
         days = times_ns // _DAY_NS
         out = np.empty(len(times_ns), dtype=int)

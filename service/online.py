@@ -56,6 +56,8 @@ STEP = pd.Timedelta("15min")
 Z90 = 1.6448536269514722  # standard normal 95 % quantile: two-sided 90 % interval
 HORIZON = 96
 MAX_GAP = pd.Timedelta("6h")
+_DAY_NS = 86_400 * 10**9
+_CKPT_MAGIC = b"ZCE2"
 
 
 @dataclass(frozen=True)
@@ -207,6 +209,15 @@ class OnlineEstimator:
         # offline study's; docs/numerics.md)
         self._dayahead = DayAheadGains(bundle.profile, tau=DAYAHEAD_TAU, window=DAYAHEAD_WINDOW,
                                        horizon=HORIZON)
+        # DayAheadGains.issue's arithmetic on arrays (pandas costs ~2 ms a forecast): its
+        # decay factors, the same for every issue time, and the profile's time-of-week bin
+        # of every grid time, cached a UTC day at a time
+        t0 = pd.Timestamp(0, tz="UTC")
+        starts = pd.date_range(t0, periods=HORIZON, freq=bundle.profile.step)
+        self._decay = np.exp(-np.asarray((starts - t0) / self._dayahead.tau, dtype=float))
+        self._profile = np.nan_to_num(bundle.profile.values)
+        self._bin_days: dict[int, np.ndarray] = {}
+        self._gig_cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         self._names = _input_names(bundle)
         self.reset()
         self.steps = 0
@@ -336,9 +347,9 @@ class OnlineEstimator:
         st = self._ladder.for_airflows(u)
         base = m.Bv @ v + m.B_ig @ m.params.c_ig
         x_tilde = st.step(self._x, u, base, v[1])  # Eq:xnoig_ynoig (f_IG = 0)
-        gig = st.columns(u, m.B_ig)                 # Gamma_IG(u)
+        gig, cgig = self._gamma_ig(st, u)           # Gamma_IG(u), C Gamma_IG(u)
         try:
-            f = estimate_gains_step(m.C @ gig, y, m.C @ x_tilde).f_ig  # Eq:ig(k-1)
+            f = estimate_gains_step(cgig, y, m.C @ x_tilde).f_ig  # Eq:ig(k-1)
         except RankDeficientError:
             f = np.full(self._nz, np.nan)
         x_prior = x_tilde + gig @ self._online      # eq:online_ig
@@ -357,6 +368,19 @@ class OnlineEstimator:
         self.steps += 1
         return inn.nis, inn.dof
 
+    def _gamma_ig(self, st, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Gamma_IG(u) and C Gamma_IG(u), cached by the exact airflow vector (a pure
+        function of it: the airflows repeat, e.g. at minimum flow overnight)."""
+        key = u.tobytes()
+        hit = self._gig_cache.get(key)
+        if hit is None:
+            gig = st.columns(u, self.bundle.model.B_ig)
+            hit = (gig, self.bundle.model.C @ gig)
+            if len(self._gig_cache) >= 64:
+                self._gig_cache.pop(next(iter(self._gig_cache)))
+            self._gig_cache[key] = hit
+        return hit
+
     # --- forecast ---------------------------------------------------------------------
     def forecast(self, inputs: np.ndarray | None = None) -> Forecast:
         """Day-ahead forecast from the current state (see the module docstring).
@@ -372,9 +396,7 @@ class OnlineEstimator:
             raise ValueError("no forecast yet: the filter has not received a measurement")
         m = self.bundle.model
         t = self.time
-        history = pd.DataFrame([f for _, f in self._gains], columns=self.bundle.zones,
-                               index=pd.DatetimeIndex([s for s, _ in self._gains], tz="UTC"))
-        f_ig = self._dayahead.issue(t, history).to_numpy()
+        f_ig = self.dayahead_gains()
         # persistence inputs: row t for interval t, the row 24 h earlier for t + h
         # (integer nanosecond keys: Timestamp arithmetic per lookup costs ~1 ms a forecast)
         past = {s.value: row for s, row in self._inputs}
@@ -398,40 +420,103 @@ class OnlineEstimator:
         return Forecast(t, times, xs[1:] @ m.C.T, std, f_ig,
                         self.bundle.zones, self.bundle.version)
 
+    def _bins(self, times_ns: np.ndarray) -> np.ndarray:
+        """Time-of-week bin of the profile for UTC grid times (ns since the epoch)."""
+        from zonecast.estimator.gains import time_of_week_bin
+
+        prof = self.bundle.profile
+        step = pd.Timedelta(prof.step).value
+        per_day = _DAY_NS // step
+        if _DAY_NS % step or np.any(times_ns % step):  # not a grid the day cache fits
+            return time_of_week_bin(pd.DatetimeIndex(times_ns, tz="UTC"), prof.timezone, prof.step)
+        days = times_ns // _DAY_NS
+        out = np.empty(len(times_ns), dtype=int)
+        for day in np.unique(days):
+            bins = self._bin_days.get(int(day))
+            if bins is None:
+                if len(self._bin_days) >= 8:
+                    self._bin_days.pop(next(iter(self._bin_days)))
+                grid = pd.DatetimeIndex(int(day) * _DAY_NS + step * np.arange(per_day), tz="UTC")
+                bins = self._bin_days[int(day)] = time_of_week_bin(grid, prof.timezone, prof.step)
+            sel = days == day
+            out[sel] = bins[(times_ns[sel] - day * _DAY_NS) // step]
+        return out
+
+    def dayahead_gains(self) -> np.ndarray:
+        """f_IG (96, n_zones) [W/m2] over the forecast intervals from the current time:
+        :meth:`DayAheadGains.issue <zonecast.estimator.gains.DayAheadGains.issue>` with the
+        per-step estimates of the last two hours as history, on arrays (the same numbers;
+        tests/service compares them)."""
+        t = self.time.value
+        step = pd.Timedelta(self.bundle.profile.step).value
+        base = self._profile[self._bins(t + step * np.arange(HORIZON, dtype=np.int64))]
+        d = np.zeros(self._nz)
+        if self._gains:
+            stamps = np.array([s.value for s, _ in self._gains], dtype=np.int64)
+            known = stamps <= t - step
+            if known.any():
+                newest = stamps[known].max()
+                recent = known & (stamps > newest - self._dayahead.window.value)
+                rows = np.array([f for (_, f), r in zip(self._gains, recent) if r], dtype=float)
+                resid = rows - self._profile[self._bins(stamps[recent])]
+                with np.errstate(invalid="ignore"):
+                    n_ok = np.isfinite(resid).sum(axis=0)
+                    d = np.where(n_ok > 0, np.nansum(resid, axis=0) / np.maximum(n_ok, 1), 0.0)
+        return base + self._decay[:, None] * d[None, :]
+
     # --- checkpoint --------------------------------------------------------------------
     def to_bytes(self) -> bytes:
-        """Exact (bitwise) serialisation of the state: an .npz without pickles."""
+        """Exact (bitwise) serialisation of the state: a JSON header and the raw bytes of
+        the arrays (``ZCE2``; no pickles)."""
         meta = {"time": None if self.time is None else self.time.isoformat(),
                 "started": self.started, "steps": self.steps, "resets": self.resets,
                 "nis_sum": self.nis_sum, "dof_sum": self.dof_sum,
-                "gain_times": [s.isoformat() for s, _ in self._gains],
-                "input_times": [s.isoformat() for s, _ in self._inputs],
                 "version": self.bundle.version, "since": self._since}
         arrays = {"pending": self._pending, "held": self._held, "online": self._online,
                   "last_y": self.last_y, "last_f": self.last_f, "observed": self._observed,
+                  "gain_times": np.array([s.value for s, _ in self._gains], dtype=np.int64),
+                  "input_times": np.array([s.value for s, _ in self._inputs], dtype=np.int64),
                   "gains": np.array([f for _, f in self._gains]).reshape(-1, self._nz),
                   "inputs": np.array([r for _, r in self._inputs]).reshape(-1, self._nin)}
         if self.started:
             arrays["x"] = self._x
-        buf = io.BytesIO()
-        np.savez(buf, meta=np.array(json.dumps(meta)), **arrays)
-        return buf.getvalue()
+        parts, layout, offset = [], {}, 0
+        for name, a in arrays.items():
+            a = np.ascontiguousarray(a)
+            layout[name] = [a.dtype.str, list(a.shape), offset]
+            parts.append(a.tobytes())
+            offset += a.nbytes
+        head = json.dumps({**meta, "arrays": layout}).encode()
+        return b"".join([_CKPT_MAGIC, len(head).to_bytes(4, "big"), head, *parts])
 
     def load_bytes(self, data: bytes) -> None:
-        """Restore a state written by :meth:`to_bytes` for the same model (a checkpoint
-        of the earlier time-varying filter also loads: its covariance is not needed)."""
-        with np.load(io.BytesIO(data), allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
-            arr = {k: z[k] for k in z.files if k != "meta"}
+        """Restore a state written by :meth:`to_bytes` for the same model (the earlier
+        .npz checkpoints, also those of the time-varying filter, load too)."""
+        if data[:4] == _CKPT_MAGIC:
+            n = int.from_bytes(data[4:8], "big")
+            meta = json.loads(data[8:8 + n])
+            raw = memoryview(data)[8 + n:]
+            arr = {}
+            for name, (dtype, shape, offset) in meta["arrays"].items():
+                count = int(np.prod(shape))
+                arr[name] = np.frombuffer(raw, dtype=dtype, count=count,
+                                          offset=offset).reshape(shape).copy()
+            gain_times = [pd.Timestamp(int(s), tz="UTC") for s in arr["gain_times"]]
+            input_times = [pd.Timestamp(int(s), tz="UTC") for s in arr["input_times"]]
+        else:
+            with np.load(io.BytesIO(data), allow_pickle=False) as z:
+                meta = json.loads(str(z["meta"]))
+                arr = {k: z[k] for k in z.files if k != "meta"}
+            gain_times = [pd.Timestamp(s) for s in meta["gain_times"]]
+            input_times = [pd.Timestamp(s) for s in meta["input_times"]]
         self.reset()
         self.time = None if meta["time"] is None else pd.Timestamp(meta["time"])
         self.steps, self.resets = meta["steps"], meta["resets"]
         self.nis_sum, self.dof_sum = meta["nis_sum"], meta["dof_sum"]
         self._pending, self._held, self._online = arr["pending"], arr["held"], arr["online"]
         self.last_y, self.last_f = arr["last_y"], arr["last_f"]
-        self._gains.extend((pd.Timestamp(s), f) for s, f in zip(meta["gain_times"], arr["gains"]))
-        self._inputs.extend((pd.Timestamp(s), r)
-                            for s, r in zip(meta["input_times"], arr["inputs"]))
+        self._gains.extend(zip(gain_times, arr["gains"]))
+        self._inputs.extend(zip(input_times, arr["inputs"]))
         self._since = int(meta.get("since", 0))
         if "observed" in arr:
             self._observed = arr["observed"].astype(bool)

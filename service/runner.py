@@ -34,7 +34,8 @@ import numpy as np
 import pandas as pd
 
 from .modelfile import ModelBundle
-from .online import STEP, Forecast, OnlineEstimator, StepReport, rows_from_frame
+from .online import STEP, Forecast, OnlineEstimator, StepReport
+from .rows import RowConverter
 from .settings import RunnerSettings
 from .storage import Storage
 
@@ -75,17 +76,15 @@ class Runner:
     def __init__(self, bundle: ModelBundle, storage: Storage, settings: RunnerSettings, *,
                  clock: Callable[[], datetime] = lambda: datetime.now(UTC),
                  publish: Callable[[str, Runner], None] | None = None):
-        from zonecast.estimator.units import to_si
-
         self.bundle = bundle
         self.building = bundle.building
         self.storage = storage
         self.settings = settings
         self.clock = clock
         self.publish = publish
-        self._to_si = to_si
         self.units = bundle.site.point_units()
-        self.points = list(self.units)
+        self.convert = RowConverter(bundle)
+        self.points = self.convert.points
         self.est = OnlineEstimator(bundle, max_gap=pd.Timedelta(seconds=settings.max_gap))
         self.next_time: pd.Timestamp | None = None
         self.forecast: Forecast | None = None
@@ -119,8 +118,10 @@ class Runner:
     def _checkpoint(self) -> None:
         meta = {"next_time": None if self.next_time is None else self.next_time.isoformat(),
                 "version": self.bundle.version}
+        # not synced to disk per step: if a power cut loses it, the rows after the
+        # previous one are recomputed from readings committed (synced) before them
         self.storage.save_checkpoint(self.building, self.est.time or self.next_time,
-                                     pack_checkpoint(meta, self.est.to_bytes()))
+                                     pack_checkpoint(meta, self.est.to_bytes()), sync=False)
 
     # --- stepping ----------------------------------------------------------------------
     def poll(self) -> int:
@@ -142,33 +143,35 @@ class Runner:
     def _poll_chunk(self, watermark: pd.Timestamp, received: pd.Timestamp) -> tuple[int, bool]:
         start = self.next_time
         end = min(start + 96 * STEP, watermark.floor(STEP) + STEP)
-        frame = self.storage.readings(self.building, start, end, points=self.points)
+        times, values = self.storage.readings_matrix(self.building, start, end, self.points)
+        rows = dict(zip(times.tolist(), values))
         now = pd.Timestamp(self.clock())
         idle = (now - received).total_seconds() >= self.settings.idle_timeout
         done = 0
         t = start
         while t < end:
-            row = frame.loc[t] if t in frame.index else None
-            complete = row is not None and bool(row.notna().all())
+            row = rows.get(t.value)
+            present = None if row is None else np.isfinite(row)
+            complete = present is not None and bool(present.all())
             closable = (complete or watermark >= t + STEP + self._grace
                         or (idle and now >= t + STEP + self._grace))
             if not closable:
                 return done, False
             self.next_time = t + STEP
-            if row is not None and row.notna().any():
+            if present is not None and present.any():
                 self._process(t, row)
                 done += 1
             t += STEP
         return done, end <= watermark
 
-    def _process(self, t: pd.Timestamp, row: pd.Series) -> None:
+    def _process(self, t: pd.Timestamp, row: np.ndarray) -> None:
+        """One row: ``row`` holds the readings of :attr:`points` at ``t`` in their wire
+        units (NaN = none)."""
         t0 = _time.perf_counter()
-        si = pd.DataFrame({p: self._to_si(np.array([row[p]]), self.units[p])
-                           for p in self.points}, index=pd.DatetimeIndex([t]))
-        tt, u, v, y = rows_from_frame(self.bundle, si)
+        u, v, y = self.convert.convert(np.array([t.value], dtype=np.int64), row[None, :])
         every = self.settings.forecast_every
         with self.lock:
-            report = self.est.advance(tt[0], u[0], v[0], y[0])
+            report = self.est.advance(t, u[0], v[0], y[0])
             if report is not None:
                 self.last_report = report
             issue = self.est.started and (t.value // STEP.value) % every == 0

@@ -29,7 +29,7 @@ import sqlite3
 import threading
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -208,6 +208,15 @@ class Storage(ABC):
     def _sql(self, text: str) -> str:
         return text if self._param == "?" else text.replace("?", self._param)
 
+    def _unsynced(self) -> Any:
+        """Context (entered with the lock held, outside a transaction) in which commits
+        do not wait for the disk; default: nothing to do."""
+        return nullcontext()
+
+    def _unsynced_transaction(self, cur: Any) -> None:
+        """Make the current transaction's commit not wait for the disk (if per
+        transaction)."""
+
     # --- schema ----------------------------------------------------------
     @property
     def schema_version(self) -> int:
@@ -313,13 +322,17 @@ class Storage(ABC):
         if since is not None:
             first_where += " AND time >= ?"
             first_params.append(self._to_db(_utc(since, "since")))
+        # one aggregate per statement: each is then a single look-up in an index
+        # ((building, time), (building, received_at)) instead of a scan of the building
         with self._transaction() as cur:
             cur.execute(self._sql(f"SELECT MIN(time) FROM readings WHERE {first_where}"),
                         first_params)
             first = cur.fetchone()[0]
-            cur.execute(self._sql(f"SELECT MAX(time), MAX(received_at) FROM readings "
-                                  f"WHERE {where}"), params)
-            last, received = cur.fetchone()
+            cur.execute(self._sql(f"SELECT MAX(time) FROM readings WHERE {where}"), params)
+            last = cur.fetchone()[0]
+            cur.execute(self._sql(f"SELECT MAX(received_at) FROM readings WHERE {where}"),
+                        params)
+            received = cur.fetchone()[0]
         return tuple(None if v is None else self._from_db(v)  # type: ignore[return-value]
                      for v in (first, last, received))
 
@@ -366,6 +379,45 @@ class Storage(ABC):
         wide = wide.reindex(columns=points if points is not None else sorted(wide.columns))
         wide.index = pd.DatetimeIndex(wide.index, tz=UTC, name="time")
         return wide.astype(float)
+
+    def _ns(self, value: Any) -> int:
+        """Stored time -> UTC nanoseconds since the epoch."""
+        delta = self._from_db(value) - _EPOCH
+        return ((delta.days * 86_400 + delta.seconds) * 1_000_000 + delta.microseconds) * 1000
+
+    def readings_matrix(self, building: str, start: Any, end: Any,
+                        points: Sequence[str]) -> tuple[Any, Any]:
+        """Readings of ``points`` in ``[start, end)`` as plain arrays (no pandas): the
+        online runner's read.
+
+        Returns
+        -------
+        times : numpy.ndarray of int64, shape (N,)
+            Distinct reading times, ascending, as UTC nanoseconds since the epoch.
+        values : numpy.ndarray, shape (N, len(points))
+            One column per point in the order given; NaN where a point has no reading.
+        """
+        import numpy as np
+
+        points = list(points)
+        if not points:
+            raise ValueError("points is empty")
+        lo, hi = _utc(start, "start"), _utc(end, "end")
+        sql = (f"SELECT point, time, value FROM readings WHERE building = ? AND time >= ? "
+               f"AND time < ? AND point IN ({', '.join('?' * len(points))}) ORDER BY time")
+        with self._transaction() as cur:
+            cur.execute(self._sql(sql), [building, self._to_db(lo), self._to_db(hi), *points])
+            rows = cur.fetchall()
+        col = {p: j for j, p in enumerate(points)}
+        row_of: dict[Any, int] = {}
+        for _, when, _ in rows:
+            if when not in row_of:
+                row_of[when] = len(row_of)
+        values = np.full((len(row_of), len(points)), np.nan)
+        for point, when, value in rows:
+            values[row_of[when], col[point]] = value
+        times = np.fromiter((self._ns(t) for t in row_of), dtype=np.int64, count=len(row_of))
+        return times, values
 
     # --- dead letters ---------------------------------------------------------
     def _dead_letter_row(self, topic: str, payload: bytes | str, reason: str, *,
@@ -416,7 +468,8 @@ class Storage(ABC):
         return [DeadLetter(i, b, t, p, r, self._from_db(at)) for i, b, t, p, r, at in rows]
 
     # --- checkpoints ----------------------------------------------------------
-    def save_checkpoint(self, building: str, time: Any, state: bytes) -> None:
+    def save_checkpoint(self, building: str, time: Any, state: bytes, *,
+                        sync: bool = True) -> None:
         """Save the online runner's state for ``building`` after step ``time``.
 
         Only the latest saved checkpoint per building is kept (last write wins,
@@ -430,13 +483,24 @@ class Storage(ABC):
             tz-aware time of the last step the state includes.
         state : bytes
             Opaque serialised state (e.g. UTF-8 JSON).
+        sync : bool, default True
+            False: commit without waiting for the disk (SQLite ``synchronous=NORMAL``
+            for this transaction, PostgreSQL ``synchronous_commit = off``). The write
+            is safe against a crash of the process and the database stays consistent;
+            after a power cut or OS crash it may be lost until the next synchronous
+            commit (any readings write) has flushed the log. The online runner uses
+            this: a checkpoint it loses that way is one whose rows it can recompute
+            from the stored readings, which were committed synchronously before it.
         """
         if not isinstance(state, bytes | bytearray | memoryview):
             raise TypeError(f"state must be bytes, got {type(state).__name__}: "
                             "serialise it (e.g. json.dumps(...).encode())")
         step = self._to_db(_utc(time, "checkpoint time"))
         saved = self._to_db(datetime.now(UTC))
-        with self._transaction() as cur:
+        with self._lock, (nullcontext() if sync else self._unsynced()), \
+                self._transaction() as cur:
+            if not sync:
+                self._unsynced_transaction(cur)
             cur.execute(self._sql(
                 "INSERT INTO checkpoints (building, time, state, saved_at) VALUES (?, ?, ?, ?) "
                 "ON CONFLICT (building) DO UPDATE SET time = excluded.time, "
@@ -486,6 +550,8 @@ class SQLiteStorage(Storage):
             ("CREATE TABLE checkpoints (building TEXT PRIMARY KEY, time INTEGER NOT NULL, "
              "state BLOB NOT NULL, saved_at INTEGER NOT NULL)"),
         ),
+        # the runner's watermark query: latest arrival per building without a scan
+        2: ("CREATE INDEX readings_by_received ON readings (building, received_at)",),
     }
 
     def __init__(self, url: str):
@@ -523,12 +589,27 @@ class SQLiteStorage(Storage):
     def _lock_schema(self, cur: sqlite3.Cursor) -> None:
         pass  # BEGIN IMMEDIATE already holds the write lock
 
+    @contextmanager
+    def _unsynced(self) -> Iterator[None]:
+        # per connection, set outside a transaction; in WAL mode NORMAL skips the sync at
+        # commit, and the next FULL commit syncs the log with this transaction in it
+        if self._conn is None:
+            raise ValueError(f"{self!r} is closed: open a new storage")
+        self._conn.execute("PRAGMA synchronous=NORMAL")
+        try:
+            yield
+        finally:
+            self._conn.execute("PRAGMA synchronous=FULL")
+
     def _to_db(self, when: datetime) -> int:
         delta = when - _EPOCH
         return (delta.days * 86_400 + delta.seconds) * 1_000_000 + delta.microseconds
 
     def _from_db(self, value: int) -> datetime:
         return _EPOCH + timedelta(microseconds=int(value))
+
+    def _ns(self, value: int) -> int:
+        return int(value) * 1000
 
     def _insert_unique(self, cur: sqlite3.Cursor, building: str,
                        rows: list[tuple[str, datetime, float]],
@@ -563,6 +644,7 @@ class PostgresStorage(Storage):
             ("CREATE TABLE checkpoints (building TEXT PRIMARY KEY, time TIMESTAMPTZ NOT NULL, "
              "state BYTEA NOT NULL, saved_at TIMESTAMPTZ NOT NULL)"),
         ),
+        2: ("CREATE INDEX readings_by_received ON readings (building, received_at)",),
     }
 
     def __init__(self, url: str):
@@ -599,6 +681,9 @@ class PostgresStorage(Storage):
 
     def _lock_schema(self, cur: Any) -> None:
         cur.execute("SELECT pg_advisory_xact_lock(hashtext(current_schema() || '.zonecast'))")
+
+    def _unsynced_transaction(self, cur: Any) -> None:
+        cur.execute("SET LOCAL synchronous_commit TO OFF")
 
     def _insert_unique(self, cur: Any, building: str, rows: list[tuple[str, datetime, float]],
                        received_at: datetime) -> tuple[int, int]:

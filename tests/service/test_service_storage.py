@@ -6,7 +6,9 @@ import json
 import math
 import threading
 from datetime import UTC, datetime, timedelta, timezone
+from typing import ClassVar
 
+import numpy as np
 import pandas as pd
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -28,11 +30,51 @@ def rows_at(n, point="T_NW", start=T0, value=20.0):
 
 
 def test_schema_created_and_versioned(storage, storage_url):
-    assert storage.schema_version == 1
+    assert storage.schema_version == 2
     storage.close()
     again = open_storage(storage_url)  # reopening does not re-apply migrations
-    assert again.schema_version == 1
+    assert again.schema_version == 2
     again.close()
+
+
+def test_version_1_database_is_migrated_and_keeps_its_readings(tmp_path):
+    """A database written before the received_at index (schema 1) gets it on open."""
+    import sqlite3
+
+    class Version1(SQLiteStorage):
+        _migrations: ClassVar[dict] = {1: SQLiteStorage._migrations[1]}
+
+    url = f"sqlite:///{tmp_path / 'v1.db'}"
+    old = Version1(url)
+    assert old.schema_version == 1
+    old.put_readings("office6", rows_at(3))
+    old.close()
+    store = open_storage(url)
+    assert store.schema_version == 2
+    assert store.readings("office6", T0, T0 + timedelta(hours=1))["T_NW"].tolist() == \
+        [20.0, 21.0, 22.0]
+    store.close()
+    con = sqlite3.connect(tmp_path / "v1.db")
+    plan = " ".join(str(r) for r in con.execute(
+        "EXPLAIN QUERY PLAN SELECT MAX(received_at) FROM readings WHERE building = 'office6'"))
+    con.close()
+    assert "readings_by_received" in plan
+
+
+def test_readings_matrix_equals_the_wide_frame(storage):
+    rows = rows_at(4) + rows_at(2, point="VAV-NW-1 Flow", value=0.3) \
+        + [("T_NE", T0 + timedelta(minutes=7), 19.0)]  # off the grid: a row of its own
+    storage.put_readings("office6", rows)
+    points = ["VAV-NW-1 Flow", "T_NW", "Nope"]
+    end = T0 + timedelta(minutes=45)
+    times, values = storage.readings_matrix("office6", T0, end, points)
+    df = storage.readings("office6", T0, end, points=points).dropna(how="all")
+    assert times.dtype == np.int64 and times.tolist() == df.index.as_unit("ns").asi8.tolist()
+    np.testing.assert_array_equal(values, df.to_numpy())
+    later = T0 + timedelta(hours=2)
+    empty_t, empty_v = storage.readings_matrix("office6", later, later + timedelta(hours=1),
+                                               points)
+    assert empty_t.shape == (0,) and empty_v.shape == (0, 3)
 
 
 def test_put_and_read_back_wide_utc_frame(storage):
@@ -152,6 +194,25 @@ def test_checkpoints_roundtrip_latest_wins(storage):
     assert storage.load_checkpoint("other") is None
     with pytest.raises(TypeError, match="bytes"):
         storage.save_checkpoint("b", T0, {"x": 1})
+    # without waiting for the disk (the runner's per-step checkpoint): same contents
+    storage.save_checkpoint("b", T0 + timedelta(minutes=30), b"unsynced", sync=False)
+    cp = storage.load_checkpoint("b")
+    assert cp.time == T0 + timedelta(minutes=30) and cp.state == b"unsynced"
+    assert storage.put_readings("b", rows_at(2)) == (2, 0)  # later writes still work
+
+
+def test_unsynced_checkpoint_leaves_readings_synchronous(tmp_path):
+    store = open_storage(f"sqlite:///{tmp_path}/d.db")
+    seen = []
+    store._conn.set_trace_callback(seen.append)
+    store.save_checkpoint("b", T0, b"state", sync=False)
+    store._conn.set_trace_callback(None)
+    assert seen[0] == "PRAGMA synchronous=NORMAL" and seen[-1] == "PRAGMA synchronous=FULL"
+    assert any(s.startswith("INSERT INTO checkpoints") for s in seen)
+    assert store._conn.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL again
+    store.save_checkpoint("b", T0, b"state")  # the default stays synchronous
+    assert store._conn.execute("PRAGMA synchronous").fetchone()[0] == 2
+    store.close()
 
 
 def test_concurrent_writers_share_one_storage(storage):

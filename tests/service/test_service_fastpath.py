@@ -1,0 +1,105 @@
+"""The runner's lean paths give the numbers of the general ones they replace: per-row
+conversion (pvlib geometry cached a day at a time) vs ``rows_from_frame``, the day-ahead
+gains on arrays vs ``DayAheadGains.issue``, and checkpoints of the earlier .npz format."""
+
+from __future__ import annotations
+
+import io
+import json
+
+import numpy as np
+import pandas as pd
+
+
+def si_frame(bundle, telemetry) -> pd.DataFrame:
+    frame = telemetry.set_index(pd.to_datetime(telemetry["time"], format="ISO8601", utc=True))
+    return frame.drop(columns="time").astype(float)[list(bundle.site.point_units())]
+
+
+def test_row_converter_equals_rows_from_frame_on_every_row(bundle, telemetry):
+    from zonecast.service.online import rows_from_frame
+    from zonecast.service.rows import RowConverter
+
+    frame = si_frame(bundle, telemetry)
+    site = bundle.site
+    ghi, dni = site.points.solar.global_horizontal.point, site.points.solar.direct_normal.point
+    zone_points = [s.point for s in site.points.zone_temperature[next(iter(site.zones))]]
+    rng = np.random.default_rng(1)
+    rows = rng.choice(len(frame), 60, replace=False)
+    frame.iloc[rows[:20], frame.columns.get_loc(ghi)] = np.nan  # missing sun: NaN facades
+    frame.iloc[rows[20:40], frame.columns.get_loc(dni)] = -3.0  # thermopile offset
+    frame.iloc[rows[40:], [frame.columns.get_loc(p) for p in zone_points[:1]]] = np.nan
+    _, u, v, y = rows_from_frame(bundle, frame)
+    conv = RowConverter(bundle)
+    ns = frame.index.as_unit("ns").asi8
+    values = frame.to_numpy()
+    # all rows at once, and one row at a time as the runner converts them
+    U, V, Y = conv.convert(ns, values)
+    one = [conv.convert(ns[k:k + 1], values[k:k + 1]) for k in range(len(frame))]
+    for got in ((U, V, Y), tuple(np.vstack(p) for p in zip(*one))):
+        for a, b in zip((u, v, y), got):
+            np.testing.assert_allclose(b, a, rtol=0, atol=1e-12)
+            assert np.array_equal(np.isnan(a), np.isnan(b))
+    sol = V[:, 2:]
+    assert np.isnan(sol[rows[:20]]).all() and (sol > 0).any() and (sol == 0).any()
+    days = len(np.unique(ns // (86_400 * 10**9)))
+    assert conv.solar.computed_days <= 2 * days  # a day of geometry per pvlib call, cached
+    # a row off the step grid is computed directly (not cached)
+    off = conv.convert(ns[40:41] + 60 * 10**9, values[40:41])[1]
+    shifted = frame.iloc[40:41].copy()
+    shifted.index = shifted.index + pd.Timedelta("1min")
+    np.testing.assert_allclose(off, rows_from_frame(bundle, shifted)[2], rtol=0, atol=1e-12)
+
+
+def test_dayahead_gains_on_arrays_equal_dayahead_issue(bundle, telemetry):
+    from zonecast.service.online import OnlineEstimator, rows_from_frame
+
+    tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:3 * 96]))
+    y = y.copy()
+    y[100:110, 2] = np.nan  # the per-step gains become NaN for a while
+    est = OnlineEstimator(bundle)
+    checked = 0
+    for k in range(len(tt)):
+        if k in (150, 151):
+            continue  # a gap: the gains history has a hole
+        est.advance(tt[k], u[k], v[k], y[k])
+        if not est.started:
+            continue
+        history = pd.DataFrame([f for _, f in est._gains], columns=bundle.zones,
+                               index=pd.DatetimeIndex([s for s, _ in est._gains], tz="UTC"))
+        ref = est._dayahead.issue(est.time, history).to_numpy()
+        np.testing.assert_allclose(est.dayahead_gains(), ref, rtol=0, atol=1e-12)
+        checked += 1
+    assert checked > 250
+    assert np.ptp(est.dayahead_gains(), axis=0).max() > 1.0  # the profile is not flat
+
+
+def test_npz_checkpoint_of_the_earlier_format_still_loads(bundle, telemetry):
+    """Checkpoints stored before the raw format (an .npz with ISO time lists) resume."""
+    from zonecast.service.online import OnlineEstimator, rows_from_frame
+
+    tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:20]))
+    a = OnlineEstimator(bundle)
+    for k in range(12):
+        a.advance(tt[k], u[k], v[k], y[k])
+    meta = {"time": a.time.isoformat(), "started": True, "steps": a.steps,
+            "resets": a.resets, "nis_sum": a.nis_sum, "dof_sum": a.dof_sum,
+            "gain_times": [s.isoformat() for s, _ in a._gains],
+            "input_times": [s.isoformat() for s, _ in a._inputs],
+            "version": bundle.version, "since": a._since}
+    buf = io.BytesIO()
+    np.savez(buf, meta=np.array(json.dumps(meta)), pending=a._pending, held=a._held,
+             online=a._online, last_y=a.last_y, last_f=a.last_f, observed=a._observed,
+             gains=np.array([f for _, f in a._gains]), inputs=np.array([r for _, r in a._inputs]),
+             x=a._x)
+    b, c = OnlineEstimator(bundle), OnlineEstimator(bundle)
+    b.load_bytes(buf.getvalue())
+    c.load_bytes(a.to_bytes())
+    assert a.to_bytes()[:4] == b"ZCE2"
+    for k in range(12, 20):
+        for e in (a, b, c):
+            e.advance(tt[k], u[k], v[k], y[k])
+    for e in (b, c):
+        assert np.array_equal(e.x, a.x) and e.steps == a.steps
+        fa, fe = a.forecast(), e.forecast()
+        assert np.array_equal(fa.mean, fe.mean) and np.array_equal(fa.f_ig, fe.f_ig)

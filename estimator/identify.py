@@ -108,6 +108,25 @@ def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
     return res.x[-1]
 
 
+def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequence) -> list[dict]:
+    """The identification's simulations (f_IG = 0, x(0) = x_KF(0) of ``model``) of the
+    weekends starting on ``saturdays``, beside the measurements, for plots.
+
+    Returns one dict per weekend: ``saturday`` (date string), ``times`` (DatetimeIndex of the
+    simulated rows), ``simulated`` and ``measured`` ((N, n_zones) [degC]); the rows and the
+    x(0) are those the fit scores (Table 2).
+    """
+    out = []
+    local = data.local_times()
+    for a, b in weekend_spans(data, saturdays):
+        x0 = kalman_state(model, data, a - X0_WINDOW, a)
+        y = model.simulate(x0, data.u[a:b], data.v[a:b], np.zeros((b - a, model.n_zones))).y
+        meas = data.y[a + 1:b + 1]
+        out.append({"saturday": str(local[a].date()), "times": data.times[a + 1:a + 1 + len(meas)],
+                    "simulated": y[1:1 + len(meas)], "measured": meas})
+    return out
+
+
 @dataclass
 class IdentificationResult:
     """What :func:`identify` found (statsmodels-like results object)."""
@@ -368,10 +387,15 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         corr = cov / np.outer(se, se)
     corr = np.nan_to_num(corr)
     fitted = model.with_params(theta)
-    train_rms = _fit_rms(problem, theta, data.zones)
+    # Table 2 as the paper defines it: simulations from x(0) = x_KF(0) of the identified
+    # model, the same for training and validation weekends (the last refit started from
+    # x(0) of the parameters before it)
+    spans_x0 = x0s(fitted, train_spans + val_spans)
+    train_rms = _fit_rms(_Problem(model, data, train_spans, spans_x0[:len(train_spans)]),
+                         theta, data.zones)
     val_rms = None
     if val_spans:
-        vp = _Problem(model, data, val_spans, x0s(fitted, val_spans))
+        vp = _Problem(model, data, val_spans, spans_x0[len(train_spans):])
         val_rms = _fit_rms(vp, theta, data.zones)
     local = data.local_times()
     return IdentificationResult(

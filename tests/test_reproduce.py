@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 from pydantic import ValidationError
 
@@ -67,3 +68,13 @@ def test_week_figure_draws_measured_and_predictions_with_gaps(tmp_path):
     assert path.stat().st_size > 10_000
     with pytest.raises(KeyError):
         plot_week(week, ZONES, ["online_paper"], "Fig. 5", tmp_path / "fig5.png")
+
+
+def test_weekend_figure_has_a_panel_per_zone_and_weekend(tmp_path):
+    from zonecast.reproduce import plot_weekends
+    rng = np.random.default_rng(0)
+    sims = [{"saturday": d, "measured": 21 + rng.normal(0, 0.2, (192, len(ZONES))),
+             "simulated": np.full((192, len(ZONES)), 21.0)} for d in ("2015-04-18", "2014-10-11")]
+    path = tmp_path / "fig1.png"
+    plot_weekends(sims, {"2015-04-18": "training", "2014-10-11": "validation"}, ZONES, path)
+    assert path.stat().st_size > 5000

@@ -147,6 +147,35 @@ def plot_horizon(horizon: dict[str, dict[str, list[float]]], zones: list[str], p
     plt.close(fig)
 
 
+def plot_weekends(sims: list[dict], roles: dict[str, str], zones: list[str], path: Path) -> None:
+    """Fig. 1: the identification's simulations (f_IG = 0) against the measured zone
+    temperatures on each excitation weekend, one row per zone, one column per weekend."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(len(zones), len(sims), figsize=(4.2 * len(sims), 1.5 * len(zones)),
+                             sharex="col", squeeze=False)
+    for c, w in enumerate(sims):
+        hours = np.arange(len(w["measured"])) * 0.25
+        for r, z in enumerate(zones):
+            ax = axes[r, c]
+            meas, sim = w["measured"][:, r], w["simulated"][:, r]
+            rms = float(np.sqrt(np.nanmean((sim - meas) ** 2)))
+            ax.plot(hours, meas, ".", ms=1.5, color="k")
+            ax.plot(hours, sim, color="tab:red", lw=0.9)
+            ax.text(0.01, 0.85, f"RMS {rms:.2f} °C", transform=ax.transAxes, fontsize=7,
+                    bbox={"facecolor": "white", "alpha": 0.7, "edgecolor": "none", "pad": 1})
+            if c == 0:
+                ax.set_ylabel(f"{z} [°C]")
+        axes[0, c].set_title(f"{roles.get(w['saturday'], '')} weekend {w['saturday']}",
+                             fontsize=9)
+        axes[-1, c].set_xlabel("hours from Saturday 00:00 local")
+    fig.suptitle("Fig. 1: identification weekends, model with f_IG = 0 (red) and measured (dots)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def plot_week(week: dict, zones: list[str], methods: list[str], title: str, path: Path) -> None:
     """Figs. 4 and 5: one validation week, measured zone temperatures (black) and the
     predictions of ``methods`` (24-h forecasts laid end to end per issue day, or the
@@ -306,6 +335,12 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
                   timings_s={k: round(v, 1) for k, v in timings.items()})
     (out / "results.json").write_text(res.model_dump_json(indent=2))
     figures = []
+    from zonecast.estimator.identify import weekend_simulations
+    sims = weekend_simulations(fitted, data, ident.train_weekends + ident.validation_weekends)
+    roles = {**{d: "training" for d in ident.train_weekends},
+             **{d: "validation" for d in ident.validation_weekends}}
+    plot_weekends(sims, roles, list(site.zones), out / "fig1_identification.png")
+    figures.append("fig1_identification.png")
     plot_gains(figs["fig2"], list(site.zones), out / "fig2_internal_gains.png")
     figures.append("fig2_internal_gains.png")
     plot_horizon(res.horizon_rms, list(site.zones), out / "fig3_horizon_rms.png")

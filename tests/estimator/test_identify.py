@@ -52,6 +52,13 @@ def test_recovers_known_parameters(truth_and_data):
         i = names.index(p)
         assert res.params[i] == pytest.approx(true[i], rel=0.15), p
     assert res.to_dict()["table2"]["training"]["mean"] == res.train_rms["mean"]
+    # the plotted weekend simulations are the ones Table 2 scores
+    from zonecast.estimator.evaluate import rms_by_zone
+    from zonecast.estimator.identify import weekend_simulations
+    sims = weekend_simulations(model.with_params(res.params), data, ["2015-04-18"])
+    assert len(sims) == 1 and sims[0]["saturday"] == "2015-04-18"
+    rms = rms_by_zone(sims[0]["simulated"], sims[0]["measured"], data.zones)
+    assert rms["mean"] == pytest.approx(res.train_rms["mean"], rel=1e-9)
     assert res.corr.shape == (len(names), len(names))
     np.testing.assert_allclose(np.diag(res.corr)[res.stderr > 0], 1.0, atol=1e-9)
 

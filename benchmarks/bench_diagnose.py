@@ -7,7 +7,12 @@ virtual building (different effects, zones, magnitudes and seeds); the diagnosis
 scenario's data with the control's model and must rank the true effect first. Controls
 (other seeds, no effect added) must give no confident attribution.
 
-    python benchmarks/bench_diagnose.py [--out DIR] [--only NAME ...]
+The diagnosis of control_s0 (the identification campaign, the reference period) gives the
+reference terms — the model's own structural gap to the virtual building — that every other
+diagnosis adds to the base model (`zonecast diagnose --reference`); `--absolute` runs every
+scenario without them, as before.
+
+    python benchmarks/bench_diagnose.py [--out DIR] [--only NAME ...] [--absolute]
 
 Prints one line per scenario, the confusion table, and writes DIR/bench_diagnose.json.
 """
@@ -29,6 +34,7 @@ CLEAN = ["--disable", "reheat", "--disable", "infiltration"]
 SCENARIOS = [
     ("control_s1", 1, [], None),
     ("control_s2", 2, [], None),
+    ("control_s3", 3, [], None),
     ("reheat_s0", 0, ["reheat"], "reheat"),
     ("reheat_s1", 1, ["reheat"], "reheat"),
     ("reheat_s2", 2, ["reheat"], "reheat"),
@@ -57,6 +63,9 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", type=Path, default=Path("bench-diagnose"))
     ap.add_argument("--only", nargs="*")
+    ap.add_argument("--absolute", action="store_true",
+                    help="no reference: diagnose every scenario against the bare model (the "
+                         "controls then measure the model's structural gap)")
     args = ap.parse_args()
     zc = str(Path(sys.executable).with_name("zonecast"))
     from zonecast.diagnosis import run
@@ -78,7 +87,14 @@ def main() -> int:
         if not (d / "telemetry.csv").exists():
             t_camp = campaign(zc, d, seed, switches)
         t = time.perf_counter()
-        res = run(ref / "model.json", d, d / "diagnosis")
+        # the reference period: control_s0, the campaign the model was identified on; its
+        # diagnosis (absolute) gives the terms every other diagnosis starts from
+        use_ref = None if (args.absolute or name == "control_s0") else \
+            ref / "diagnosis" / "diagnosis.json"
+        if use_ref is not None and not use_ref.is_file():
+            run(ref / "model.json", ref, ref / "diagnosis")
+        res = run(ref / "model.json", d, d / ("diagnosis" if use_ref is None else "diagnosis_ref"),
+                  reference=use_ref)
         t_diag = time.perf_counter() - t
         top = res.ranked[0]
         conf = [c for c in res.ranked if c.confident]
@@ -103,7 +119,8 @@ def main() -> int:
               f"->{top.heldout_rms_after['mean']:.3f} diag {t_diag:.0f}s {'OK' if ok else 'MISS'}",
               flush=True)
     scen = [r for r in rows if r["truth"]]
-    ctrl = [r for r in rows if not r["truth"]]
+    # control_s0 is the reference period itself (unless --absolute): not a blind control
+    ctrl = [r for r in rows if not r["truth"] and (args.absolute or r["scenario"] != "control_s0")]
     hits = sum(r["top"] == r["truth"] for r in scen)
     clean = sum(not r["confident_effects"] for r in ctrl)
     print(f"\ntrue effect ranked first: {hits}/{len(scen)}; controls without a confident "

@@ -66,6 +66,7 @@ __all__ = [
     "Diagnosis",
     "baseline",
     "diagnose",
+    "reference_terms",
     "scaled_capacity",
     "score_candidates",
     "sensitivities",
@@ -531,6 +532,7 @@ class Diagnosis:
     gains: str
     seconds: float
     base: Baseline | None = None
+    reference: list[dict] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {
@@ -540,15 +542,59 @@ class Diagnosis:
             "split": {k: self.split[k] for k in ("train", "validation", "train_starts",
                                                  "validation_starts", "seed")},
             "gains": self.gains,
+            "reference": self.reference,
             "thresholds": {"confidence": CONFIDENCE, "min_score": MIN_SCORE},
             "seconds": self.seconds,
         }
 
 
+def reference_terms(ranked_effects: Sequence[dict]) -> list[dict]:
+    """The confident effects of a reference diagnosis (``diagnosis.json``'s
+    ``ranked_effects``) as terms to add to the base model: ``effect``, ``variant``,
+    ``parameters`` (zone -> value)."""
+    out = []
+    for c in ranked_effects:
+        missing = {"effect", "variant", "parameters", "confident"} - set(c)
+        if missing:
+            raise DiagnosisError(f"reference effect entry lacks {sorted(missing)}: give the "
+                                 "ranked_effects of a diagnosis.json")
+        if c["effect"] not in SPECS:
+            raise DiagnosisError(f"reference effect {c['effect']!r} is unknown; known: "
+                                 f"{list(SPECS)}")
+        if c["confident"]:
+            out.append({"effect": c["effect"], "variant": c["variant"],
+                        "parameters": dict(c["parameters"])})
+    return out
+
+
+def _apply_reference(resid: np.ndarray, sens: dict, terms: Sequence[dict],
+                     zones: Sequence[str]) -> np.ndarray:
+    """Residuals of the base model with the reference terms added (superposition: each term
+    changes the forecasts by its sensitivity times its parameters)."""
+    out = resid.copy()
+    for t in terms:
+        key = (t["effect"], t["variant"])
+        if key not in sens:
+            raise DiagnosisError(f"reference term {key} has no sensitivity here: its variant is "
+                                 "not one of the library's (effects.py)")
+        cols = [list(zones).index(z) for z in t["parameters"]]
+        theta = np.array(list(t["parameters"].values()), float)
+        out = out - sens[key][:, :, cols] @ theta
+    return out
+
+
 def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str = "profile",
-             effects: Sequence[str] | None = None,
+             effects: Sequence[str] | None = None, reference: Sequence[dict] | None = None,
              progress: Callable[[str], None] | None = None) -> Diagnosis:
-    """Where, which and how much (module docstring); ``seed`` draws the week split."""
+    """Where, which and how much (module docstring); ``seed`` draws the week split.
+
+    ``reference``: terms from :func:`reference_terms` of a diagnosis of a period known to
+    be free of the faults looked for (e.g. the commissioning weeks the model was identified
+    on). They are added to the base model before scoring, so that what the reference period
+    already showed — the model's own structural gap to the building — is not attributed
+    again; the ranking then names what is *new* in the data. Without it the ranking is
+    absolute: everything the model lacks, structural or not.
+    """
     t0 = time.perf_counter()
     zones = list(data.zones)
     if zones != list(model.structure.zones):
@@ -560,6 +606,12 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
     wh = where(base, data, zones, box_zone_matrix(model))
     sens = sensitivities(model, data, base, effects, progress)
     resid = data.y - base.pred
+    terms = list(reference or [])
+    if terms:
+        needed = {t["effect"] for t in terms} - set(effects or SPECS)
+        if needed:
+            sens.update(sensitivities(model, data, base, sorted(needed), progress))
+        resid = _apply_reference(resid, sens, terms, zones)
     if progress:
         progress("scoring candidates")
     per = score_candidates(base, data, sens, zones, resid)
@@ -579,4 +631,5 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
     ranked.sort(key=lambda c: (c.confident, c.score), reverse=True)
     per_zone = {z: sorted((per[e][z] for e in per), key=lambda c: c.score, reverse=True)
                 for z in zones}
-    return Diagnosis(wh, ranked, per_zone, base.split, gains, time.perf_counter() - t0, base)
+    return Diagnosis(wh, ranked, per_zone, base.split, gains, time.perf_counter() - t0, base,
+                     reference=terms)

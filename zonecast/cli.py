@@ -314,6 +314,10 @@ def diagnose_cmd(model: Annotated[Path, typer.Option(help="identified-model file
                  gains: Annotated[str, typer.Option(
                      help="internal gains of the base model: 'profile' (weekly profile fitted "
                           "on the training weeks) or 'constant' (c_IG only)")] = "profile",
+                 reference: Annotated[Path | None, typer.Option(
+                     help="diagnosis.json of a period known to be clean (e.g. the weeks the "
+                          "model was identified on): its confident effects are added to the "
+                          "base model, so the ranking names what is new")] = None,
                  seed: Annotated[int, typer.Option(help="seed of the week split")] = 0) -> None:
     """Where the model's error lies, which unmodelled effect causes it and how much adding it
     helps on held-out weeks: writes diagnosis.json, diagnosis.md and plots."""
@@ -322,6 +326,7 @@ def diagnose_cmd(model: Annotated[Path, typer.Option(help="identified-model file
         with _progress() as prog:
             task = prog.add_task("diagnose", total=None)
             res = run(model, data, out, site_path=site, seed=seed, gains=gains,
+                      reference=reference,
                       progress=lambda m: prog.update(task, description=f"diagnose: {m}"))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)

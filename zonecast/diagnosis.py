@@ -14,9 +14,11 @@ from zonecast.estimator.effects import SPECS
 
 
 def run(model_path: Path, data_path: Path, out: Path, *, site_path: Path | None = None,
-        seed: int = 0, gains: str = "profile",
+        seed: int = 0, gains: str = "profile", reference: Path | None = None,
         progress: Callable[[str], None] | None = None) -> Diagnosis:
-    """Load the model file and telemetry, diagnose, write ``out``."""
+    """Load the model file and telemetry, diagnose, write ``out``. ``reference``: the
+    ``diagnosis.json`` of a period known to be clean; its confident effects are added to the
+    base model (:func:`~zonecast.estimator.diagnose.diagnose`)."""
     from zonecast.estimator.dataset import model_data
     from zonecast.estimator.site import load_site
     from zonecast.estimator.telemetry import load_telemetry
@@ -29,7 +31,19 @@ def run(model_path: Path, data_path: Path, out: Path, *, site_path: Path | None 
                          f"{list(bundle.site.zones)}: diagnose the model of this site")
     tel = load_telemetry(data_path / "telemetry.csv" if data_path.is_dir() else data_path, site)
     data = model_data(tel, bundle.model.room_weights())
-    res = diagnose(bundle.model, data, seed=seed, gains=gains, progress=progress)
+    terms = None
+    if reference is not None:
+        from zonecast.estimator.diagnose import reference_terms
+        try:
+            doc = json.loads(Path(reference).read_text())
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"reference diagnosis {reference}: {exc}") from None
+        if not isinstance(doc, dict) or "ranked_effects" not in doc:
+            raise ValueError(f"reference diagnosis {reference} has no 'ranked_effects': give "
+                             "a diagnosis.json written by zonecast diagnose")
+        terms = reference_terms(doc["ranked_effects"])
+    res = diagnose(bundle.model, data, seed=seed, gains=gains, reference=terms,
+                   progress=progress)
     write(res, out, list(site.zones))
     return res
 
@@ -114,6 +128,11 @@ def _write_md(res: Diagnosis, out: Path, figs: list[str]) -> None:
          f"{', '.join(sp['train_starts'])}; held out: {', '.join(sp['validation_starts'])}. "
          f"Internal gains in the base model: {res.gains}. Thresholds: confidence >= "
          f"{CONFIDENCE}, cross-validated score >= {MIN_SCORE}. {res.seconds:.0f} s."), ""]
+    if res.reference:
+        L += [("Reference terms added to the base model (the confident effects of a diagnosis "
+               "of a clean period; the ranking below is of what is new): "
+               + "; ".join(f"`{t['effect']}` in {', '.join(t['parameters'])}"
+                           for t in res.reference) + "."), ""]
     conf = [c for c in res.ranked if c.confident]
     if not conf:
         L += [("**No candidate effect explains the error with confidence.** The residuals are "

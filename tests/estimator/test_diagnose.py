@@ -194,3 +194,34 @@ def test_unknown_effect_and_gains_mode_are_rejected(model, inputs):
         heat_regressor("wind", None, model, d, np.zeros((len(u), 5)))
     with pytest.raises(ValueError, match="gains must be 'profile' or 'constant'"):
         baseline(model, d, gains="weekly")
+
+
+def test_reference_terms_absorb_a_known_gap_and_leave_a_new_effect(model, inputs):
+    """A reference period showed infiltration in one zone; the same infiltration in the data
+    is then not attributed again, while an effect added on top of it still is."""
+    from zonecast.estimator.diagnose import DiagnosisError, reference_terms
+    times, u, v, f = inputs
+    y, _ = _case("infiltration", model, inputs)
+    ref = diagnose(model, _data(times, u, v, y), seed=0)
+    assert ref.ranked[0].effect == "infiltration" and ref.ranked[0].confident
+    terms = reference_terms(ref.to_dict()["ranked_effects"])
+    assert [t["effect"] for t in terms if t["effect"] == "infiltration"]
+    again = diagnose(model, _data(times, u, v, y), seed=0, reference=terms)
+    assert not [c.effect for c in again.ranked if c.confident], \
+        [(c.effect, round(c.score, 3)) for c in again.ranked]
+    assert again.to_dict()["reference"] == terms
+    # a sensor offset on top of the known infiltration: found against the reference
+    # (constant-gains base, where an offset is identifiable: PROFILE_BLIND)
+    y0, _ = _case("infiltration", model, (times, u, v, np.zeros_like(f)))
+    ref0 = diagnose(model, _data(times, u, v, y0), seed=0, gains="constant")
+    terms0 = reference_terms(ref0.to_dict()["ranked_effects"])
+    y1 = y0.copy()
+    y1[:, ZONE] += 0.5
+    new = diagnose(model, _data(times, u, v, y1), seed=0, gains="constant", reference=terms0)
+    assert new.ranked[0].effect == "sensor_bias" and new.ranked[0].confident
+    assert list(ZONES)[ZONE] in new.ranked[0].zones
+    with pytest.raises(DiagnosisError, match="reference effect 'draughts' is unknown"):
+        reference_terms([{"effect": "draughts", "variant": None, "parameters": {},
+                          "confident": True}])
+    with pytest.raises(DiagnosisError, match="lacks"):
+        reference_terms([{"effect": "reheat"}])

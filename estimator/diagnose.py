@@ -338,6 +338,9 @@ class Candidate:
     n_days: int
     heldout_rms_before: dict[str, float] = field(default_factory=dict)
     heldout_rms_after: dict[str, float] = field(default_factory=dict)
+    #: the same variant fitted in every zone (for a confident effect): what a reference
+    #: period hands on (:func:`reference_terms`)
+    parameters_all_zones: dict[str, float] = field(default_factory=dict)
 
     @property
     def confident(self) -> bool:
@@ -350,7 +353,8 @@ class Candidate:
                 "score": self.score, "confidence": self.confidence,
                 "confident": self.confident, "n_days": self.n_days,
                 "heldout_rms_before": self.heldout_rms_before,
-                "heldout_rms_after": self.heldout_rms_after}
+                "heldout_rms_after": self.heldout_rms_after,
+                "parameters_all_zones": self.parameters_all_zones}
 
 
 def _fit(S: np.ndarray, r: np.ndarray, sign: int) -> np.ndarray:
@@ -551,7 +555,7 @@ class Diagnosis:
 def reference_terms(ranked_effects: Sequence[dict]) -> list[dict]:
     """The confident effects of a reference diagnosis (``diagnosis.json``'s
     ``ranked_effects``) as terms to add to the base model: ``effect``, ``variant``,
-    ``parameters`` (zone -> value)."""
+    ``parameters`` (zone -> value; the effect's fit in every zone when the entry has it)."""
     out = []
     for c in ranked_effects:
         missing = {"effect", "variant", "parameters", "confident"} - set(c)
@@ -562,8 +566,11 @@ def reference_terms(ranked_effects: Sequence[dict]) -> list[dict]:
             raise DiagnosisError(f"reference effect {c['effect']!r} is unknown; known: "
                                  f"{list(SPECS)}")
         if c["confident"]:
+            # the effect fitted in every zone where the reference has that fit: its weaker
+            # zones are part of the known gap too
+            params = c.get("parameters_all_zones") or c["parameters"]
             out.append({"effect": c["effect"], "variant": c["variant"],
-                        "parameters": dict(c["parameters"])})
+                        "parameters": dict(params)})
     return out
 
 
@@ -627,6 +634,10 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
             cols = [zones.index(z) for z in conf_zones]
             cand = _evaluate(base, data, sens[(effect, lead.variant)], resid, effect,
                              lead.variant, cols, zones)
+            S, r = _flat(base, sens[(effect, lead.variant)], resid,
+                         base.rows_of(base.split["train"]), list(range(len(zones))))
+            cand.parameters_all_zones = {
+                z: float(t) for z, t in zip(zones, _fit(S, r, SPECS[effect].sign))}
         ranked.append(_heldout(base, data, sens[(effect, cand.variant)], resid, cand, zones))
     ranked.sort(key=lambda c: (c.confident, c.score), reverse=True)
     per_zone = {z: sorted((per[e][z] for e in per), key=lambda c: c.score, reverse=True)

@@ -271,7 +271,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
     timings["campaign"] = time.perf_counter() - t0
     site = load_site(campaign / "site.yaml")
     tel = load_telemetry(campaign / "telemetry.csv", site)
-    model = build_model(read_building(site.idf_path), site.zones,
+    building = read_building(site.idf_path)
+    model = build_model(building, site.zones,
                         {b: s.room for b, s in site.boxes.items()})
     data = model_data(tel, model.room_weights())
     sats = [str(s.date()) for s in excitation_saturdays(data)]
@@ -283,7 +284,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
     # sensitivity: the paper's placement of window solar (room air), one start
     from zonecast.estimator.rc.network import ModelOptions
     progress("identification with window solar on the room air (paper's placement)")
-    air_model = build_model(read_building(site.idf_path), site.zones,
+    air_model = build_model(building, site.zones,
                             {b: s.room for b, s in site.boxes.items()},
                             options=ModelOptions(window_solar="air"))
     ident_air = identify(air_model, data, sats[1:3], sats[:1], n_starts=1, seed=seed)

@@ -8,7 +8,8 @@ File format (JSON, ``schema_version`` 1)::
      "weekly_profile": {"zones": ["NW", ...],  # optional; null -> zeros
                         "values": [[...], ...]},   # 672 rows x n_zones [W/m2]
      "noise": {"sigma_air": 0.3, ...} | null,  # optional filter noise [K]
-     "model_options": {"window_solar": "floor", "roof_solar": "mean"}}
+     "model_options": {"window_solar": "surfaces", "floor_share": 0.25,
+                       "roof_solar": "mean"}}
                                                # modelling choices (ModelOptions); a file
                                                # without them was written before they
                                                # existed: window solar on the room air
@@ -192,7 +193,7 @@ def _noise(doc: dict, path: Path) -> NoiseSettings:
     return NoiseSettings(**{k: float(v) for k, v in known.items()})
 
 
-_OPTION_KEYS = ("window_solar", "roof_solar")
+_OPTION_KEYS = ("window_solar", "floor_share", "roof_solar")
 #: what a model file without ``model_options`` was built with (files written before the
 #: key existed put window solar on the room air, the paper's placement)
 LEGACY_OPTIONS = {"window_solar": "air"}

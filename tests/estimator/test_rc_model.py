@@ -161,31 +161,41 @@ def test_bilinear_terms_only_room_rows(five_model):
     assert np.allclose(five_model.B_ig[[i for i in range(five_model.n) if i not in room_idx]], 0)
 
 
-def test_window_solar_placement(five_zone):
-    """Window solar (gamma_winSolAbs a_win v_sol) on the room air or on the floors' inside
-    faces: the same heat per unit irradiance, only where it lands differs."""
+@pytest.mark.parametrize("mode", ["floor", "surfaces"])
+def test_window_solar_placement(five_zone, mode):
+    """Window solar (gamma_winSolAbs a_win v_sol) on the room air, the floors' inside faces or
+    shared between floors and the other inside faces: the same heat per unit irradiance, only
+    where it lands differs."""
     air = build_structure(five_zone, FIVE_ZONES, FIVE_BOXES, ModelOptions(window_solar="air"))
-    floor = build_structure(five_zone, FIVE_ZONES, FIVE_BOXES)
-    assert floor.options.window_solar == "floor" and air.n == floor.n
+    st = build_structure(five_zone, FIVE_ZONES, FIVE_BOXES, ModelOptions(window_solar=mode))
+    assert air.n == st.n
     p = 5  # gamma_winSolAbs
     heat_air = air.Bv_p[p].toarray() * air.capacity[:, None]
-    heat_floor = floor.Bv_p[p].toarray() * floor.capacity[:, None]
+    heat = st.Bv_p[p].toarray() * st.capacity[:, None]
     assert heat_air[:, 2:].sum() > 0
-    np.testing.assert_allclose(heat_air.sum(axis=0), heat_floor.sum(axis=0), rtol=1e-12)
+    np.testing.assert_allclose(heat_air.sum(axis=0), heat.sum(axis=0), rtol=1e-12)
     rooms = {i for i, lab in enumerate(air.labels) if lab.kind == "room_air"}
     assert set(np.flatnonzero(heat_air.any(axis=1))) <= rooms
-    A = floor.A0 + sum(floor.A_p)
-    for i in np.flatnonzero(heat_floor.any(axis=1)):
-        lab = floor.labels[i]
-        assert lab.kind in ("floor", "floor_ceiling"), lab
-        # a floor face node next to the room whose windows feed it
-        room = next(r for r in np.flatnonzero(A[i].toarray()) if r in rooms)
-        assert air.labels[room].room == lab.room
+    A = st.A0 + sum(st.A_p)
+    floors = {n for n, srf in five_zone.surfaces.items() if srf.surface_type == "Floor"}
+    on_floor = 0.0
+    for i in np.flatnonzero(heat.any(axis=1)):
+        lab = st.labels[i]
+        assert i not in rooms, lab  # every room of the five-zone building has a floor
+        # an element face next to the room whose windows feed it
+        linked = {air.labels[r].room for r in np.flatnonzero(A[i].toarray()) if r in rooms}
+        assert linked, lab
+        if lab.element in floors:
+            on_floor += heat[i, 2:].sum()
+    share = on_floor / heat[:, 2:].sum()
+    assert share == pytest.approx(1.0 if mode == "floor" else st.options.floor_share, abs=1e-9)
     # the per-room window areas (used by the diagnosis) agree with the air placement
-    for r, area in floor.window_area.items():
+    for r, area in st.window_area.items():
         np.testing.assert_allclose(area, heat_air[air.rooms.index(r), 2:6], rtol=1e-12)
-    with pytest.raises(ModelDefinitionError, match="window_solar must be 'air' or 'floor'"):
+    with pytest.raises(ModelDefinitionError, match="window_solar must be 'surfaces'"):
         ModelOptions(window_solar="walls")
+    with pytest.raises(ModelDefinitionError, match="floor_share must be a fraction"):
+        ModelOptions(floor_share=1.5)
 
 
 def test_affine_in_parameters(five_model):

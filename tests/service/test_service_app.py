@@ -109,7 +109,7 @@ def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
     bare = load_model_file(write_model_file(tmp_path / "m.json", vb / "site.yaml"))
     assert np.all(bare.profile.values == 0) and "no weekly" in " ".join(bare.notes)
     # model options round-trip; a file from before they existed is read as it was built
-    assert bare.model.structure.options.window_solar == "floor"
+    assert bare.model.structure.options.window_solar == "surfaces"
     air = load_model_file(write_model_file(tmp_path / "a.json", vb / "site.yaml",
                                            model_options={"window_solar": "air"}))
     assert air.model.structure.options.window_solar == "air"
@@ -132,7 +132,7 @@ def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
         ({"schema_version": 1, "site": str(vb / "site.yaml"), "noise": {"sigma_air": 0}},
          "positive number"),
         ({"schema_version": 1, "site": str(vb / "site.yaml"),
-          "model_options": {"window_solar": "wall"}}, "window_solar must be 'air' or 'floor'"),
+          "model_options": {"window_solar": "wall"}}, "window_solar must be 'surfaces', 'floor'"),
         ({"schema_version": 1, "site": str(vb / "site.yaml"),
           "model_options": {"colour": "red"}}, r"unknown model_options \['colour'\]"),
     ]

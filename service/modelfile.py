@@ -293,7 +293,7 @@ def write_model_file(path: str | Path, site: str | Path, *,
                      parameters: dict[str, float] | None = None,
                      weekly_profile: dict | None = None,
                      noise: dict[str, float] | None = None,
-                     model_options: dict[str, str] | None = None,
+                     model_options: dict[str, str | float] | None = None,
                      extra: dict[str, Any] | None = None) -> Path:
     """Write a model file (schema 1) pointing to ``site`` (stored relative to the file
     when both are on one drive, else absolute).

@@ -52,7 +52,8 @@ class Results(BaseModel):
     table2_window_solar_air: dict[str, ZoneRms | None] | None = Field(
         None, description="Table 2 with window solar on the room air (the paper's placement), "
                           "one start: a sensitivity")
-    model_options: dict[str, str] | None = Field(None, description="ModelOptions of the model")
+    model_options: dict[str, str | float] | None = Field(
+        None, description="ModelOptions of the model")
     gains_truth: dict[str, Any] = Field(description="zone -> correlation with the true gains")
     coverage_90: Any = Field(description="empirical coverage of the 90 % forecast intervals")
     split: dict[str, Any] = Field(description="identification weekends and gains/forecast weeks")

@@ -220,7 +220,7 @@ class RCStructure:
     notes: list[str] = field(default_factory=list)
     areas: dict[str, float] = field(default_factory=dict)
     window_area: dict[str, np.ndarray] = field(default_factory=dict)
-    options: ModelOptions = field(default_factory=lambda: ModelOptions())
+    options: ModelOptions = field(default_factory=ModelOptions)
 
     @property
     def n(self) -> int:
@@ -434,9 +434,10 @@ def build_structure(
     floor_faces: dict[str, list[tuple[int, float]]] = {}
     other_faces: dict[str, list[tuple[int, float]]] = {}
 
-    def floor_face(surface: Surface, node: int, room: str | None = None) -> None:
+    def face(surface: Surface, room: str, node: int) -> None:
+        """Record an element face of ``surface`` exposed to ``room``'s air."""
         kind = floor_faces if surface.surface_type == "Floor" else other_faces
-        kind.setdefault(room or surface.zone, []).append((node, surface.area))
+        kind.setdefault(room, []).append((node, surface.area))
 
     for name in sorted(surfaces):
         if name in done:
@@ -465,25 +466,25 @@ def build_structure(
             nodes = _add_element(asm, kind, label, room_state, layout, s.area, s.zone, inside_g)
             outer_g = _INSIDE_GAMMA.get(other.surface_type, IW)
             asm.link(nodes[0], room_state[other.zone], s.area, outer_g)
-            floor_face(s, nodes[-1])
-            floor_face(other, nodes[0])
+            face(s, s.zone, nodes[-1])
+            face(other, other.zone, nodes[0])
         elif s.boundary == "Zone" and s.boundary_object:
             other_zone = _resolve([s.boundary_object], building.zones, "zone")[0]
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
             mirror = _INSIDE_GAMMA.get(_MIRROR.get(s.surface_type, "Wall"), IW)
             asm.link(nodes[0], room_state[other_zone], s.area, mirror)
-            floor_face(s, nodes[-1])
-            other_faces.setdefault(other_zone, []).append((nodes[0], s.area))
+            face(s, s.zone, nodes[-1])
+            other_faces.setdefault(other_zone, []).append((nodes[0], s.area))  # mirrored face
         elif s.boundary == "Outdoors":
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
-            floor_face(s, nodes[-1])
+            face(s, s.zone, nodes[-1])
             asm.to_temperature(nodes[0], 0, s.area, EW)  # paper eq:q_bh, convection
             for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar).items():
                 asm.source(nodes[0], DISTURBANCES.index(col), w * s.area, ABSORP)
             area_ext += s.area
         else:
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
-            floor_face(s, nodes[-1])
+            face(s, s.zone, nodes[-1])
             if s.boundary not in ("Adiabatic", "Ground"):
                 notes.append(f"surface {name}: boundary {s.boundary} treated as adiabatic")
     if any(s.boundary == "Ground" for s in surfaces.values()):

@@ -7,10 +7,10 @@ virtual building (different effects, zones, magnitudes and seeds); the diagnosis
 scenario's data with the control's model and must rank the true effect first. Controls
 (other seeds, no effect added) must give no confident attribution.
 
-The diagnosis of control_s0 (the identification campaign, the reference period) gives the
-reference terms — the model's own structural gap to the virtual building — that every other
-diagnosis adds to the base model (`zonecast diagnose --reference`); `--absolute` runs every
-scenario without them, as before.
+The diagnosis of control_s0 (the identification campaign, the reference period) is the
+reference of every other diagnosis (`zonecast diagnose --reference`): its confident effects —
+the model's own structural gap to the virtual building — are added to the base model and its
+internal-gains profile is kept; `--absolute` runs every scenario without it.
 
     python benchmarks/bench_diagnose.py [--out DIR] [--only NAME ...] [--absolute]
 
@@ -59,17 +59,59 @@ def campaign(zc: str, out: Path, seed: int, switches: list[str]) -> float:
     return time.perf_counter() - t
 
 
+def _one(zc: str, root: Path, item, absolute: bool) -> dict:
+    """Campaign (if missing) and diagnosis of one scenario; prints its line."""
+    from zonecast.diagnosis import run
+
+    name, seed, switches, truth = item
+    ref = root / "control_s0"
+    d = root / name
+    t_camp = 0.0
+    if not (d / "telemetry.csv").exists():
+        t_camp = campaign(zc, d, seed, switches)
+    t = time.perf_counter()
+    # the reference period: control_s0, the campaign the model was identified on; its
+    # diagnosis (absolute) is the reference of every other one
+    use_ref = None if (absolute or name == "control_s0") else ref / "diagnosis" / "diagnosis.json"
+    res = run(ref / "model.json", d, d / ("diagnosis" if use_ref is None else "diagnosis_ref"),
+              reference=use_ref, site_path=d / "site.yaml")
+    t_diag = time.perf_counter() - t
+    top = res.ranked[0]
+    conf = [c for c in res.ranked if c.confident]
+    row = {"scenario": name, "seed": seed, "truth": truth, "top": top.effect,
+           "top_zones": top.zones, "top_variant": top.variant, "top_confident": top.confident,
+           "top_score": top.score, "top_confidence": top.confidence,
+           "confident_effects": [c.effect for c in conf],
+           "truth_rank": next((i + 1 for i, c in enumerate(res.ranked)
+                               if c.effect == truth), None),
+           "heldout_before": top.heldout_rms_before["mean"],
+           "heldout_after": top.heldout_rms_after["mean"],
+           "campaign_s": t_camp, "diagnose_s": t_diag}
+    if truth:
+        tc = next(c for c in res.ranked if c.effect == truth)
+        row.update(truth_zones=tc.zones, truth_score=tc.score,
+                   truth_heldout_before=tc.heldout_rms_before["mean"],
+                   truth_heldout_after=tc.heldout_rms_after["mean"])
+    ok = (top.effect == truth) if truth else not conf
+    print(f"{name:22s} truth={truth or '-':14s} top={top.effect:15s} {top.zones} "
+          f"score={top.score:.3f} conf={top.confidence:.3f} "
+          f"confident={[c.effect for c in conf]} heldout {top.heldout_rms_before['mean']:.3f}"
+          f"->{top.heldout_rms_after['mean']:.3f} diag {t_diag:.0f}s {'OK' if ok else 'MISS'}",
+          flush=True)
+    return row
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", type=Path, default=Path("bench-diagnose"))
     ap.add_argument("--only", nargs="*")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="diagnose this many scenarios at once (after the reference)")
     ap.add_argument("--absolute", action="store_true",
                     help="no reference: diagnose every scenario against the bare model (the "
                          "controls then measure the model's structural gap)")
     args = ap.parse_args()
     zc = str(Path(sys.executable).with_name("zonecast"))
-    from zonecast.diagnosis import run
-
     root = args.out
     ref = root / "control_s0"
     if not (ref / "model.json").exists():
@@ -77,47 +119,22 @@ def main() -> int:
         campaign(zc, ref, 0, [])
         subprocess.run([zc, "identify", "--site", str(ref / "site.yaml"), "--data", str(ref),
                         "--out", str(ref / "model.json")], check=True, capture_output=True)
-    rows = []
-    todo = [("control_s0", 0, [], None)] + SCENARIOS
-    for name, seed, switches, truth in todo:
-        if args.only and name not in args.only:
-            continue
-        d = root / name
-        t_camp = 0.0
-        if not (d / "telemetry.csv").exists():
-            t_camp = campaign(zc, d, seed, switches)
-        t = time.perf_counter()
-        # the reference period: control_s0, the campaign the model was identified on; its
-        # diagnosis (absolute) gives the terms every other diagnosis starts from
-        use_ref = None if (args.absolute or name == "control_s0") else \
-            ref / "diagnosis" / "diagnosis.json"
-        if use_ref is not None and not use_ref.is_file():
-            run(ref / "model.json", ref, ref / "diagnosis")
-        res = run(ref / "model.json", d, d / ("diagnosis" if use_ref is None else "diagnosis_ref"),
-                  reference=use_ref)
-        t_diag = time.perf_counter() - t
-        top = res.ranked[0]
-        conf = [c for c in res.ranked if c.confident]
-        row = {"scenario": name, "seed": seed, "truth": truth, "top": top.effect,
-               "top_zones": top.zones, "top_confident": top.confident,
-               "top_score": top.score, "top_confidence": top.confidence,
-               "confident_effects": [c.effect for c in conf],
-               "truth_rank": next((i + 1 for i, c in enumerate(res.ranked)
-                                   if c.effect == truth), None),
-               "heldout_before": top.heldout_rms_before["mean"],
-               "heldout_after": top.heldout_rms_after["mean"],
-               "campaign_s": t_camp, "diagnose_s": t_diag}
-        if truth:
-            tc = next(c for c in res.ranked if c.effect == truth)
-            row.update(truth_zones=tc.zones, truth_heldout_before=tc.heldout_rms_before["mean"],
-                       truth_heldout_after=tc.heldout_rms_after["mean"])
-        rows.append(row)
-        ok = (top.effect == truth) if truth else not conf
-        print(f"{name:22s} truth={truth or '-':14s} top={top.effect:15s} {top.zones} "
-              f"score={top.score:.3f} conf={top.confidence:.3f} "
-              f"confident={[c.effect for c in conf]} heldout {top.heldout_rms_before['mean']:.3f}"
-              f"->{top.heldout_rms_after['mean']:.3f} diag {t_diag:.0f}s {'OK' if ok else 'MISS'}",
-              flush=True)
+    todo = [t for t in [("control_s0", 0, [], None)] + SCENARIOS
+            if not args.only or t[0] in args.only]
+    # the reference diagnosis first: every other one reads it
+    first = [t for t in todo if t[0] == "control_s0"]
+    rest = [t for t in todo if t[0] != "control_s0"]
+    if not args.absolute and rest and not (ref / "diagnosis" / "diagnosis.json").is_file():
+        first = first or [("control_s0", 0, [], None)]
+    rows = [_one(zc, root, t, args.absolute) for t in first]
+    if args.jobs > 1:
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(args.jobs) as pool:
+            rows += list(pool.map(_one, [zc] * len(rest), [root] * len(rest), rest,
+                                  [args.absolute] * len(rest)))
+    else:
+        rows += [_one(zc, root, t, args.absolute) for t in rest]
+    rows = [r for r in rows if not args.only or r["scenario"] in args.only]
     scen = [r for r in rows if r["truth"]]
     # control_s0 is the reference period itself (unless --absolute): not a blind control
     ctrl = [r for r in rows if not r["truth"] and (args.absolute or r["scenario"] != "control_s0")]

@@ -39,6 +39,7 @@ from scipy import optimize, stats
 
 from .dataset import ModelData
 from .effects import (
+    SCHEDULE,
     SPECS,
     box_zone_matrix,
     heat_regressor,
@@ -64,8 +65,10 @@ __all__ = [
     "Baseline",
     "Candidate",
     "Diagnosis",
+    "Reference",
     "baseline",
     "diagnose",
+    "load_reference",
     "reference_terms",
     "scaled_capacity",
     "score_candidates",
@@ -130,14 +133,18 @@ def _profile_at(profile: WeeklyProfile, times) -> np.ndarray:
 
 
 def baseline(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str = "profile",
+             profile: WeeklyProfile | None = None,
              progress: Callable[[str], None] | None = None) -> Baseline:
     """Forecast and simulate the model on every week (see the module docstring).
 
     ``gains="profile"``: f_IG is the weekly profile fitted on the training weeks (paper
     Eq:fixed_ig); ``"constant"``: f_IG = 0 (only the model's c_IG), the identification's
-    model.
+    model. ``profile`` given: that profile (a reference period's, :func:`diagnose`), kept
+    fixed; ``gains`` is then ``"reference"``.
     """
-    if gains not in ("profile", "constant"):
+    if profile is not None:
+        gains = "reference"
+    elif gains not in ("profile", "constant"):
         raise ValueError(f"gains must be 'profile' or 'constant', got {gains!r}")
     split = week_split(data, seed)
     weeks = split["weeks"]
@@ -148,7 +155,9 @@ def baseline(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
     for w in weeks:
         say(f"tracking the state, week {w['index'] + 1}/{len(weeks)}")
         tracks.append(track_week(model, data, w["rows"]))
-    if gains == "profile":
+    if gains == "reference":
+        profile = fill_profile(profile)
+    elif gains == "profile":
         profile = fixed_profile(data, [tracks[i] for i in split["train"]])
     else:
         nb = int(pd.Timedelta("7D") / step)
@@ -228,8 +237,17 @@ def _heat_response(model: BilinearModel, data: ModelData, base: Baseline, q: np.
 
 def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
                   effects: Sequence[str] | None = None,
-                  progress: Callable[[str], None] | None = None) -> dict:
+                  progress: Callable[[str], None] | None = None, *,
+                  net_of_profile: bool | None = None,
+                  heating_setpoint: np.ndarray | None = None) -> dict:
     """Forecast sensitivities of every candidate.
+
+    ``heating_setpoint`` (N,) [degC]: the site's scheduled heating set point; without it
+    the reheat variant ``"schedule"`` is left out.
+
+    ``net_of_profile``: heat terms net of their training-week time-of-week mean (what a
+    profile refitted on these weeks absorbs); default: when the base fits its profile here
+    (``base.gains == "profile"``).
 
     Returns
     -------
@@ -242,6 +260,7 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
     if unknown:
         raise DiagnosisError(f"unknown effects {unknown}; known: {list(SPECS)}")
     train_rows = np.flatnonzero(np.isin(base.week_of_row, base.split["train"]))
+    net = base.gains == "profile" if net_of_profile is None else net_of_profile
     stepper = stepper_for(model, data.u)
     temps = np.where(np.isfinite(base.pred), base.pred, base.sim)
     # rows before a week's first issue: the measurement of that row, else the training mean
@@ -253,9 +272,11 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
         if progress:
             progress(f"sensitivities: {e}")
         for var in spec.variants:
+            if var == SCHEDULE and heating_setpoint is None:
+                continue
             if spec.kind == "heat":
-                q = heat_regressor(e, var, model, data, temps)
-                if base.gains == "profile":
+                q = heat_regressor(e, var, model, data, temps, heating_setpoint)
+                if net:
                     q = q - time_of_week_mean(q, data, train_rows)
                 out[(e, var)] = _heat_response(model, data, base, q, stepper)
             elif spec.kind == "output":
@@ -547,9 +568,32 @@ class Diagnosis:
                                                  "validation_starts", "seed")},
             "gains": self.gains,
             "reference": self.reference,
+            "profile": None if self.base is None else {
+                "zones": list(self.per_zone), "step": str(self.base.profile.step),
+                "values": np.round(self.base.profile.values, 4).tolist()},
             "thresholds": {"confidence": CONFIDENCE, "min_score": MIN_SCORE},
             "seconds": self.seconds,
         }
+
+
+@dataclass
+class Reference:
+    """What the diagnosis of a period known to be free of the faults looked for hands on
+    (:func:`load_reference`).
+
+    Attributes
+    ----------
+    terms : its confident effects (:func:`reference_terms`), added to the base model
+    profile : the internal-gains profile its base used [W/m2]; kept fixed, so that a change
+        of the building's weekly pattern (reheat on a schedule, an offset sensor) is not
+        absorbed by a profile refitted on the data under diagnosis. None: refit as usual.
+    gains : the base of the reference diagnosis (``"profile"`` or ``"constant"``); its terms
+        were fitted net of that profile and are applied the same way
+    """
+
+    terms: list[dict]
+    profile: WeeklyProfile | None = None
+    gains: str = "profile"
 
 
 def reference_terms(ranked_effects: Sequence[dict]) -> list[dict]:
@@ -574,6 +618,39 @@ def reference_terms(ranked_effects: Sequence[dict]) -> list[dict]:
     return out
 
 
+def load_reference(doc: dict, zones: Sequence[str], timezone: str) -> Reference:
+    """A :class:`Reference` from a ``diagnosis.json`` document (its confident effects and,
+    when it has one, its base's weekly profile)."""
+    if not isinstance(doc, dict) or "ranked_effects" not in doc:
+        raise DiagnosisError("the reference has no 'ranked_effects': give a diagnosis.json "
+                             "written by zonecast diagnose")
+    gains = doc.get("gains", "profile")
+    if gains not in ("profile", "constant"):
+        raise DiagnosisError(f"the reference diagnosis used gains {gains!r}; a reference must "
+                             "itself be diagnosed without a reference ('profile' or "
+                             "'constant')")
+    prof = None
+    wp = doc.get("profile")
+    if wp is not None:
+        try:
+            values = np.asarray(wp["values"], float)
+            names = list(wp["zones"])
+            step = pd.Timedelta(wp.get("step", "15min"))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise DiagnosisError(f"the reference's 'profile' is malformed ({exc}): it needs "
+                                 "'zones', 'values' and 'step'") from None
+        if sorted(names) != sorted(zones):
+            raise DiagnosisError(f"the reference's profile zones {names} differ from the "
+                                 f"data's {list(zones)}: use a diagnosis of this site")
+        nb = int(pd.Timedelta("7D") / step)
+        if values.shape != (nb, len(names)):
+            raise DiagnosisError(f"the reference's profile values have shape {values.shape}; "
+                                 f"expected {(nb, len(names))}")
+        values = values[:, [names.index(z) for z in zones]]
+        prof = WeeklyProfile(values, np.isfinite(values).astype(int), timezone, step)
+    return Reference(reference_terms(doc["ranked_effects"]), prof, gains)
+
+
 def _apply_reference(resid: np.ndarray, sens: dict, terms: Sequence[dict],
                      zones: Sequence[str]) -> np.ndarray:
     """Residuals of the base model with the reference terms added (superposition: each term
@@ -591,34 +668,53 @@ def _apply_reference(resid: np.ndarray, sens: dict, terms: Sequence[dict],
 
 
 def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str = "profile",
-             effects: Sequence[str] | None = None, reference: Sequence[dict] | None = None,
+             effects: Sequence[str] | None = None,
+             reference: Reference | Sequence[dict] | None = None,
+             heating_setpoint: np.ndarray | None = None,
              progress: Callable[[str], None] | None = None) -> Diagnosis:
     """Where, which and how much (module docstring); ``seed`` draws the week split.
 
-    ``reference``: terms from :func:`reference_terms` of a diagnosis of a period known to
-    be free of the faults looked for (e.g. the commissioning weeks the model was identified
-    on). They are added to the base model before scoring, so that what the reference period
-    already showed — the model's own structural gap to the building — is not attributed
-    again; the ranking then names what is *new* in the data. Without it the ranking is
-    absolute: everything the model lacks, structural or not.
+    ``reference``: a :class:`Reference` from the diagnosis of a period known to be free of
+    the faults looked for (e.g. the commissioning weeks the model was identified on), or
+    just its terms (:func:`reference_terms`). Its confident effects are added to the base
+    model before scoring, so that what the reference period already showed — the model's
+    own structural gap to the building — is not attributed again; with its profile the
+    base keeps the reference's internal gains instead of refitting them, so that a change
+    with a weekly pattern stays visible. The ranking then names what is *new* in the data.
+    Without a reference the ranking is absolute: everything the model lacks, structural
+    or not.
+
+    ``heating_setpoint`` (N,) [degC]: the site's scheduled heating set point
+    (:meth:`~.site.Thermostat.heating_setpoint`), for the reheat variant ``"schedule"``.
     """
     t0 = time.perf_counter()
     zones = list(data.zones)
     if zones != list(model.structure.zones):
         raise DiagnosisError(f"data zones {zones} differ from model zones "
                              f"{list(model.structure.zones)}")
-    base = baseline(model, data, seed=seed, gains=gains, progress=progress)
+    if reference is not None and not isinstance(reference, Reference):
+        reference = Reference(list(reference), None, gains)
+    base = baseline(model, data, seed=seed, gains=gains,
+                    profile=reference.profile if reference is not None else None,
+                    progress=progress)
     if progress:
         progress("residual slices")
     wh = where(base, data, zones, box_zone_matrix(model))
-    sens = sensitivities(model, data, base, effects, progress)
+    sens = sensitivities(model, data, base, effects, progress,
+                         heating_setpoint=heating_setpoint)
     resid = data.y - base.pred
-    terms = list(reference or [])
+    terms = list(reference.terms) if reference is not None else []
     if terms:
-        needed = {t["effect"] for t in terms} - set(effects or SPECS)
-        if needed:
-            sens.update(sensitivities(model, data, base, sorted(needed), progress))
-        resid = _apply_reference(resid, sens, terms, zones)
+        # the terms were fitted net of the reference's own refitted profile (or against
+        # constant gains): their sensitivities here are taken the same way
+        net = reference.gains == "profile"
+        needed = sorted({t["effect"] for t in terms})
+        if net == (base.gains == "profile") and not set(needed) - set(effects or SPECS):
+            ref_sens = sens
+        else:
+            ref_sens = sensitivities(model, data, base, needed, progress, net_of_profile=net,
+                                     heating_setpoint=heating_setpoint)
+        resid = _apply_reference(resid, ref_sens, terms, zones)
     if progress:
         progress("scoring candidates")
     per = score_candidates(base, data, sens, zones, resid)
@@ -642,5 +738,5 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
     ranked.sort(key=lambda c: (c.confident, c.score), reverse=True)
     per_zone = {z: sorted((per[e][z] for e in per), key=lambda c: c.score, reverse=True)
                 for z in zones}
-    return Diagnosis(wh, ranked, per_zone, base.split, gains, time.perf_counter() - t0, base,
-                     reference=terms)
+    return Diagnosis(wh, ranked, per_zone, base.split, base.gains, time.perf_counter() - t0,
+                     base, reference=terms)

@@ -9,7 +9,9 @@ name                      parameter   extra term in zone z
 ``reheat``                W/K         heat q = θ · m_z(k) · max(0, T_h − T_z): reheat coils of
                                       boxes at minimum airflow (fraction m_z of the zone's
                                       boxes) acting as proportional heating to T_h; T_h is
-                                      searched over :data:`REHEAT_SETPOINTS`
+                                      the site's scheduled heating set point (variant
+                                      ``"schedule"``, when the site gives its thermostat)
+                                      or searched over :data:`REHEAT_SETPOINTS`
 ``infiltration``          W/K         heat q = θ · (T_a − T_z) (outdoor air leaking in)
 ``window_solar``          -           heat q = θ · Σ_f a_win,z,f · I_f(k) through a first-order
                                       lag τ (transmitted solar stored in floors and
@@ -46,6 +48,7 @@ from .rc.network import CP_AIR as C_P
 __all__ = [
     "EFFECTS",
     "REHEAT_SETPOINTS",
+    "SCHEDULE",
     "SOLAR_LAGS",
     "SPECS",
     "EffectSpec",
@@ -60,6 +63,8 @@ __all__ = [
 
 #: heating setpoints searched for the reheat term [degC]
 REHEAT_SETPOINTS = (19.0, 20.0, 21.0, 22.0)
+#: reheat variant that follows the site's thermostat schedule (``Site.thermostat``)
+SCHEDULE = "schedule"
 #: lags of transmitted solar reaching the air [h] (0: at once)
 SOLAR_LAGS = (0.0, 2.0, 6.0)
 #: a box counts as at its minimum when its airflow is within this factor of its 1st percentile
@@ -90,7 +95,7 @@ class EffectSpec:
 
 
 SPECS: dict[str, EffectSpec] = {s.name: s for s in (
-    EffectSpec("reheat", "heat", "W/K", +1, REHEAT_SETPOINTS,
+    EffectSpec("reheat", "heat", "W/K", +1, (SCHEDULE, *REHEAT_SETPOINTS),
                "VAV reheat at minimum airflow, proportional to the shortfall below a setpoint"),
     EffectSpec("infiltration", "heat", "W/K", +1, (None,),
                "outdoor air leaking in, proportional to outdoor minus zone temperature"),
@@ -190,12 +195,14 @@ def _workday_hours(data: ModelData) -> np.ndarray:
 
 
 def heat_regressor(name: str, variant, model: BilinearModel, data: ModelData,
-                   temps: np.ndarray) -> np.ndarray:
+                   temps: np.ndarray, heating_setpoint: np.ndarray | None = None) -> np.ndarray:
     """(N, n_zones) extra heat into each zone per unit parameter [W per unit].
 
     ``temps`` (N, n_zones) are the zone temperatures the regressor uses [degC]: the base
     model's own prediction (see the module docstring), never measurements after an issue
-    time. Rows where ``temps`` is NaN give NaN.
+    time. Rows where ``temps`` is NaN give NaN. ``heating_setpoint`` (N,) [degC]: the
+    site's scheduled heating set point, needed by the reheat variant ``"schedule"``
+    (:meth:`~.site.Thermostat.heating_setpoint`).
     """
     spec = SPECS.get(name)
     if spec is None or spec.kind != "heat":
@@ -207,7 +214,17 @@ def heat_regressor(name: str, variant, model: BilinearModel, data: ModelData,
         raise ValueError(f"temps must have shape {(N, nz)}, got {temps.shape}")
     bz = box_zone_matrix(model)
     if name == "reheat":
-        return minimum_airflow_fraction(data.u, bz) * np.maximum(0.0, float(variant) - temps)
+        if variant == SCHEDULE:
+            if heating_setpoint is None:
+                raise ValueError("the reheat variant 'schedule' needs the site's heating set "
+                                 "point schedule (site.yaml 'thermostat')")
+            th = np.asarray(heating_setpoint, float)
+            if th.shape != (N,):
+                raise ValueError(f"heating_setpoint must have shape {(N,)}, got {th.shape}")
+            th = th[:, None]
+        else:
+            th = float(variant)
+        return minimum_airflow_fraction(data.u, bz) * np.maximum(0.0, th - temps)
     if name == "infiltration":
         return data.v[:, [0]] - temps
     if name == "window_solar":

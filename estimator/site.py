@@ -146,6 +146,46 @@ class Experiment(_Strict):
         return self
 
 
+class Thermostat(_Strict):
+    """The zones' thermostat schedule (optional; the diagnosis's scheduled reheat term
+    uses it, docs/diagnosis.md). Set points [degC]; occupied hours are local wall-clock
+    hours [start, end) on the working days (0 = Monday)."""
+    heating_occupied: float = Field(ge=0, le=40)
+    heating_unoccupied: float = Field(ge=0, le=40)
+    cooling_occupied: float | None = Field(None, ge=0, le=50)
+    cooling_unoccupied: float | None = Field(None, ge=0, le=50)
+    occupied_hours: tuple[float, float] = (7.0, 19.0)
+    working_days: list[int] = Field(default_factory=lambda: [0, 1, 2, 3, 4])
+    experiment_heating: float | None = Field(
+        None, ge=0, le=40, description="heating set point during the site's experiments")
+
+    @model_validator(mode="after")
+    def _check(self):
+        h0, h1 = self.occupied_hours
+        if not 0 <= h0 < h1 <= 24:
+            raise ValueError(f"thermostat occupied_hours {self.occupied_hours}: need "
+                             "0 <= start < end <= 24 (local hours)")
+        bad = [d for d in self.working_days if d not in range(7)]
+        if bad:
+            raise ValueError(f"thermostat working_days {bad}: use 0 (Monday) to 6 (Sunday)")
+        return self
+
+    def heating_setpoint(self, times, timezone: str, experiment=None):
+        """Scheduled heating set point at each time [degC], shape (N,); ``experiment``
+        (N,) bool marks rows of experiments (they take ``experiment_heating`` if given)."""
+        import numpy as np
+        import pandas as pd
+        local = pd.DatetimeIndex(times).tz_convert(timezone)
+        hour = np.asarray(local.hour + local.minute / 60.0)
+        h0, h1 = self.occupied_hours
+        occ = np.isin(np.asarray(local.day_of_week), self.working_days) & (hour >= h0) \
+            & (hour < h1)
+        out = np.where(occ, self.heating_occupied, self.heating_unoccupied).astype(float)
+        if experiment is not None and self.experiment_heating is not None:
+            out[np.asarray(experiment, bool)] = self.experiment_heating
+        return out
+
+
 _STEP = re.compile(r"^\s*(\d+)\s*(s|sec|min|h)\s*$")
 
 
@@ -174,6 +214,7 @@ class Site(_Strict):
     boxes : VAV box id -> room served and airflow point.
     points : telemetry columns by role, with units.
     experiments : excitation experiment periods, if any.
+    thermostat : the zones' set point schedule, if known.
     """
 
     schema_version: int = SITE_SCHEMA_VERSION
@@ -186,6 +227,7 @@ class Site(_Strict):
     boxes: dict[str, Box]
     points: Points
     experiments: list[Experiment] = Field(default_factory=list)
+    thermostat: Thermostat | None = None
     base_dir: Path | None = Field(None, exclude=True)
 
     @field_validator("step", mode="before")

@@ -198,7 +198,13 @@ def make_site(cfg: BuildingConfig, experiments: list[tuple[dt.datetime, dt.datet
             "outdoor_air_temperature": {"point": names["oat"], "unit": "degC"},
             "solar": {"global_horizontal": names["ghi"], "direct_normal": names["dni"],
                       "diffuse_horizontal": names["dhi"]}},
-        "experiments": [{"start": s, "end": e} for s, e in experiments]})
+        "experiments": [{"start": s, "end": e} for s, e in experiments],
+        "thermostat": {"heating_occupied": cfg.hvac.heating.occupied,
+                       "heating_unoccupied": cfg.hvac.heating.unoccupied,
+                       "cooling_occupied": cfg.hvac.cooling.occupied,
+                       "cooling_unoccupied": cfg.hvac.cooling.unoccupied,
+                       "occupied_hours": list(cfg.hvac.occupied_hours),
+                       "experiment_heating": cfg.hvac.experiment_heating}})
 
 
 def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Timestamp, pd.Timestamp]],

@@ -317,7 +317,8 @@ def diagnose_cmd(model: Annotated[Path, typer.Option(help="identified-model file
                  reference: Annotated[Path | None, typer.Option(
                      help="diagnosis.json of a period known to be clean (e.g. the weeks the "
                           "model was identified on): its confident effects are added to the "
-                          "base model, so the ranking names what is new")] = None,
+                          "base model and its internal-gains profile is kept, so the ranking "
+                          "names what is new")] = None,
                  seed: Annotated[int, typer.Option(help="seed of the week split")] = 0) -> None:
     """Where the model's error lies, which unmodelled effect causes it and how much adding it
     helps on held-out weeks: writes diagnosis.json, diagnosis.md and plots."""

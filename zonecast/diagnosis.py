@@ -31,19 +31,22 @@ def run(model_path: Path, data_path: Path, out: Path, *, site_path: Path | None 
                          f"{list(bundle.site.zones)}: diagnose the model of this site")
     tel = load_telemetry(data_path / "telemetry.csv" if data_path.is_dir() else data_path, site)
     data = model_data(tel, bundle.model.room_weights())
-    terms = None
+    ref = None
     if reference is not None:
-        from zonecast.estimator.diagnose import reference_terms
+        from zonecast.estimator.diagnose import DiagnosisError, load_reference
         try:
             doc = json.loads(Path(reference).read_text())
         except (OSError, ValueError) as exc:
             raise ValueError(f"reference diagnosis {reference}: {exc}") from None
-        if not isinstance(doc, dict) or "ranked_effects" not in doc:
-            raise ValueError(f"reference diagnosis {reference} has no 'ranked_effects': give "
-                             "a diagnosis.json written by zonecast diagnose")
-        terms = reference_terms(doc["ranked_effects"])
-    res = diagnose(bundle.model, data, seed=seed, gains=gains, reference=terms,
-                   progress=progress)
+        try:
+            ref = load_reference(doc, list(site.zones), site.timezone)
+        except DiagnosisError as exc:
+            raise ValueError(f"reference diagnosis {reference}: {exc}") from None
+    setpoint = None
+    if site.thermostat is not None:
+        setpoint = site.thermostat.heating_setpoint(data.times, site.timezone, data.excitation)
+    res = diagnose(bundle.model, data, seed=seed, gains=gains, reference=ref,
+                   heating_setpoint=setpoint, progress=progress)
     write(res, out, list(site.zones))
     return res
 
@@ -128,7 +131,13 @@ def _write_md(res: Diagnosis, out: Path, figs: list[str]) -> None:
          f"{', '.join(sp['train_starts'])}; held out: {', '.join(sp['validation_starts'])}. "
          f"Internal gains in the base model: {res.gains}. Thresholds: confidence >= "
          f"{CONFIDENCE}, cross-validated score >= {MIN_SCORE}. {res.seconds:.0f} s."), ""]
-    if res.reference:
+    if res.gains == "reference":
+        L += [("Against a reference period: the base model keeps that period's internal-gains "
+               "profile" + ("; its confident effects are added as terms: "
+                            + "; ".join(f"`{t['effect']}` in {', '.join(t['parameters'])}"
+                                        for t in res.reference) if res.reference else "")
+               + ". The ranking below is of what is new."), ""]
+    elif res.reference:
         L += [("Reference terms added to the base model (the confident effects of a diagnosis "
                "of a clean period; the ranking below is of what is new): "
                + "; ".join(f"`{t['effect']}` in {', '.join(t['parameters'])}"

@@ -38,6 +38,11 @@ def test_round_trip_through_yaml(tmp_path, site_dict):
     (lambda d: d.pop("idf"), r"idf: Field required"),
     (lambda d: d["points"]["zone_temperature"].update(
         B=[{"point": "TB", "room": "Room_A1"}]), r"sensor TB sits in room Room_A1"),
+    (lambda d: d.update(thermostat={"heating_occupied": 21, "heating_unoccupied": 17,
+                                    "occupied_hours": [19, 7]}),
+     r"occupied_hours.*need 0 <= start < end <= 24"),
+    (lambda d: d.update(thermostat={"heating_occupied": 21, "heating_unoccupied": 17,
+                                    "working_days": [1, 7]}), r"working_days \[7\]"),
 ])
 def test_invalid_sites_name_the_field(tmp_path, site_dict, mutate, message):
     mutate(site_dict)
@@ -51,3 +56,21 @@ def test_site_error_is_a_value_error(tmp_path):
         load_site(tmp_path / "site.yaml")
     with pytest.raises(SiteError, match="not found"):
         load_site(tmp_path / "missing.yaml")
+
+
+def test_thermostat_schedule_follows_local_time_and_experiments(tmp_path, site_dict):
+    import numpy as np
+    import pandas as pd
+    site_dict["thermostat"] = {"heating_occupied": 21, "heating_unoccupied": 17,
+                               "occupied_hours": [7, 19], "experiment_heating": 10}
+    site = load_site(write_site(tmp_path, site_dict))
+    site.to_yaml(tmp_path / "again.yaml")
+    assert load_site(tmp_path / "again.yaml").thermostat == site.thermostat
+    tz = site.timezone
+    # Friday 06:45, 07:00, 18:45, 19:00 local, then Saturday 10:00 local
+    local = pd.DatetimeIndex(["2015-01-16 06:45", "2015-01-16 07:00", "2015-01-16 18:45",
+                              "2015-01-16 19:00", "2015-01-17 10:00"]).tz_localize(tz)
+    sp = site.thermostat.heating_setpoint(local.tz_convert("UTC"), tz)
+    assert sp.tolist() == [17, 21, 21, 17, 17]
+    exp = np.array([False, True, False, False, False])
+    assert site.thermostat.heating_setpoint(local, tz, exp).tolist() == [17, 10, 21, 17, 17]

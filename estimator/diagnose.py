@@ -67,6 +67,7 @@ __all__ = [
     "Diagnosis",
     "Reference",
     "baseline",
+    "bias_offset_states",
     "diagnose",
     "load_reference",
     "reference_terms",
@@ -296,20 +297,28 @@ def _zone_states(model: BilinearModel, kinds: Sequence[str]) -> list[np.ndarray]
     return out
 
 
+def bias_offset_states(model: BilinearModel, u: np.ndarray) -> np.ndarray:
+    """(n, n_zones) state offset that a unit sensor offset of each zone leaves in a state
+    tracked by paper Eq:ig(k-1): the tracker keeps the zone's modelled air at the offset
+    reading with extra gains, and after long enough the whole state carries the steady
+    response to them, S (C S)^-1 with S = -A(u)^-1 B_IG (``u``: the airflows then)."""
+    S = -np.linalg.solve(model.system_matrix(u), model.B_ig)
+    return S @ np.linalg.inv(model.C @ S)
+
+
 def _bias_response(model: BilinearModel, data: ModelData, base: Baseline, stepper) -> np.ndarray:
-    """A sensor offset θ_j: ȳ_j = C_j x + θ_j. The filter puts the offset into the zone's air
-    states at the issue; the model then relaxes them, so the forecast error is
-    θ_j (1 − C_j x_δ(h)) with x_δ the free response to a unit offset of those air states."""
-    nz, n = model.n_zones, model.n
-    air = _zone_states(model, ("room_air",))
+    """A sensor offset θ_j: ȳ_j = C_j x + θ_j. The gains tracker carries the offset into the
+    state at the issue (:func:`bias_offset_states`); the model then relaxes it, so the
+    forecast error is θ_j (e_j − C x_δ(h)) with x_δ the free response from that offset."""
+    nz = model.n_zones
     out = np.full((len(data), nz, nz), np.nan)
-    for j in range(nz):
-        for _, r, H in _forecast_windows(base):
-            x = np.zeros(n)
-            x[air[j]] = 1.0
+    for _, r, H in _forecast_windows(base):
+        X0 = bias_offset_states(model, data.u[r])
+        for j in range(nz):
+            x = X0[:, j].copy()
             for h in range(H):
                 k = r + h
-                x = stepper.step(x, data.u[k], np.zeros(n), 0.0)
+                x = stepper.step(x, data.u[k], np.zeros(model.n), 0.0)
                 col = -(model.C @ x)
                 col[j] += 1.0
                 out[k + 1, :, j] = col

@@ -46,6 +46,10 @@ SCENARIOS = [
     ("bias_S_+0.4_s2", 2, ["--set", "bias.S=0.4"], "sensor_bias"),
     ("shgc_0.7_s0", 0, ["--set", "shgc=0.7"], "window_solar"),
     ("shgc_0.15_s1", 1, ["--set", "shgc=0.15"], "window_solar"),
+    ("supply_offset_+1.0_s1", 1, ["--set", "supply_offset=1.0"], "supply_offset"),
+    ("supply_offset_-1.5_s2", 2, ["--set", "supply_offset=-1.5"], "supply_offset"),
+    ("gains_C_x1.5_s0", 0, ["--set", "gains.C=1.5"], "occupancy_gains"),
+    ("gains_E_x0.5_s3", 3, ["--set", "gains.E=0.5"], "occupancy_gains"),
 ]
 
 

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-EFFECTS = ("reheat", "infiltration", "gains", "window_solar", "sensor_noise", "sensor_bias")
+EFFECTS = ("reheat", "infiltration", "gains", "window_solar", "sensor_noise", "sensor_bias",
+           "supply_offset")
 
 
 class Effects(BaseModel):
@@ -24,6 +25,8 @@ class Effects(BaseModel):
     sensor_resolution : temperature sensor resolution [degC] (readings are rounded).
     sensor_bias : per model zone additive temperature sensor bias [degC].
     airflow_noise : relative standard deviation of box airflow readings [-].
+    supply_offset : the supply air reaching the boxes is this much warmer than the AHU
+        supply temperature sensor reads (the sensor reads true minus it) [degC].
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -35,6 +38,7 @@ class Effects(BaseModel):
     sensor_resolution: float = Field(0.1, ge=0)
     sensor_bias: dict[str, float] = Field(default_factory=dict)
     airflow_noise: float = Field(0.0, ge=0)
+    supply_offset: float = Field(0.0, ge=-5, le=5)
 
     def gain_scale(self, zone: str) -> float:
         return self.gains.get(zone, 1.0)
@@ -51,7 +55,7 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
     """Turn ``--disable EFFECT`` and ``--set EFFECT=VALUE`` options into :class:`Effects`.
 
     ``EFFECT`` is one of reheat, infiltration, gains[.ZONE], window_solar,
-    sensor_noise, sensor_bias; ``--set`` also takes shgc, sensor_resolution,
+    sensor_noise, sensor_bias, supply_offset; ``--set`` also takes shgc, sensor_resolution,
     airflow_noise and bias.ZONE.
     """
     data: dict = {"gains": {}, "sensor_bias": {}}
@@ -78,6 +82,8 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
             data["sensor_resolution"] = 0.0
         elif item == "sensor_bias":
             data["sensor_bias"] = {}
+        elif item == "supply_offset":
+            data["supply_offset"] = 0.0
         else:
             raise ValueError(f"--disable {item}: unknown effect; choose from {list(EFFECTS)} "
                              f"or gains.ZONE")
@@ -85,7 +91,8 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
         if "=" not in item:
             raise ValueError(f"--set {item}: write EFFECT=VALUE, e.g. infiltration=2.0")
         key, value = item.split("=", 1)
-        if key in ("infiltration", "shgc", "sensor_noise", "sensor_resolution", "airflow_noise"):
+        if key in ("infiltration", "shgc", "sensor_noise", "sensor_resolution", "airflow_noise",
+                   "supply_offset"):
             data[key] = _num(key, value)
         elif key == "reheat":
             data["reheat"] = value.lower() in ("1", "true", "on", "yes")
@@ -95,6 +102,6 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
             data["sensor_bias"][zone_of(key)] = _num(key, value)
         else:
             raise ValueError(f"--set {key}: unknown setting; choose from infiltration, shgc, "
-                             "sensor_noise, sensor_resolution, airflow_noise, reheat, "
-                             "gains.ZONE, bias.ZONE")
+                             "sensor_noise, sensor_resolution, airflow_noise, supply_offset, "
+                             "reheat, gains.ZONE, bias.ZONE")
     return Effects.model_validate(data)

@@ -254,7 +254,9 @@ def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Time
         tru[f"window_solar:{r}"] = sum((iv[f"{w}|Surface Window Transmitted Solar Radiation Rate"]
                                         .to_numpy() for w in wins), np.zeros(len(index)))
         tru[f"reheat:{box_name(r)}"] = _opt(iv, f"{r} Reheat Coil", "Heating Coil Heating Rate")
-    tel[names["sat"]] = _col(iv, ahu_outlet_node(), "System Node Temperature")
+    # the AHU sensor reads the supply supply_offset low of what reaches the boxes
+    tel[names["sat"]] = _col(iv, ahu_outlet_node(), "System Node Temperature") \
+        - effects.supply_offset
     tel[names["oat"]] = _col(iv, "Environment", "Site Outdoor Air Drybulb Temperature")
     dni = _col(iv, "Environment", "Site Direct Solar Radiation Rate per Area")
     dhi = _col(iv, "Environment", "Site Diffuse Solar Radiation Rate per Area")

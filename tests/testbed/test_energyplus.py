@@ -132,6 +132,11 @@ def test_sensor_switches(base):
     for r, room in CFG.rooms.items():
         offset = 0.5 if room.zone == "NW" else 0.0
         np.testing.assert_allclose(tel[f"T_{r}"] - tru[f"air_temperature:{r}"], offset, atol=1e-12)
+    # the AHU supply sensor reading the air at the boxes 1.5 degC low
+    low, _ = to_records(CFG, base.raw, base.keep, clean.model_copy(update={"supply_offset": 1.5}),
+                        seed=7)
+    np.testing.assert_allclose(tel["AHU_SAT"] - low["AHU_SAT"], 1.5, atol=1e-12)
+    assert (low.drop(columns="AHU_SAT") == tel.drop(columns="AHU_SAT")).all().all()
     noisy = base.telemetry[[f"T_{r}" for r in CFG.rooms]].to_numpy()
     true = base.truth[[f"air_temperature:{r}" for r in CFG.rooms]].to_numpy()
     np.testing.assert_allclose(noisy * 10, np.round(noisy * 10), atol=1e-9)  # 0.1 degC resolution

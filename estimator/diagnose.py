@@ -62,6 +62,7 @@ from .model import BilinearModel
 __all__ = [
     "CONFIDENCE",
     "MIN_SCORE",
+    "TIE_CONFIDENCE",
     "Baseline",
     "Candidate",
     "Diagnosis",
@@ -81,6 +82,9 @@ __all__ = [
 #: reach these (set before the blind benchmark was run; docs/diagnosis.md)
 CONFIDENCE = 0.99
 MIN_SCORE = 0.02
+#: two confident effects are tied when the better one's per-day reductions exceed the
+#: other's with less than this one-sided confidence (then the simpler one ranks first)
+TIE_CONFIDENCE = 0.95
 #: relative capacity step of the thermal-mass finite difference
 MASS_STEP = 0.1
 #: state kinds whose capacity the thermal-mass effect scales
@@ -371,6 +375,13 @@ class Candidate:
     #: the same variant fitted in every zone (for a confident effect): what a reference
     #: period hands on (:func:`reference_terms`)
     parameters_all_zones: dict[str, float] = field(default_factory=dict)
+    #: number of fitted parameters (zones, or 1 for a system-wide effect)
+    n_params: int = 1
+    #: effects ranked below this one that explain the training residuals as well (paired
+    #: test of the per-day reductions not significant, :data:`TIE_CONFIDENCE`)
+    tied_with: list[str] = field(default_factory=list)
+    #: per-day SSE reductions under leave-one-week-out fits (training days, fixed order)
+    day_reductions: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def confident(self) -> bool:
@@ -384,7 +395,9 @@ class Candidate:
                 "confident": self.confident, "n_days": self.n_days,
                 "heldout_rms_before": self.heldout_rms_before,
                 "heldout_rms_after": self.heldout_rms_after,
-                "parameters_all_zones": self.parameters_all_zones}
+                "parameters_all_zones": self.parameters_all_zones,
+                "n_params": self.n_params, "scope": spec.scope,
+                "statistically_tied_with": self.tied_with}
 
 
 def _fit(S: np.ndarray, r: np.ndarray, sign: int) -> np.ndarray:
@@ -444,8 +457,12 @@ def _evaluate(base: Baseline, data: ModelData, sens: np.ndarray, resid: np.ndarr
         conf = 0.0
     S, r = _flat(base, sens, resid, base.rows_of(train), cols)
     theta = _fit(S, r, spec.sign)
+    if sens.shape[2] == 1 and len(zones) > 1:  # a system-wide effect's summed column
+        return Candidate(effect, variant, list(zones), {z: float(theta[0]) for z in zones},
+                         score, conf, len(red), n_params=1, day_reductions=red)
     return Candidate(effect, variant, [zones[c] for c in cols],
-                     {zones[c]: float(t) for c, t in zip(cols, theta)}, score, conf, len(red))
+                     {zones[c]: float(t) for c, t in zip(cols, theta)}, score, conf, len(red),
+                     n_params=len(cols), day_reductions=red)
 
 
 def score_candidates(base: Baseline, data: ModelData, sens: dict, zones: Sequence[str],
@@ -454,6 +471,15 @@ def score_candidates(base: Baseline, data: ModelData, sens: dict, zones: Sequenc
     resid = data.y - base.pred if resid is None else resid
     out: dict[str, dict[str, Candidate]] = {}
     for (effect, variant), s in sens.items():
+        if SPECS[effect].scope == "system":
+            # one parameter for every zone: the zones' responses to a common θ summed
+            c = _evaluate(base, data, s.sum(axis=2, keepdims=True), resid, effect, variant,
+                          [0], zones)
+            for z in zones:
+                best = out.setdefault(effect, {}).get(z)
+                if best is None or c.score > best.score:
+                    out[effect][z] = c
+            continue
         for j, z in enumerate(zones):
             c = _evaluate(base, data, s, resid, effect, variant, [j], zones)
             best = out.setdefault(effect, {}).get(z)
@@ -472,6 +498,32 @@ def _heldout(base: Baseline, data: ModelData, sens: np.ndarray, resid: np.ndarra
     cand.heldout_rms_before = _rms(before, zones)
     cand.heldout_rms_after = _rms(after, zones)
     return cand
+
+
+def _rank(cands: list[Candidate]) -> list[Candidate]:
+    """Confident effects first, by score; then, among the confident effects that explain
+    the training residuals as well as the best one (paired one-sided t-test of their
+    per-day reductions below :data:`TIE_CONFIDENCE`), the one with the fewest parameters
+    comes first (parsimony: e.g. one system-wide supply offset against six zone sensor
+    offsets that mimic it). ``tied_with`` of the first names the others of that group."""
+    ranked = sorted(cands, key=lambda c: (c.confident, c.score), reverse=True)
+    if not ranked or not ranked[0].confident:
+        return ranked
+    best = ranked[0]
+    tied = [best]
+    for c in ranked[1:]:
+        if not c.confident or c.day_reductions is None or best.day_reductions is None:
+            continue
+        d = best.day_reductions - c.day_reductions
+        if len(d) > 1 and d.std(ddof=1) > 0:
+            conf = float(stats.t.cdf(d.mean() / (d.std(ddof=1) / np.sqrt(len(d))), len(d) - 1))
+        else:
+            conf = 0.0
+        if conf < TIE_CONFIDENCE:
+            tied.append(c)
+    first = min(tied, key=lambda c: (c.n_params, -c.score))
+    first.tied_with = [c.effect for c in tied if c is not first]
+    return [first] + [c for c in ranked if c is not first]
 
 
 # --------------------------------------------------------------------------- where
@@ -730,7 +782,11 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
     ranked = []
     for effect, by_zone in per.items():
         conf_zones = [z for z, c in by_zone.items() if c.confident]
-        if not conf_zones:
+        if SPECS[effect].scope == "system":
+            cand = dataclasses.replace(by_zone[zones[0]])
+            if cand.confident:
+                cand.parameters_all_zones = dict(cand.parameters)
+        elif not conf_zones:
             best = max(by_zone.values(), key=lambda c: c.score)
             cand = dataclasses.replace(best)
         else:
@@ -744,7 +800,7 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
             cand.parameters_all_zones = {
                 z: float(t) for z, t in zip(zones, _fit(S, r, SPECS[effect].sign))}
         ranked.append(_heldout(base, data, sens[(effect, cand.variant)], resid, cand, zones))
-    ranked.sort(key=lambda c: (c.confident, c.score), reverse=True)
+    ranked = _rank(ranked)
     per_zone = {z: sorted((per[e][z] for e in per), key=lambda c: c.score, reverse=True)
                 for z in zones}
     return Diagnosis(wh, ranked, per_zone, base.split, base.gains, time.perf_counter() - t0,

@@ -1,7 +1,7 @@
 """Candidate unmodelled effects for the sim-to-real diagnosis (``zonecast diagnose``).
 
 Each effect is a physically meaningful term the paper's 13-parameter model lacks, with one
-parameter per model zone:
+parameter per model zone (``supply_offset``: one for the whole system):
 
 ========================  ==========  ====================================================
 name                      parameter   extra term in zone z
@@ -19,7 +19,8 @@ name                      parameter   extra term in zone z
                                       :data:`SOLAR_LAGS`
 ``occupancy_gains``       W/m2        heat q = θ · a_floor,z · 1[workday, 08:00–18:00 local]
 ``supply_offset``         K           heat q = θ · c_p · Σ_{boxes of z} u_j (supply air at the
-                                      boxes θ warmer than the AHU sensor reads)
+                                      boxes θ warmer than the AHU sensor reads); one θ for
+                                      all zones: the site has one supply temperature point
 ``interzone_air``         W/K         heat q = θ · Σ_{n adjacent to z} (T_n − T_z)
 ``sensor_bias``           K           measured ȳ_z = C_z x + θ (output equation)
 ``thermal_mass``          -           capacity of the zone's room air and internal mass
@@ -84,6 +85,8 @@ class EffectSpec:
     sign : +1 when only a non-negative parameter is physical, 0 when either sign is
     variants : hyper-parameter values searched (setpoint, lag), ``(None,)`` if none
     description : one line for reports
+    scope : ``"zone"`` (one parameter per zone) or ``"system"`` (one parameter shared by
+        every zone: the effect belongs to equipment common to all of them)
     """
 
     name: str
@@ -92,6 +95,7 @@ class EffectSpec:
     sign: int
     variants: tuple
     description: str
+    scope: str = "zone"
 
 
 SPECS: dict[str, EffectSpec] = {s.name: s for s in (
@@ -104,7 +108,8 @@ SPECS: dict[str, EffectSpec] = {s.name: s for s in (
     EffectSpec("occupancy_gains", "heat", "W/m2", 0, (None,),
                "a gain on workdays 08:00-18:00 local (office occupancy)"),
     EffectSpec("supply_offset", "heat", "K", 0, (None,),
-               "supply air at the boxes warmer or colder than the AHU sensor reads"),
+               "supply air at the boxes warmer or colder than the AHU sensor reads",
+               scope="system"),
     EffectSpec("interzone_air", "heat", "W/K", +1, (None,),
                "air exchanged with adjacent zones (open doors, transfer grilles)"),
     EffectSpec("sensor_bias", "output", "K", 0, (None,),

@@ -151,6 +151,14 @@ def _write_md(res: Diagnosis, out: Path, figs: list[str]) -> None:
         L += [(f"**Top attribution: `{top.effect}` in {', '.join(top.zones)}** "
               f"(score {top.score:.3f}, confidence {top.confidence:.3f}); held-out mean RMS "
               f"{top.heldout_rms_before['mean']:.3f} -> {top.heldout_rms_after['mean']:.3f} K."), ""]
+        if top.tied_with:
+            L += [(f"`{top.effect}` ({top.n_params} parameter{'s' if top.n_params > 1 else ''}) "
+                   "explains the training residuals as well as "
+                   + ", ".join(f"`{e}`" for e in top.tied_with)
+                   + " (paired test of the per-day reductions not significant): these data do "
+                   "not separate them; it is ranked first as the explanation with the fewest "
+                   "parameters. Check it on site (e.g. a reference thermometer, or the "
+                   "sensor against the air at the boxes)."), ""]
         helped = [c for c in conf if c.heldout_rms_after["mean"] < c.heldout_rms_before["mean"]]
         if not helped:
             L += [("No confident candidate lowers the held-out RMS: the attribution does not "

@@ -103,6 +103,8 @@ def _case(effect, model, inputs):
     at_min = minimum_airflow_fraction(u, box_zone_matrix(model))
     adj = adjacent_zones(model)
 
+    system = SPECS[effect].scope == "system"  # e.g. the AHU's supply offset: every zone
+
     def extra(k, yk):  # the regressors of effects.heat_regressor at the simulated temperatures
         if effect == "reheat":
             q = at_min[k] * np.maximum(0.0, variant - yk)
@@ -113,6 +115,8 @@ def _case(effect, model, inputs):
         else:
             q = Q[k]
         out = np.zeros(5)
+        if system:
+            return theta * q
         out[ZONE] = theta * q[ZONE]
         return out
 
@@ -137,6 +141,8 @@ def test_effect_simulated_by_the_model_is_found_and_recovered(effect, model, inp
     assert top.effect == effect, [(c.effect, c.zones, round(c.score, 3)) for c in res.ranked]
     assert list(ZONES)[ZONE] in top.zones
     assert top.confident
+    if SPECS[effect].scope == "system":
+        assert top.zones == list(ZONES) and top.n_params == 1
     est = top.parameters[list(ZONES)[ZONE]]
     assert est == pytest.approx(theta, rel=0.35), (effect, est, theta)
     assert top.heldout_rms_after["mean"] < top.heldout_rms_before["mean"]
@@ -298,3 +304,26 @@ def test_bias_offset_states_hold_exactly_the_offset_zone(model, inputs):
     g = np.linalg.lstsq(model.B_ig, -model.system_matrix(u[0]) @ X0, rcond=None)[0]
     np.testing.assert_allclose(model.system_matrix(u[0]) @ X0 + model.B_ig @ g, 0, atol=1e-9)
     assert (X0[np.abs(X0).sum(axis=1) > 0] != 0).any() and (X0 >= -1e-12).all()
+
+
+def test_ties_go_to_the_explanation_with_fewer_parameters():
+    """A confident effect that is not significantly better than a simpler one (paired test
+    of per-day reductions) yields the first rank to it; a significantly better one keeps
+    it."""
+    from zonecast.estimator.diagnose import Candidate, _rank
+    rng = np.random.default_rng(1)
+    base = rng.uniform(1.0, 2.0, 60)
+
+    def cand(effect, red, n, score):
+        return Candidate(effect, None, ["a"] * n, {}, score, 1.0, len(red), n_params=n,
+                         day_reductions=red)
+
+    six = cand("sensor_bias", base + rng.normal(0, 0.05, 60), 6, 0.724)
+    one = cand("supply_offset", base + rng.normal(0, 0.05, 60), 1, 0.720)
+    weak = cand("reheat", 0.3 * base, 1, 0.2)
+    ranked = _rank([weak, six, one])
+    assert [c.effect for c in ranked] == ["supply_offset", "sensor_bias", "reheat"]
+    assert ranked[0].tied_with == ["sensor_bias"]
+    better = cand("sensor_bias", base + 0.5, 6, 0.9)
+    ranked = _rank([one, better, weak])
+    assert ranked[0].effect == "sensor_bias" and ranked[0].tied_with == []

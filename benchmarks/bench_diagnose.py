@@ -50,6 +50,15 @@ SCENARIOS = [
     ("supply_offset_-1.5_s2", 2, ["--set", "supply_offset=-1.5"], "supply_offset"),
     ("gains_C_x1.5_s0", 0, ["--set", "gains.C=1.5"], "occupancy_gains"),
     ("gains_E_x0.5_s3", 3, ["--set", "gains.E=0.5"], "occupancy_gains"),
+    # added after the method was frozen (2026-11-23) and run once: new seeds, zones, sizes
+    ("reheat_s3", 3, ["reheat"], "reheat"),
+    ("infiltration_x1.5_s3", 3, ["--set", "infiltration=1.5"], "infiltration"),
+    ("bias_C_-0.4_s3", 3, ["--set", "bias.C=-0.4"], "sensor_bias"),
+    ("bias_E_+0.3_s1", 1, ["--set", "bias.E=0.3"], "sensor_bias"),
+    ("shgc_0.55_s2", 2, ["--set", "shgc=0.55"], "window_solar"),
+    ("supply_offset_+0.6_s0", 0, ["--set", "supply_offset=0.6"], "supply_offset"),
+    ("gains_NW_x1.3_s1", 1, ["--set", "gains.NW=1.3"], "occupancy_gains"),
+    ("control_s4", 4, [], None),
 ]
 
 
@@ -84,6 +93,7 @@ def _one(zc: str, root: Path, item, absolute: bool) -> dict:
     conf = [c for c in res.ranked if c.confident]
     row = {"scenario": name, "seed": seed, "truth": truth, "top": top.effect,
            "top_zones": top.zones, "top_variant": top.variant, "top_confident": top.confident,
+           "top_tied_with": top.tied_with,
            "top_score": top.score, "top_confidence": top.confidence,
            "confident_effects": [c.effect for c in conf],
            "truth_rank": next((i + 1 for i, c in enumerate(res.ranked)
@@ -103,6 +113,38 @@ def _one(zc: str, root: Path, item, absolute: bool) -> dict:
           f"->{top.heldout_rms_after['mean']:.3f} diag {t_diag:.0f}s {'OK' if ok else 'MISS'}",
           flush=True)
     return row
+
+
+def _markdown(rows: list[dict], hits: int, n_scen: int, clean: int, n_ctrl: int,
+              absolute: bool = False) -> str:
+    """The scenario table and the confusion table as Markdown (docs/diagnosis.md)."""
+    L = [("| scenario | true effect | top-ranked (zones) | score | tied with | confident "
+          "effects | rank of the true effect | held-out RMS, true effect added [K] | pass |"),
+         "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        truth = r["truth"]
+        ok = (r["top"] == truth) if truth else not r["confident_effects"]
+        if r["scenario"] == "control_s0" and not absolute:
+            ok_s = "reference"
+        else:
+            ok_s = "yes" if ok else "no"
+        zones = ", ".join(r["top_zones"]) if len(r["top_zones"]) < 6 else "all"
+        held = (f"{r['truth_heldout_before']:.3f} → {r['truth_heldout_after']:.3f}"
+                if truth else "–")
+        L.append(f"| {r['scenario']} | {truth or 'control'} | {r['top']} ({zones}) | "
+                 f"{r['top_score']:.3f} | {', '.join(r.get('top_tied_with', [])) or '–'} | "
+                 f"{', '.join(r['confident_effects']) or 'none'} | {r['truth_rank'] or '–'} | "
+                 f"{held} | {ok_s} |")
+    scen = [r for r in rows if r["truth"]]
+    effects = sorted({r["truth"] for r in scen})
+    tops = sorted({r["top"] for r in scen})
+    L += ["", (f"True effect ranked first: **{hits} of {n_scen}**; controls without a "
+               f"confident attribution: **{clean} of {n_ctrl}**."), "",
+          "| true \\ top | " + " | ".join(tops) + " |", "|---" * (len(tops) + 1) + "|"]
+    for e in effects:
+        L.append(f"| {e} | " + " | ".join(str(sum(r["top"] == t for r in scen
+                                                   if r["truth"] == e)) for t in tops) + " |")
+    return "\n".join(L) + "\n"
 
 
 def main() -> int:
@@ -153,6 +195,8 @@ def main() -> int:
     for e in effects:
         print(f"{e:14s}" + " ".join(f"{sum(r['top'] == t for r in scen if r['truth'] == e):12d}"
                                     for t in tops))
+    (root / "bench_diagnose.md").write_text(_markdown(rows, hits, len(scen), clean, len(ctrl),
+                                                          args.absolute))
     (root / "bench_diagnose.json").write_text(json.dumps(
         {"rows": rows, "hits": hits, "n_scenarios": len(scen), "clean_controls": clean,
          "n_controls": len(ctrl)}, indent=1))

@@ -21,8 +21,10 @@ Pipeline (docs/diagnosis.md has the method and the measured numbers):
    training weeks' residuals; its score is the share of the training sum of squares it
    removes under leave-one-week-out cross-validation, its confidence a one-sided t-test over
    the per-day reductions (days are roughly independent; 15-min residuals are not).
-5. :func:`diagnose` — effects ranked by score; each with its confident zones refitted on
-   all training weeks and scored on the held-out weeks, which no step above has read.
+5. :func:`diagnose` — effects ranked by score (ties between confident effects to the one
+   with fewer parameters, :func:`_rank`); each with its confident zones refitted on all
+   training weeks and scored on the held-out weeks, which no step above has read. With a
+   :class:`Reference` the base keeps the reference period's profile and adds its effects.
 """
 
 from __future__ import annotations

@@ -59,6 +59,9 @@ SCENARIOS = [
     ("supply_offset_+0.6_s0", 0, ["--set", "supply_offset=0.6"], "supply_offset"),
     ("gains_NW_x1.3_s1", 1, ["--set", "gains.NW=1.3"], "occupancy_gains"),
     ("control_s4", 4, [], None),
+    # thermal mass (testbed switch added after the method was frozen; run once)
+    ("mass_S_x3_s1", 1, ["--set", "mass.S=3"], "thermal_mass"),
+    ("mass_E_x4_s2", 2, ["--set", "mass.E=4"], "thermal_mass"),
 ]
 
 

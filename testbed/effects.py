@@ -27,6 +27,7 @@ class Effects(BaseModel):
     airflow_noise : relative standard deviation of box airflow readings [-].
     supply_offset : the supply air reaching the boxes is this much warmer than the AHU
         supply temperature sensor reads (the sensor reads true minus it) [degC].
+    mass : per model zone scale of the furniture (internal mass) area [-].
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -39,9 +40,13 @@ class Effects(BaseModel):
     sensor_bias: dict[str, float] = Field(default_factory=dict)
     airflow_noise: float = Field(0.0, ge=0)
     supply_offset: float = Field(0.0, ge=-5, le=5)
+    mass: dict[str, float] = Field(default_factory=dict)
 
     def gain_scale(self, zone: str) -> float:
         return self.gains.get(zone, 1.0)
+
+    def mass_scale(self, zone: str) -> float:
+        return self.mass.get(zone, 1.0)
 
 
 def _num(key: str, value: str) -> float:
@@ -56,9 +61,9 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
 
     ``EFFECT`` is one of reheat, infiltration, gains[.ZONE], window_solar,
     sensor_noise, sensor_bias, supply_offset; ``--set`` also takes shgc, sensor_resolution,
-    airflow_noise and bias.ZONE.
+    airflow_noise, bias.ZONE and mass.ZONE.
     """
-    data: dict = {"gains": {}, "sensor_bias": {}}
+    data: dict = {"gains": {}, "sensor_bias": {}, "mass": {}}
 
     def zone_of(key: str) -> str:
         zone = key.split(".", 1)[1]
@@ -100,8 +105,13 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
             data["gains"][zone_of(key)] = _num(key, value)
         elif key.startswith("bias."):
             data["sensor_bias"][zone_of(key)] = _num(key, value)
+        elif key.startswith("mass."):
+            scale = _num(key, value)
+            if not scale > 0:
+                raise ValueError(f"--set {key}={value}: the furniture area scale must be > 0")
+            data["mass"][zone_of(key)] = scale
         else:
             raise ValueError(f"--set {key}: unknown setting; choose from infiltration, shgc, "
                              "sensor_noise, sensor_resolution, airflow_noise, supply_offset, "
-                             "reheat, gains.ZONE, bias.ZONE")
+                             "reheat, gains.ZONE, bias.ZONE, mass.ZONE")
     return Effects.model_validate(data)

@@ -144,7 +144,7 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
         add(obj("ElectricEquipment", f"{rname} Equipment", rname, f"sch:equip:{rname}",
                 "Watts/Area", "", kind.equipment_w_m2 * scale, "", 0.0, 0.3, 0.0))
         add(obj("InternalMass", f"{rname} Furniture", "furniture", rname, "",
-                cfg.furniture_area_per_floor_area * area))
+                cfg.furniture_area_per_floor_area * area * effects.mass_scale(room.zone)))
         if any(w.neighbour is None for w in walls[rname].walls) and effects.infiltration > 0:
             add(obj("ZoneInfiltration:DesignFlowRate", f"{rname} Infiltration", rname, "AlwaysOn",
                     "Flow/ExteriorArea", "", "", cfg.infiltration_m3s_per_m2_facade

@@ -13,6 +13,8 @@ def test_switches_parse():
     assert parse_switches(["gains"], None, ZONES).gains == {z: 0.0 for z in ZONES}
     assert parse_switches(None, ["supply_offset=-1.5"], ZONES).supply_offset == -1.5
     assert parse_switches(["supply_offset"], None, ZONES).supply_offset == 0.0
+    e = parse_switches(None, ["mass.S=3"], ZONES)
+    assert e.mass == {"S": 3.0} and e.mass_scale("S") == 3.0 and e.mass_scale("NW") == 1.0
 
 
 @pytest.mark.parametrize("disable, set_, message", [
@@ -23,7 +25,31 @@ def test_switches_parse():
     (None, ["colour=red"], r"--set colour: unknown setting"),
     (None, ["shgc=1.5"], r"less than 1"),
     (None, ["supply_offset=9"], r"less than or equal to 5"),
+    (None, ["mass.S=0"], r"furniture area scale must be > 0"),
 ])
 def test_bad_switches_say_what_to_fix(disable, set_, message):
     with pytest.raises(ValueError, match=message):
         parse_switches(disable, set_, ZONES)
+
+
+def test_mass_switch_scales_the_furniture_of_its_zone_only():
+    import datetime as dt
+    import re
+
+    from zonecast.testbed.config import load_config
+    from zonecast.testbed.effects import Effects
+    from zonecast.testbed.idfgen import build_idf
+
+    cfg = load_config()
+    period = [(dt.date(2015, 4, 13), dt.date(2015, 4, 19))]
+
+    def furniture(effects):
+        text = build_idf(cfg, period, effects, ["htg", "clg"])
+        found = re.findall(r"InternalMass,\s*(\S+) Furniture,[^;]*?,\s*([\d.eE+-]+);", text)
+        return {room: float(a) for room, a in found}
+
+    base = furniture(Effects())
+    more = furniture(Effects(mass={"S": 3.0}))
+    assert base and set(base) == set(more)
+    for room, area in base.items():
+        assert more[room] == pytest.approx(area * (3.0 if cfg.rooms[room].zone == "S" else 1.0))

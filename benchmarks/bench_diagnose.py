@@ -62,6 +62,9 @@ SCENARIOS = [
     # thermal mass (testbed switch added after the method was frozen; run once)
     ("mass_S_x3_s1", 1, ["--set", "mass.S=3"], "thermal_mass"),
     ("mass_E_x4_s2", 2, ["--set", "mass.E=4"], "thermal_mass"),
+    # air exchanged with neighbouring zones (switch added after the freeze; run once)
+    ("mixing_S_0.1_s1", 1, ["--set", "mixing.S=0.1"], "interzone_air"),
+    ("mixing_NE_0.05_s3", 3, ["--set", "mixing.NE=0.05"], "interzone_air"),
 ]
 
 

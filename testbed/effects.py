@@ -28,6 +28,8 @@ class Effects(BaseModel):
     supply_offset : the supply air reaching the boxes is this much warmer than the AHU
         supply temperature sensor reads (the sensor reads true minus it) [degC].
     mass : per model zone scale of the furniture (internal mass) area [-].
+    mixing : per model zone air flow exchanged both ways between each of its rooms and
+        each neighbouring room of another zone (open doors, transfer grilles) [m3/s].
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -41,6 +43,7 @@ class Effects(BaseModel):
     airflow_noise: float = Field(0.0, ge=0)
     supply_offset: float = Field(0.0, ge=-5, le=5)
     mass: dict[str, float] = Field(default_factory=dict)
+    mixing: dict[str, float] = Field(default_factory=dict)
 
     def gain_scale(self, zone: str) -> float:
         return self.gains.get(zone, 1.0)
@@ -61,9 +64,9 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
 
     ``EFFECT`` is one of reheat, infiltration, gains[.ZONE], window_solar,
     sensor_noise, sensor_bias, supply_offset; ``--set`` also takes shgc, sensor_resolution,
-    airflow_noise, bias.ZONE and mass.ZONE.
+    airflow_noise, bias.ZONE, mass.ZONE and mixing.ZONE.
     """
-    data: dict = {"gains": {}, "sensor_bias": {}, "mass": {}}
+    data: dict = {"gains": {}, "sensor_bias": {}, "mass": {}, "mixing": {}}
 
     def zone_of(key: str) -> str:
         zone = key.split(".", 1)[1]
@@ -110,8 +113,13 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
             if not scale > 0:
                 raise ValueError(f"--set {key}={value}: the furniture area scale must be > 0")
             data["mass"][zone_of(key)] = scale
+        elif key.startswith("mixing."):
+            flow = _num(key, value)
+            if not flow >= 0:
+                raise ValueError(f"--set {key}={value}: the mixing flow must be >= 0 [m3/s]")
+            data["mixing"][zone_of(key)] = flow
         else:
             raise ValueError(f"--set {key}: unknown setting; choose from infiltration, shgc, "
                              "sensor_noise, sensor_resolution, airflow_noise, supply_offset, "
-                             "reheat, gains.ZONE, bias.ZONE, mass.ZONE")
+                             "reheat, gains.ZONE, bias.ZONE, mass.ZONE, mixing.ZONE")
     return Effects.model_validate(data)

@@ -155,6 +155,18 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
         add(obj("HVACTemplate:Zone:VAV", rname, "AHU", "Thermostat", flow, "", "", "Scheduled",
                 "", "", f"sch:minflow:{rname}", "Flow/Person", 0.00944, "", "", "Electric",
                 "AlwaysOn" if effects.reheat else "AlwaysOff", "Reverse", "", "", 35.0))
+    # air exchanged both ways with neighbours of other zones (effect switch mixing.ZONE)
+    pairs: dict[tuple[str, str], float] = {}
+    for rname, room in cfg.rooms.items():
+        flow = effects.mixing.get(room.zone, 0.0)
+        for w in walls[rname].walls:
+            n = w.neighbour
+            if flow > 0 and n is not None and cfg.rooms[n].zone != room.zone:
+                key = tuple(sorted((rname, n)))
+                pairs[key] = max(pairs.get(key, 0.0), flow)
+    for (a, b), flow in sorted(pairs.items()):
+        add(obj("ZoneCrossMixing", f"{a} {b} Mixing", a, "AlwaysOn", "Flow/Zone", flow, "", "",
+                "", b, 0.0))
     add(obj("HVACTemplate:Thermostat", "Thermostat", "sch:htg", "", "sch:clg", ""))
     add(obj("HVACTemplate:System:VAV", "AHU", "AlwaysOn", "autosize", "autosize", 0.7, 1000.0,
             0.9, 1.0, "ChilledWater", "AlwaysOn", "", cfg.hvac.supply_setpoint, "Electric",

@@ -26,6 +26,7 @@ def test_switches_parse():
     (None, ["shgc=1.5"], r"less than 1"),
     (None, ["supply_offset=9"], r"less than or equal to 5"),
     (None, ["mass.S=0"], r"furniture area scale must be > 0"),
+    (None, ["mixing.S=-1"], r"mixing flow must be >= 0"),
 ])
 def test_bad_switches_say_what_to_fix(disable, set_, message):
     with pytest.raises(ValueError, match=message):
@@ -53,3 +54,27 @@ def test_mass_switch_scales_the_furniture_of_its_zone_only():
     assert base and set(base) == set(more)
     for room, area in base.items():
         assert more[room] == pytest.approx(area * (3.0 if cfg.rooms[room].zone == "S" else 1.0))
+
+
+def test_mixing_switch_joins_its_zone_to_neighbours_of_other_zones_once():
+    import datetime as dt
+    import re
+
+    from zonecast.testbed.config import load_config
+    from zonecast.testbed.effects import Effects
+    from zonecast.testbed.geometry import plan_walls
+    from zonecast.testbed.idfgen import build_idf
+
+    cfg = load_config()
+    period = [(dt.date(2015, 4, 13), dt.date(2015, 4, 19))]
+    assert "ZoneCrossMixing" not in build_idf(cfg, period, Effects(), ["htg", "clg"])
+    text = build_idf(cfg, period, Effects(mixing={"S": 0.05}), ["htg", "clg"])
+    found = re.findall(r"ZoneCrossMixing,\s*[^,]+,\s*([^,]+),\s*AlwaysOn,\s*Flow/Zone,"
+                       r"\s*([\d.]+),[^;]*?,\s*([A-Za-z0-9_]+),\s*0(?:\.0)?;", text)
+    pairs = {tuple(sorted((a, b))) for a, _, b in found}
+    assert len(pairs) == len(found) > 0 and all(float(q) == 0.05 for _, q, _ in found)
+    walls = plan_walls({n: r.rect for n, r in cfg.rooms.items()})
+    expected = {tuple(sorted((r, w.neighbour))) for r, room in cfg.rooms.items()
+                if room.zone == "S" for w in walls[r].walls
+                if w.neighbour is not None and cfg.rooms[w.neighbour].zone != "S"}
+    assert pairs == expected

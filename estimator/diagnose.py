@@ -459,7 +459,7 @@ def _evaluate(base: Baseline, data: ModelData, sens: np.ndarray, resid: np.ndarr
         conf = 0.0
     S, r = _flat(base, sens, resid, base.rows_of(train), cols)
     theta = _fit(S, r, spec.sign)
-    if sens.shape[2] == 1 and len(zones) > 1:  # a system-wide effect's summed column
+    if spec.scope == "system":  # ``sens`` is the zones' summed column: one θ for all
         return Candidate(effect, variant, list(zones), {z: float(theta[0]) for z in zones},
                          score, conf, len(red), n_params=1, day_reductions=red)
     return Candidate(effect, variant, [zones[c] for c in cols],

@@ -10,7 +10,7 @@ DEMO_OUT ?= demo-out
 
 venv: $(VENV)/.installed
 
-$(VENV)/.installed: pyproject.toml setup.py
+$(VENV)/.installed: pyproject.toml
 	@test -n "$(PYTHON)" || { echo "zonecast needs Python >= 3.11 on PATH"; exit 1; }
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip

@@ -80,7 +80,7 @@ def campaign(zc: str, out: Path, seed: int, switches: list[str]) -> float:
 
 def _one(zc: str, root: Path, item, absolute: bool) -> dict:
     """Campaign (if missing) and diagnosis of one scenario; prints its line."""
-    from zonecast.diagnosis import run
+    from zonecast.jobs.diagnosis import run
 
     name, seed, switches, truth = item
     ref = root / "control_s0"

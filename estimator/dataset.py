@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from .solar import facade_irradiance
-from .telemetry import Telemetry, segments_of
+from zonecast.estimator.solar import facade_irradiance
+from zonecast.estimator.telemetry import Telemetry, segments_of
 
 #: names of the disturbance vector's entries, paper order
 DISTURBANCES = ("Ta", "Ts", "solE", "solS", "solW", "solN")

@@ -39,8 +39,8 @@ import pandas as pd
 import scipy.sparse as sp
 from scipy import optimize, stats
 
-from .dataset import ModelData
-from .effects import (
+from zonecast.estimator.dataset import ModelData
+from zonecast.estimator.effects import (
     SCHEDULE,
     SPECS,
     box_zone_matrix,
@@ -48,7 +48,7 @@ from .effects import (
     minimum_airflow_fraction,
     time_of_week_mean,
 )
-from .forecast import (
+from zonecast.estimator.forecast import (
     HORIZON,
     fill_profile,
     fixed_profile,
@@ -57,9 +57,9 @@ from .forecast import (
     week_split,
     zone_floor_area,
 )
-from .gains import WeeklyProfile
-from .internal_gains import stepper_for
-from .model import BilinearModel
+from zonecast.estimator.gains import WeeklyProfile
+from zonecast.estimator.internal_gains import stepper_for
+from zonecast.estimator.model import BilinearModel
 
 __all__ = [
     "CONFIDENCE",

@@ -25,24 +25,24 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from .dataset import ModelData
-from .evaluate import horizon_rms, rms_by_zone
-from .gains import (
+from zonecast.estimator.dataset import ModelData
+from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
+from zonecast.estimator.gains import (
     DayAheadGains,
     RankDeficientError,
     WeeklyProfile,
     estimate_gains_step,
     fit_weekly_profile,
 )
-from .identify import SIGMA_AIR_X0, kalman_state
-from .internal_gains import GainsTrack, track_gains, truth_correlation, zone_gain_heat
-from .kalman import (
+from zonecast.estimator.identify import SIGMA_AIR_X0, kalman_state
+from zonecast.estimator.internal_gains import GainsTrack, track_gains, truth_correlation, zone_gain_heat
+from zonecast.estimator.kalman import (
     ZoneStateFilter,
     air_wall_covariance,
     default_initial_covariance,
     initial_state_from_measurement,
 )
-from .model import BilinearModel
+from zonecast.estimator.model import BilinearModel
 
 __all__ = [
     "FORECAST_METHODS",

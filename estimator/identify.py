@@ -26,17 +26,17 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import least_squares
 
-from .dataset import ModelData
-from .evaluate import rms_by_zone
-from .kalman import (
+from zonecast.estimator.dataset import ModelData
+from zonecast.estimator.evaluate import rms_by_zone
+from zonecast.estimator.kalman import (
     default_initial_covariance,
     default_measurement_noise,
     default_process_noise,
     initial_state_from_measurement,
     run_filter,
 )
-from .model import BilinearModel
-from .rc.parameters import ParameterSet
+from zonecast.estimator.model import BilinearModel
+from zonecast.estimator.rc.parameters import ParameterSet
 
 RESULTS_SCHEMA_VERSION = 1
 
@@ -220,7 +220,7 @@ class _Problem:
         """Spectral bound L [1/s] of A(theta) at the spans' largest airflows."""
         import scipy.sparse as sp
 
-        from .integrate import tight_bound
+        from zonecast.estimator.integrate import tight_bound
         phys = np.asarray(theta, float)[:self.n_phys]
         n = len(self.capacity)
         A = sp.csr_matrix((self.d0 + phys @ self.dp, self.indices, self.indptr), shape=(n, n))
@@ -229,7 +229,7 @@ class _Problem:
     def simulate(self, theta: np.ndarray, L: float | None = None) -> list[np.ndarray]:
         """Zone temperatures of every span for parameters ``theta``; ``L`` a spectral bound
         valid for them (default: computed, an eigenvalue problem of ~20 ms)."""
-        from .integrate import _run, chebyshev_coefficients
+        from zonecast.estimator.integrate import _run, chebyshev_coefficients
         theta = np.asarray(theta, float)
         phys, c_ig = theta[:self.n_phys], theta[self.n_phys:]
         data_vals = self.d0 + phys @ self.dp

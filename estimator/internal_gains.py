@@ -18,10 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dataset import ModelData
-from .gains import estimate_gains_step
-from .integrate import ExactStepper
-from .model import BilinearModel
+from zonecast.estimator.dataset import ModelData
+from zonecast.estimator.gains import estimate_gains_step
+from zonecast.estimator.integrate import ExactStepper
+from zonecast.estimator.model import BilinearModel
 
 
 @dataclass

@@ -37,10 +37,10 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg as sla
 
-from .idf import Building
-from .integrate import simulate_exact
-from .rc.network import DISTURBANCES, ModelOptions, RCStructure, build_structure
-from .rc.parameters import ParameterSet
+from zonecast.estimator.idf import Building
+from zonecast.estimator.integrate import simulate_exact
+from zonecast.estimator.rc.network import DISTURBANCES, ModelOptions, RCStructure, build_structure
+from zonecast.estimator.rc.parameters import ParameterSet
 
 __all__ = ["BilinearModel", "DiscreteBilinear", "SimulationResult", "write_model_summary"]
 

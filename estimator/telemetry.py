@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .site import Site
-from .units import to_si
+from zonecast.estimator.site import Site
+from zonecast.estimator.units import to_si
 
 MISSING_TOKENS = {"", "nan", "NaN", "NA", "N/A", "null", "None"}
 

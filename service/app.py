@@ -28,9 +28,9 @@ from fastapi.responses import JSONResponse, Response
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.concurrency import run_in_threadpool
 
-from . import schemas as S
-from .ingest import MessageRejected, PointSpec, validate_message
-from .settings import ServiceSettings
+from zonecast.service import schemas as S
+from zonecast.service.ingest import MessageRejected, PointSpec, validate_message
+from zonecast.service.settings import ServiceSettings
 
 __all__ = ["ServiceContext", "catalogue_for_site", "create_app"]
 
@@ -79,10 +79,10 @@ class ServiceContext:
 
     # lifecycle --------------------------------------------------------------------
     def start(self) -> None:
-        from .metrics import ServiceMetrics
-        from .modelfile import load_model_file
-        from .runner import Runner
-        from .storage import open_storage
+        from zonecast.service.metrics import ServiceMetrics
+        from zonecast.service.modelfile import load_model_file
+        from zonecast.service.runner import Runner
+        from zonecast.service.storage import open_storage
 
         s = self.settings
         self.metrics = ServiceMetrics(self)
@@ -100,8 +100,8 @@ class ServiceContext:
                 self.load_errors[bid] = str(exc)
                 log.error("building %s: model not loaded: %s", bid, exc)
         if s.mqtt_enabled:
-            from .mqtt import Ingester
-            from .replay import connect_publisher
+            from zonecast.service.mqtt import Ingester
+            from zonecast.service.replay import connect_publisher
 
             self.ingester = Ingester(s.mqtt, self.storage, self.catalogues).start()
             if s.runner.publish:
@@ -444,7 +444,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         Default: :func:`~zonecast.service.settings.load_settings` (environment only).
     """
     if settings is None:
-        from .settings import load_settings
+        from zonecast.service.settings import load_settings
 
         settings = load_settings()
 

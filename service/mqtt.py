@@ -32,7 +32,7 @@ from typing import Any, Literal, Self
 
 from pydantic import BaseModel, Field, SecretStr
 
-from .ingest import (
+from zonecast.service.ingest import (
     DEFAULT_PREFIX,
     IngestLimits,
     MessageRejected,
@@ -41,7 +41,7 @@ from .ingest import (
     RejectedReading,
     validate_message,
 )
-from .storage import Storage
+from zonecast.service.storage import Storage
 
 __all__ = ["Ingester", "MqttSettings", "TLSSettings", "dead_letter_topic"]
 

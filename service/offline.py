@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from .modelfile import ModelBundle, load_model_file
-from .online import MAX_GAP, Forecast, OnlineEstimator, rows_from_frame
+from zonecast.service.modelfile import ModelBundle, load_model_file
+from zonecast.service.online import MAX_GAP, Forecast, OnlineEstimator, rows_from_frame
 
 __all__ = ["offline_forecasts", "telemetry_frame"]
 

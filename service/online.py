@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from .modelfile import ModelBundle
+from zonecast.service.modelfile import ModelBundle
 
 __all__ = ["Forecast", "OnlineEstimator", "StepReport", "rows_from_frame"]
 

@@ -18,7 +18,7 @@ from urllib.parse import urlsplit
 
 import pandas as pd
 
-from .mqtt import MqttSettings
+from zonecast.service.mqtt import MqttSettings
 
 __all__ = ["ReplayResult", "connect_publisher", "parse_broker_url", "replay"]
 

@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 import pvlib
 
-from .modelfile import ModelBundle
+from zonecast.service.modelfile import ModelBundle
 
 __all__ = ["RowConverter", "SolarGeometryCache"]
 

@@ -33,11 +33,11 @@ from datetime import UTC, datetime
 import numpy as np
 import pandas as pd
 
-from .modelfile import ModelBundle
-from .online import STEP, Forecast, OnlineEstimator, StepReport
-from .rows import RowConverter
-from .settings import RunnerSettings
-from .storage import Storage
+from zonecast.service.modelfile import ModelBundle
+from zonecast.service.online import STEP, Forecast, OnlineEstimator, StepReport
+from zonecast.service.rows import RowConverter
+from zonecast.service.settings import RunnerSettings
+from zonecast.service.storage import Storage
 
 __all__ = ["Runner", "pack_checkpoint", "unpack_checkpoint"]
 

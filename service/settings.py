@@ -22,8 +22,8 @@ from pydantic_settings import (
     YamlConfigSettingsSource,
 )
 
-from .mqtt import MqttSettings
-from .storage import DEFAULT_URL
+from zonecast.service.mqtt import MqttSettings
+from zonecast.service.storage import DEFAULT_URL
 
 __all__ = ["RunnerSettings", "ServiceSettings", "load_settings"]
 

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Self
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
-from .ingest import parse_time
+from zonecast.service.ingest import parse_time
 
 if TYPE_CHECKING:  # pandas is imported lazily (only readings() needs it)
     import pandas as pd

@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import datetime as dt
 
-from .config import BuildingConfig
-from .effects import Effects
-from .geometry import plan_walls, wall_vertices, window_on
+from zonecast.testbed.config import BuildingConfig
+from zonecast.testbed.effects import Effects
+from zonecast.testbed.geometry import plan_walls, wall_vertices, window_on
 
 SCHEDULE_FILE = "schedules.csv"
 

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..estimator.site import load_site
-from ..estimator.telemetry import load_telemetry
-from .config import load_config
-from .geometry import plan_walls
+from zonecast.estimator.site import load_site
+from zonecast.estimator.telemetry import load_telemetry
+from zonecast.testbed.config import load_config
+from zonecast.testbed.geometry import plan_walls
 
 ZONE_COLOURS = {"NW": "#4e79a7", "W": "#f28e2b", "S": "#e15759", "E": "#76b7b2",
                 "NE": "#59a14f", "C": "#edc948"}

@@ -23,12 +23,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..estimator.site import Site
-from .config import BuildingConfig, load_config
-from .effects import Effects
-from .geometry import plan_walls
-from .idfgen import SCHEDULE_FILE, ahu_outlet_node, box_name, build_idf, supply_node
-from .schedules import excitation_plan, rng_for, schedule_table, zone_neighbours
+from zonecast.estimator.site import Site
+from zonecast.testbed.config import BuildingConfig, load_config
+from zonecast.testbed.effects import Effects
+from zonecast.testbed.geometry import plan_walls
+from zonecast.testbed.idfgen import SCHEDULE_FILE, ahu_outlet_node, box_name, build_idf, supply_node
+from zonecast.testbed.schedules import excitation_plan, rng_for, schedule_table, zone_neighbours
 
 STANDARD_OFFSET = dt.timezone(dt.timedelta(hours=-8))  # EnergyPlus reports standard time
 STEP = pd.Timedelta(minutes=15)

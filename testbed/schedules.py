@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from .config import BuildingConfig
+from zonecast.testbed.config import BuildingConfig
 
 STEPS_PER_DAY = 96
 STEP = dt.timedelta(minutes=15)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from zonecast.reproduce import PAPER, Results, plot_horizon, plot_week, write_report
+from zonecast.jobs.reproduce import PAPER, Results, plot_horizon, plot_week, write_report
 
 ZONES = ["NW", "NE", "W", "E", "S", "C"]
 
@@ -74,7 +74,7 @@ def test_week_figure_draws_measured_and_predictions_with_gaps(tmp_path):
 
 
 def test_weekend_figure_has_a_panel_per_zone_and_weekend(tmp_path):
-    from zonecast.reproduce import plot_weekends
+    from zonecast.jobs.reproduce import plot_weekends
     rng = np.random.default_rng(0)
     sims = [{"saturday": d, "measured": 21 + rng.normal(0, 0.2, (192, len(ZONES))),
              "simulated": np.full((192, len(ZONES)), 21.0)} for d in ("2015-04-18", "2014-10-11")]

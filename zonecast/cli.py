@@ -288,7 +288,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   starts: Annotated[int, typer.Option(min=1, help="identification starts")] = 3) -> None:
     """The paper's tables and figures on the virtual building: campaign, identification,
     internal gains, forecasts; writes results.json, figures and report.md."""
-    from zonecast.reproduce import run
+    from zonecast.jobs.reproduce import run
     try:
         with _progress() as prog:
             task = prog.add_task("reproduce", total=None)
@@ -322,7 +322,7 @@ def diagnose_cmd(model: Annotated[Path, typer.Option(help="identified-model file
                  seed: Annotated[int, typer.Option(help="seed of the week split")] = 0) -> None:
     """Where the model's error lies, which unmodelled effect causes it and how much adding it
     helps on held-out weeks: writes diagnosis.json, diagnosis.md and plots."""
-    from zonecast.diagnosis import run
+    from zonecast.jobs.diagnosis import run
     try:
         with _progress() as prog:
             task = prog.add_task("diagnose", total=None)
@@ -345,7 +345,7 @@ def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-
          seed: Seed = 0) -> None:
     """The main job on embedded defaults: the virtual building's campaign (with its own
     report in OUT/campaign) and `zonecast reproduce` on it (OUT/report.md)."""
-    from zonecast.reproduce import run
+    from zonecast.jobs.reproduce import run
     from zonecast.testbed.report import write_report
     from zonecast.testbed.run import run_campaign
     campaign = out / "campaign"

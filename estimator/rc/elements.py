@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..idf import Layer
+from zonecast.estimator.idf import Layer
 
 __all__ = ["MASSLESS_FACE_CAPACITY", "MIN_RESISTANCE", "NodeLayout", "discretise_layers"]
 

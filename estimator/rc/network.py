@@ -33,8 +33,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..idf import Building, Construction, Surface
-from .elements import NodeLayout, discretise_layers
+from zonecast.estimator.idf import Building, Construction, Surface
+from zonecast.estimator.rc.elements import NodeLayout, discretise_layers
 
 __all__ = [
     "CP_AIR",

@@ -26,13 +26,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from zonecast.estimator.dataset import model_data
-from zonecast.estimator.identify import excitation_saturdays, identify
-from zonecast.estimator.idf import read_building
-from zonecast.estimator.model import build_model
+from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.rc.network import ModelOptions
-from zonecast.estimator.site import load_site
-from zonecast.estimator.telemetry import load_telemetry
 
 
 def main() -> int:
@@ -46,10 +41,9 @@ def main() -> int:
         from zonecast.testbed.run import run_campaign
         print(f"running the campaign into {camp} ...", flush=True)
         run_campaign(camp, seed=0)
-    site = load_site(camp / "site.yaml")
-    tel = load_telemetry(camp / "telemetry.csv", site)
-    building = read_building(site.idf_path)
-    boxes = {b: s.room for b, s in site.boxes.items()}
+    pipe = Pipeline.from_site(camp / "site.yaml")
+    tel = pipe.telemetry(camp / "telemetry.csv")
+    pipe.building()  # read once, shared by both option sets
     print(f"python {platform.python_version()}, numpy {np.__version__}, {os.cpu_count()} cores, "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}")
     default = ModelOptions()
@@ -57,13 +51,12 @@ def main() -> int:
             (f"default (window solar: {default.window_solar}, floor share {default.floor_share})",
              default, args.repeat),
             ("reference: paper (window solar on air)", ModelOptions(window_solar="air"), 1)):
-        model = build_model(building, site.zones, boxes, options=options)
-        data = model_data(tel, model.room_weights())
-        sats = [str(s.date()) for s in excitation_saturdays(data)]
+        variant = pipe.with_options(options)
+        data = variant.data(tel)
         times = []
         for _ in range(repeat):
             t = time.perf_counter()
-            res = identify(model, data, sats[1:3], sats[:1], n_starts=args.starts)
+            res = variant.identify(data, n_starts=args.starts)
             times.append(time.perf_counter() - t)
         costs = [s["cost"] for s in res.starts]
         print(f"{label}: {args.starts} starts, median {statistics.median(times):.1f} s "

@@ -29,9 +29,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.integrate import solve_ivp
-from zonecast.estimator.dataset import model_data
 from zonecast.estimator.evaluate import rms_by_zone
-from zonecast.estimator.idf import read_building
 from zonecast.estimator.kalman import (
     default_initial_covariance,
     default_measurement_noise,
@@ -39,10 +37,8 @@ from zonecast.estimator.kalman import (
     initial_state_from_measurement,
     run_filter,
 )
-from zonecast.estimator.model import build_model
+from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.rc.parameters import ParameterSet
-from zonecast.estimator.site import load_site
-from zonecast.estimator.telemetry import load_telemetry
 
 
 def campaign(dir_: Path | None):
@@ -62,7 +58,7 @@ def campaign(dir_: Path | None):
 
 def kalman_x0(model, d, k0, k1):
     """Filter over rows [k0, k1) and return the filtered state at row k1."""
-    air = np.flatnonzero([lab.kind.endswith("air") for lab in model.structure.labels])
+    air = model.structure.air_states()
     y = d.y[k0:k1 + 1]
     x0 = initial_state_from_measurement(y[0], model.state_zones())
     P0 = default_initial_covariance(model.n, air)
@@ -84,14 +80,15 @@ def main() -> None:
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
           f"numpy {np.__version__}")
     out, t_ep = campaign(args.campaign)
-    site = load_site(out / "site.yaml")
-    tel = load_telemetry(out / "telemetry.csv", site)
+    pipe = Pipeline.from_site(out / "site.yaml")
+    site = pipe.site
+    tel = pipe.telemetry(out / "telemetry.csv")
     t0 = time.perf_counter()
-    building = read_building(site.idf_path)
+    pipe.building()
     t1 = time.perf_counter()
-    model = build_model(building, site.zones, {b: s.room for b, s in site.boxes.items()})
+    model = pipe.model()
     x0 = np.full(model.n, 20.0)
-    d = model_data(tel, model.room_weights())
+    d = pipe.data(tel)
     model.simulate(x0, d.u[:2], d.v[:2])          # compile the kernel (cached on disk after)
     t2 = time.perf_counter()
     print(f"states: {model.n} {model.structure.state_counts()}")

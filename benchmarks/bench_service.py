@@ -41,6 +41,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 import pandas as pd
+from zonecast.estimator.pipeline import Pipeline
 
 TOKEN = "bench-token"
 
@@ -51,27 +52,24 @@ def _ms(values) -> str:
 
 
 def virtual_building(data: Path | None, work: Path) -> Path:
-    from zonecast.service.modelfile import write_model_file
     from zonecast.testbed.run import run_weeks
 
     if data is None:
         data = work / "vb"
         run_weeks([dt.date(2015, 4, 13)], data, seed=0)
     if not (data / "model.json").exists():
-        write_model_file(data / "model.json", data / "site.yaml")
+        Pipeline.from_site(data / "site.yaml").write_model_file(data / "model.json")
     return data
 
 
 def bench_steps(data: Path, work: Path, days: int) -> dict:
+    from zonecast.estimator.streaming import STEP, OnlineEstimator, rows_from_frame, telemetry_frame
     from zonecast.service.app import forecast_json
-    from zonecast.service.modelfile import load_model_file
-    from zonecast.service.offline import telemetry_frame
-    from zonecast.service.online import STEP, OnlineEstimator, rows_from_frame
-    from zonecast.service.runner import Runner, pack_checkpoint
+    from zonecast.service.runner import Runner
     from zonecast.service.settings import RunnerSettings
     from zonecast.service.storage import open_storage
 
-    bundle = load_model_file(data / "model.json")
+    bundle = Pipeline.from_model_file(data / "model.json").bundle
     m = bundle.model
     frame = telemetry_frame(data, bundle).iloc[: 96 * (days + 1)]
     hist, live = frame.iloc[: 96 * days], frame.iloc[96 * days:]
@@ -103,7 +101,7 @@ def bench_steps(data: Path, work: Path, days: int) -> dict:
                 if np.isfinite(f.loc[t, p])]
 
     store.put_readings(bundle.building, rows_of(hist))
-    runner = Runner(load_model_file(data / "model.json"), store,
+    runner = Runner(Pipeline.from_model_file(data / "model.json").bundle, store,
                     RunnerSettings(forecast_every=4))
     t0 = time.perf_counter()
     caught_up = runner.poll()
@@ -138,8 +136,7 @@ def bench_steps(data: Path, work: Path, days: int) -> dict:
         rows_from_frame(bundle, live.iloc[k:k + 1])
         general.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
-        blob = pack_checkpoint({"next_time": start.isoformat(), "version": bundle.version},
-                               runner.est.to_bytes())
+        blob = runner.est.to_bytes({"next_time": start.isoformat()})
         ckpt.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
         store.save_checkpoint(bundle.building, start, blob, sync=False)

@@ -14,12 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-
+from zonecast.estimator.rc.network import DISTURBANCES
+from zonecast.estimator.site import Site
 from zonecast.estimator.solar import facade_irradiance
 from zonecast.estimator.telemetry import Telemetry, segments_of
 
-#: names of the disturbance vector's entries, paper order
-DISTURBANCES = ("Ta", "Ts", "solE", "solS", "solW", "solN")
+__all__ = ["DISTURBANCES", "ModelData", "model_data", "zone_weights"]
+
 
 
 @dataclass
@@ -68,7 +69,7 @@ class ModelData:
         return ~(np.isfinite(self.u).all(axis=1) & np.isfinite(self.v).all(axis=1))
 
 
-def zone_weights(tel: Telemetry, room_volume: Mapping[str, float] | None) -> dict[str, np.ndarray] | None:
+def zone_weights(site: Site, room_volume: Mapping[str, float] | None) -> dict[str, np.ndarray] | None:
     """Weights of each zone's sensors: the air volume of the room a sensor sits in when the
     site names it and ``room_volume`` is given (matching C, which averages rooms by air
     volume), else equal weights."""
@@ -76,7 +77,7 @@ def zone_weights(tel: Telemetry, room_volume: Mapping[str, float] | None) -> dic
         return None
     vol = {k.upper(): float(v) for k, v in room_volume.items()}
     out = {}
-    for zone, sensors in tel.site.points.zone_temperature.items():
+    for zone, sensors in site.points.zone_temperature.items():
         if all(s.room is not None and s.room.upper() in vol for s in sensors):
             out[zone] = np.array([vol[s.room.upper()] for s in sensors])
     return out
@@ -107,5 +108,5 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
     exc = np.zeros(len(w), dtype=bool)
     for e in site.experiments:
         exc |= (w.index >= e.start) & (w.index < e.end)
-    return ModelData(tel.times, tel.airflow(), v, tel.zone_temperature(zone_weights(tel, room_volume)),
+    return ModelData(tel.times, tel.airflow(), v, tel.zone_temperature(zone_weights(site, room_volume)),
                      list(site.zones), list(site.boxes), list(tel.segments), exc, site.timezone)

@@ -38,7 +38,6 @@ import numpy as np
 import pandas as pd
 import scipy.sparse as sp
 from scipy import optimize, stats
-
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.effects import (
     SCHEDULE,

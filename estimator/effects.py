@@ -41,7 +41,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.model import BilinearModel
 from zonecast.estimator.rc.network import CP_AIR as C_P

@@ -24,7 +24,16 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-
+from zonecast.estimator.constants import (
+    DAYAHEAD_TAU,
+    DAYAHEAD_WINDOW,
+    HORIZON,
+    SIGMA_AIR_FORECAST,
+    SIGMA_AIR_X0,
+    SIGMA_MEAS,
+    SIGMA_WALL_FORECAST,
+    Z90,
+)
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
 from zonecast.estimator.gains import (
@@ -34,8 +43,13 @@ from zonecast.estimator.gains import (
     estimate_gains_step,
     fit_weekly_profile,
 )
-from zonecast.estimator.identify import SIGMA_AIR_X0, kalman_state
-from zonecast.estimator.internal_gains import GainsTrack, track_gains, truth_correlation, zone_gain_heat
+from zonecast.estimator.identify import kalman_state
+from zonecast.estimator.internal_gains import (
+    GainsTrack,
+    track_gains,
+    truth_correlation,
+    zone_gain_heat,
+)
 from zonecast.estimator.kalman import (
     ZoneStateFilter,
     air_wall_covariance,
@@ -67,16 +81,8 @@ __all__ = [
     "zone_floor_area",
 ]
 
-Z90 = 1.6448536269514722  # two-sided 90 % interval of a standard normal
-HORIZON = 96
 #: forecast methods of :func:`issue_forecast`
 FORECAST_METHODS = ("fixed", "dayahead", "persistence")
-SIGMA_MEAS = 0.2  # [K] measurement noise of the filter and of the forecast intervals
-SIGMA_AIR_FORECAST = 0.3  # [K per step] air-state process noise propagated in the forecast
-SIGMA_WALL_FORECAST = 0.01  # [K per step] element-state process noise in the forecast
-#: day-ahead offset: decay time and averaging window (chosen on the training weeks, docs)
-DAYAHEAD_TAU = pd.Timedelta("1h")
-DAYAHEAD_WINDOW = pd.Timedelta("1h")
 
 
 # --------------------------------------------------------------------------- split
@@ -206,7 +212,7 @@ def filter_day(model: BilinearModel, data: ModelData, start: int, issue: int, *,
     then the residuals of paper Eq:xnoig_ynoig with the prior's gains, and Eq:ig(k-1) on
     them gives f_IG(k-1) - prior(k-1), returned added to the prior.
     """
-    air = np.flatnonzero([lab.kind.endswith("air") for lab in model.structure.labels])
+    air = model.structure.air_states()
     y = data.y[start:issue + 1]
     y0 = y[0] if np.isfinite(y[0]).any() else np.nanmean(y, axis=0)
     x0 = initial_state_from_measurement(np.where(np.isfinite(y0), y0, np.nanmean(y0)),
@@ -239,27 +245,53 @@ def filter_day(model: BilinearModel, data: ModelData, start: int, issue: int, *,
 
 @dataclass(frozen=True)
 class Forecast:
-    """A 24-h forecast issued at row ``issue``.
+    """A zone-temperature forecast: the one type issued offline (:func:`issue_forecast`),
+    by the streaming estimator (:class:`~zonecast.estimator.streaming.OnlineEstimator`) and
+    served by the service.
 
     Attributes
     ----------
-    issue : int
-        Row of the issue time; y is read up to this row only.
-    mean : (H, n_zones) predicted y(issue + 1 ... issue + H) [degC]
-    std : (H, n_zones) standard deviation of a measured zone temperature [K]
-        (state covariance propagated through the model, plus measurement noise)
-    f_ig : (H, n_zones) internal gains used [W/m2]
+    issued : pandas.Timestamp
+        Issue time (UTC): the time of the last measurement used.
+    times : pandas.DatetimeIndex
+        Forecast times t + 15 min ... t + H steps (UTC).
+    mean : ndarray, shape (H, n_zones)
+        Predicted zone temperatures [degC].
+    std : ndarray, shape (H, n_zones)
+        Standard deviation of the prediction [K].
+    f_ig : ndarray, shape (H, n_zones)
+        Internal gains used per interval [W/m2].
+    zones : list of str
+    model_version : str
+        Model file version (empty for a model that was not read from a file).
+    issue_row : int or None
+        Row of the data at the issue time, for forecasts issued on a data set (y is read
+        up to this row only).
     """
 
-    issue: int
+    issued: pd.Timestamp
+    times: pd.DatetimeIndex
     mean: np.ndarray
     std: np.ndarray
     f_ig: np.ndarray
+    zones: list[str]
+    model_version: str = ""
+    issue_row: int | None = None
 
     def interval(self, z: float = Z90) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) ends of the interval mean -+ z std [degC]; default 90 %."""
         half = z * self.std
         return self.mean - half, self.mean + half
+
+    @property
+    def lower(self) -> np.ndarray:
+        """Lower end of the 90 % interval [degC]."""
+        return self.mean - Z90 * self.std
+
+    @property
+    def upper(self) -> np.ndarray:
+        """Upper end of the 90 % interval [degC]."""
+        return self.mean + Z90 * self.std
 
 
 def _gains(method: str, data: ModelData, issue: int, horizon: int, profile: WeeklyProfile,
@@ -280,7 +312,7 @@ def propagate_std(model: BilinearModel, P: np.ndarray, u: np.ndarray, *,
                   sigma_air: float = SIGMA_AIR_FORECAST, sigma_wall: float = SIGMA_WALL_FORECAST,
                   sigma_meas: float = SIGMA_MEAS) -> np.ndarray:
     """Std of C x(h) + e over the horizon: P <- Phi(u_h) P Phi(u_h)' + Q, var = C P C' + R."""
-    air = np.flatnonzero([lab.kind.endswith("air") for lab in model.structure.labels])
+    air = model.structure.air_states()
     q = np.diag(air_wall_covariance(model.n, air, sigma_air, sigma_wall))
     out = np.empty((len(u), model.n_zones))
     for h in range(len(u)):
@@ -330,12 +362,15 @@ def issue_forecast(model: BilinearModel, data: ModelData, issue: int, profile: W
     std = (propagate_std(model, fd.P, u, sigma_air=sigma_air_forecast, sigma_wall=sigma_wall,
                          sigma_meas=sigma_meas) if intervals
            else np.full((horizon, model.n_zones), np.nan))
+    step = data.times[1] - data.times[0]
+    times = pd.date_range(data.times[issue] + step, periods=horizon, freq=step)
     issuer = dayahead or DayAheadGains(profile, tau=DAYAHEAD_TAU, window=DAYAHEAD_WINDOW,
                                        horizon=HORIZON)
     out = {}
     for m in methods:
         f = _gains(m, data, issue, horizon, profile, fd, issuer)
-        out[m] = Forecast(issue, model.simulate(fd.x, u, v, f).y[1:], std, f)
+        out[m] = Forecast(data.times[issue], times, model.simulate(fd.x, u, v, f).y[1:], std, f,
+                          list(data.zones), issue_row=issue)
     return out
 
 

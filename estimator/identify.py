@@ -20,14 +20,17 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+import scipy.sparse as sp
 from scipy.optimize import least_squares
-
+from zonecast.estimator.constants import SIGMA_AIR_X0, STEPS_PER_DAY
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.evaluate import rms_by_zone
+from zonecast.estimator.integrate import _run, chebyshev_coefficients, tight_bound
 from zonecast.estimator.kalman import (
     default_initial_covariance,
     default_measurement_noise,
@@ -72,10 +75,8 @@ def excitation_saturdays(data: ModelData) -> list[pd.Timestamp]:
     return [s for s in sats if s.day_of_week == 5]
 
 
-#: process noise [K per step] on air states of the filter that estimates x(0); see docs
-SIGMA_AIR_X0 = 3.0
 #: steps of telemetry before a weekend that the x(0) filter runs over (24 h; docs)
-X0_WINDOW = 96
+X0_WINDOW = STEPS_PER_DAY
 
 
 def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
@@ -89,7 +90,7 @@ def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
     the identified model, fall weekend): sigma_air 0.1 K -> 1.25 degC, 0.3 -> 1.06,
     1 -> 0.54, 3 -> 0.37, 10 -> 0.40 (docs/identification.md).
     """
-    air = np.flatnonzero([lab.kind.endswith("air") for lab in model.structure.labels])
+    air = model.structure.air_states()
     y = data.y[start:stop + 1]
     first = np.flatnonzero(np.isfinite(y).any(axis=1))
     if len(first) == 0:
@@ -129,7 +130,26 @@ def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequen
 
 @dataclass
 class IdentificationResult:
-    """What :func:`identify` found (statsmodels-like results object)."""
+    """What :func:`identify` found, in the statsmodels manner: ``params``, ``bse``,
+    ``cov_params()``, ``summary()`` and the fitted ``model``.
+
+    Attributes
+    ----------
+    param_names, units : list of str
+    params : ndarray
+        Identified values, in ``param_names`` order.
+    stderr : ndarray
+        Standard errors from the Gauss-Newton covariance sigma^2 (J'J)^+ at the optimum
+        (also as :attr:`bse`).
+    corr : ndarray
+        Correlation matrix of the estimates.
+    train_rms, validation_rms : dict
+        Table 2 rows: zone (and ``mean``) -> RMS [K].
+    bounds : list of (float, float)
+        Bounds the parameters were fitted within.
+    model : BilinearModel or None
+        The model with the identified parameters.
+    """
 
     param_names: list[str]
     units: list[str]
@@ -145,6 +165,26 @@ class IdentificationResult:
     n_evaluations: int = 0
     seconds: float = 0.0
     seed: int = 0
+    bounds: list[tuple[float, float]] = field(default_factory=list)
+    model: BilinearModel | None = field(default=None, repr=False)
+
+    @property
+    def bse(self) -> np.ndarray:
+        """Standard errors of :attr:`params` (statsmodels' name)."""
+        return self.stderr
+
+    def cov_params(self) -> np.ndarray:
+        """Covariance matrix of the estimates (from :attr:`bse` and :attr:`corr`)."""
+        return self.corr * np.outer(self.stderr, self.stderr)
+
+    def at_bounds(self, rtol: float = 1e-6) -> list[str]:
+        """Names of the parameters that ended on (within ``rtol`` of the range) a bound."""
+        out = []
+        for name, v, (lo, hi) in zip(self.param_names, self.params, self.bounds):
+            width = (hi - lo) if np.isfinite(hi - lo) else max(abs(v), 1.0)
+            if v - lo <= rtol * width or hi - v <= rtol * width:
+                out.append(name)
+        return out
 
     def parameters(self) -> dict:
         return {n: {"value": float(v), "unit": u, "stderr": float(s)}
@@ -157,6 +197,33 @@ class IdentificationResult:
                 if abs(self.corr[i, j]) >= threshold:
                     out.append((self.param_names[i], self.param_names[j], float(self.corr[i, j])))
         return out
+
+    def summary(self) -> str:
+        """A plain-text table: value, unit, standard error, bounds and a flag for every
+        parameter at a bound; Table 2; the strongly correlated pairs."""
+        bounds = self.bounds or [(float("nan"), float("nan"))] * len(self.params)
+        pinned = set(self.at_bounds()) if self.bounds else set()
+        weekends = (f"training weekends: {', '.join(self.train_weekends) or '-'}; "
+                    f"validation: {', '.join(self.validation_weekends) or '-'}")
+        counts = (f"residuals {self.n_residuals}, evaluations {self.n_evaluations}, "
+                  f"{self.seconds:.1f} s, seed {self.seed}")
+        lines = ["Identification (paper section 4-A): simulation-error least squares",
+                 weekends, counts, "",
+                 f"{'parameter':<16}{'value':>12}{'std err':>12}  {'unit':<10}{'bounds':<24}"]
+        for name, v, s, u, (lo, hi) in zip(self.param_names, self.params, self.stderr,
+                                           self.units, bounds):
+            flag = "  AT BOUND" if name in pinned else ""
+            lines.append(f"{name:<16}{v:>12.4g}{s:>12.3g}  {u:<10}[{lo:.4g}, {hi:.4g}]{flag}")
+        lines.append("")
+        for label, row in (("training RMS [K]", self.train_rms),
+                           ("validation RMS [K]", self.validation_rms)):
+            if row:
+                lines.append(f"{label}: " + ", ".join(f"{k} {v:.3f}" for k, v in row.items()))
+        pairs = self.strongly_correlated()
+        if pairs:
+            lines.append("strongly correlated (|r| >= 0.9): "
+                         + "; ".join(f"{a}/{b} {r:+.2f}" for a, b, r in pairs))
+        return "\n".join(lines)
 
     def to_dict(self) -> dict:
         return {"schema_version": RESULTS_SCHEMA_VERSION, "parameters": self.parameters(),
@@ -218,9 +285,7 @@ class _Problem:
 
     def bound(self, theta: np.ndarray) -> float:
         """Spectral bound L [1/s] of A(theta) at the spans' largest airflows."""
-        import scipy.sparse as sp
 
-        from zonecast.estimator.integrate import tight_bound
         phys = np.asarray(theta, float)[:self.n_phys]
         n = len(self.capacity)
         A = sp.csr_matrix((self.d0 + phys @ self.dp, self.indices, self.indptr), shape=(n, n))
@@ -229,7 +294,6 @@ class _Problem:
     def simulate(self, theta: np.ndarray, L: float | None = None) -> list[np.ndarray]:
         """Zone temperatures of every span for parameters ``theta``; ``L`` a spectral bound
         valid for them (default: computed, an eigenvalue problem of ~20 ms)."""
-        from zonecast.estimator.integrate import _run, chebyshev_coefficients
         theta = np.asarray(theta, float)
         phys, c_ig = theta[:self.n_phys], theta[self.n_phys:]
         data_vals = self.d0 + phys @ self.dp
@@ -268,7 +332,6 @@ class _Problem:
         of 1e-4 moves the extreme eigenvalue far less, and one series for the base point
         and its neighbours keeps the differences free of series-truncation noise (and
         saves an eigenvalue problem per column)."""
-        from concurrent.futures import ThreadPoolExecutor
         theta = np.asarray(theta, float)
         L = 1.02 * self.bound(theta)
         f0 = self.residuals(theta, L)
@@ -348,7 +411,6 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
 
     def x0s(m, spans):
         # one Kalman filter per span, on two threads (the dense products release the GIL)
-        from concurrent.futures import ThreadPoolExecutor
         with ThreadPoolExecutor(max_workers=2) as pool:
             return list(pool.map(lambda sp: kalman_state(m, data, sp[0] - window, sp[0]),
                                  spans))
@@ -402,4 +464,5 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         list(model.params.param_names), list(model.params.units), theta, se, corr, train_rms,
         val_rms, starts_report, [str(local[a].date()) for a, _ in train_spans],
         [str(local[a].date()) for a, _ in val_spans], len(sol.fun),
-        sum(s["nfev"] for s in starts_report) + int(sol.nfev), time.perf_counter() - t0, seed)
+        sum(s["nfev"] for s in starts_report) + int(sol.nfev), time.perf_counter() - t0, seed,
+        bounds=[(float(lo_), float(hi_)) for lo_, hi_ in zip(lo, hi)], model=fitted)

@@ -17,7 +17,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.gains import estimate_gains_step
 from zonecast.estimator.integrate import ExactStepper

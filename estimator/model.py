@@ -36,7 +36,6 @@ from pathlib import Path
 
 import numpy as np
 import scipy.linalg as sla
-
 from zonecast.estimator.idf import Building
 from zonecast.estimator.integrate import simulate_exact
 from zonecast.estimator.rc.network import DISTURBANCES, ModelOptions, RCStructure, build_structure
@@ -414,10 +413,9 @@ class BilinearModel:
 
     # labels ------------------------------------------------------------------------
     def state_zones(self) -> np.ndarray:
-        """Model-zone index of every state (-1 for states of rooms in no model zone)."""
-        zone_of_room = {r.upper(): i for i, (z, rooms) in enumerate(self.structure.zones.items())
-                        for r in rooms}
-        return np.array([zone_of_room.get(lab.room.upper(), -1) for lab in self.structure.labels])
+        """Model-zone index of every state (-1 for states of rooms in no model zone);
+        :meth:`RCStructure.state_zones`."""
+        return self.structure.state_zones()
 
     def room_weights(self) -> dict[str, float]:
         """Weight of each room's air temperature in its zone's output (row of C)."""

@@ -5,7 +5,9 @@ the building's facades, ordered as the paper's disturbance vector
 ``v = [v_Ta, v_Ts, v_solE, v_solS, v_solW, v_solN]`` (paper eq:model_dt).
 This module transposes weather-station irradiance (GHI, DNI, DHI) onto tilted
 surfaces with :func:`pvlib.irradiance.get_total_irradiance`; no solar geometry
-is written here.
+is written here. :func:`transpose` is the one implementation of the rules below, used by the
+offline data path (:func:`facade_irradiance`) and the online runner's per-row conversion
+(sun geometry cached a day at a time, :class:`SolarGeometryCache`).
 
 Time convention
 ---------------
@@ -30,8 +32,8 @@ Night, negative and missing values
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -41,10 +43,13 @@ import pvlib
 __all__ = [
     "FACADE_AZIMUTHS",
     "SKY_MODELS",
+    "SolarGeometryCache",
     "SolarInputError",
     "facade_irradiance",
     "plane_of_array_irradiance",
+    "sun_geometry",
     "surface_irradiance",
+    "transpose",
 ]
 
 #: Azimuths [deg, clockwise from north] of the paper's facade order E, S, W, N.
@@ -98,35 +103,186 @@ def _midpoints(idx: pd.DatetimeIndex, interval: pd.Timedelta, label: Label):
     return start, start + interval / 2, start + interval
 
 
-@dataclass(frozen=True)
-class _Prepared:
-    """Cleaned inputs and sun geometry shared by all planes of one call."""
-
-    index: pd.DatetimeIndex
-    ghi: np.ndarray
-    dni: np.ndarray
-    dhi: np.ndarray
-    dni_extra: np.ndarray
-    zenith: np.ndarray
-    azimuth: np.ndarray
-    sun_down: np.ndarray
-    night: np.ndarray
-    missing: np.ndarray
-    albedo: float
-    sky_model: str
+_DAY_NS = 86_400 * 10**9
 
 
-def _prepare(times, ghi, dni, dhi, latitude, longitude, elevation, albedo, sky_model,
-             interval, label) -> _Prepared:
-    idx = _as_times(times)
-    n = len(idx)
-    ghi_a = _as_column("ghi", ghi, n)
-    dni_a = _as_column("dni", dni, n)
-    dhi_a = _as_column("dhi", dhi, n)
+def sun_geometry(starts: pd.DatetimeIndex, step: pd.Timedelta, latitude: float,
+                 longitude: float, elevation: float = 0.0) -> np.ndarray:
+    """Sun geometry of intervals ``[start, start + step)`` from pvlib.
+
+    Parameters
+    ----------
+    starts : pandas.DatetimeIndex
+        Interval starts (tz-aware).
+    step : pandas.Timedelta
+        Interval length.
+    latitude, longitude, elevation : float
+        Site location [deg north, deg east, m].
+
+    Returns
+    -------
+    ndarray, shape (5, N)
+        Apparent zenith at the start, midpoint and end [deg]; azimuth [deg] and
+        extraterrestrial normal irradiance [W/m²] at the midpoint.
+    """
+    n = len(starts)
+    mid = starts + step / 2
+    end = starts + step
+    sp = pvlib.solarposition.get_solarposition(
+        starts.append(mid).append(end), latitude, longitude, altitude=elevation,
+        pressure=pvlib.atmosphere.alt2pres(elevation))
+    zen = sp["apparent_zenith"].to_numpy()
+    out = np.empty((5, n))
+    out[0], out[1], out[2] = zen[:n], zen[n:2 * n], zen[2 * n:]
+    out[3] = sp["azimuth"].to_numpy()[n:2 * n]
+    out[4] = np.asarray(pvlib.irradiance.get_extra_radiation(mid), dtype=float)
+    return out
+
+
+class SolarGeometryCache:
+    """:func:`sun_geometry` of a site's grid intervals, computed a UTC day at a time.
+
+    The online runner converts one row per step; pvlib's fixed cost per call (about
+    10 ms with pandas) is paid once a day instead. Times off the grid are computed
+    directly (not cached).
+
+    Parameters
+    ----------
+    latitude, longitude, elevation : float
+        Site location [deg north, deg east, m].
+    step : timedelta
+        Interval length (divides a day).
+    max_days : int
+        Days kept in the cache (oldest dropped first).
+    """
+
+    def __init__(self, latitude: float, longitude: float, elevation: float, step,
+                 max_days: int = 4):
+        self.latitude, self.longitude, self.elevation = latitude, longitude, elevation
+        self.step = pd.Timedelta(step)
+        self._step_ns = self.step.value
+        if self._step_ns <= 0 or _DAY_NS % self._step_ns:
+            raise ValueError(f"step {step} must divide a day")
+        self._per_day = _DAY_NS // self._step_ns
+        self.max_days = max_days
+        self._days: OrderedDict[int, np.ndarray] = OrderedDict()
+        self.computed_days = 0
+
+    def _compute(self, starts: pd.DatetimeIndex) -> np.ndarray:
+        return sun_geometry(starts, self.step, self.latitude, self.longitude, self.elevation)
+
+    def _day(self, day: int) -> np.ndarray:
+        hit = self._days.get(day)
+        if hit is None:
+            starts = pd.DatetimeIndex(day * _DAY_NS + self._step_ns * np.arange(self._per_day),
+                                      tz="UTC")
+            hit = self._compute(starts)
+            self.computed_days += 1
+            self._days[day] = hit
+            while len(self._days) > self.max_days:
+                self._days.popitem(last=False)
+        else:
+            self._days.move_to_end(day)
+        return hit
+
+    def geometry(self, times_ns: np.ndarray) -> np.ndarray:
+        """(5, N) geometry (rows as :func:`sun_geometry`) of interval starts given as UTC
+        nanoseconds since the epoch."""
+        times_ns = np.asarray(times_ns, dtype=np.int64)
+        if np.any(times_ns % self._step_ns):
+            return self._compute(pd.DatetimeIndex(times_ns, tz="UTC"))
+        if len(times_ns) == 1:  # the runner's case
+            day, off = divmod(int(times_ns[0]), _DAY_NS)
+            return self._day(day)[:, off // self._step_ns:off // self._step_ns + 1]
+        out = np.empty((5, len(times_ns)))
+        days = times_ns // _DAY_NS
+        for day in np.unique(days):
+            sel = days == day
+            out[:, sel] = self._day(int(day))[:, (times_ns[sel] - day * _DAY_NS) // self._step_ns]
+        return out
+
+
+def _check_options(albedo: float, sky_model: str) -> None:
     if sky_model not in SKY_MODELS:
         raise SolarInputError(f"sky_model must be one of {SKY_MODELS}, got {sky_model!r}")
     if not 0.0 <= albedo <= 1.0:
         raise SolarInputError(f"albedo must be in [0, 1], got {albedo}")
+
+
+def transpose(geometry: np.ndarray, ghi, dni, dhi, surfaces: Sequence[tuple[float, float]], *,
+              albedo: float = 0.2, sky_model: str = "perez") -> dict[str, np.ndarray]:
+    """Station irradiance onto planes, with the module's rules for night, negative and
+    missing readings. The one implementation behind every function of this module and
+    the online runner's per-row conversion.
+
+    Parameters
+    ----------
+    geometry : ndarray, shape (5, N)
+        From :func:`sun_geometry` (or :class:`SolarGeometryCache`).
+    ghi, dni, dhi : ndarray, shape (N,)
+        Station irradiance averaged over each interval [W/m²]; NaN = missing.
+    surfaces : sequence of (tilt, azimuth)
+        Planes [deg; tilt from horizontal, azimuth clockwise from north].
+    albedo : float
+        Ground reflectance [-].
+    sky_model : str
+        One of :data:`SKY_MODELS`.
+
+    Returns
+    -------
+    dict
+        ``poa_direct``, ``poa_sky_diffuse``, ``poa_ground_diffuse`` [W/m²], each of shape
+        (N, len(surfaces)): >= 0, exactly 0 for a night interval, NaN where GHI, DNI or
+        DHI is missing.
+    """
+    _check_options(albedo, sky_model)
+    tilts = np.array([float(s[0]) for s in surfaces])
+    azimuths = np.array([float(s[1]) for s in surfaces])
+    if np.any((tilts < 0.0) | (tilts > 180.0)):
+        raise SolarInputError(f"surface_tilt must be in [0, 180] deg, got {tilts.tolist()}")
+    zen_start, zenith, zen_end, azimuth, dni_extra = geometry
+    sun = np.column_stack([ghi, dni, dhi]).astype(float)
+    n, k = len(sun), len(surfaces)
+    missing = ~np.isfinite(sun).all(axis=1)
+    clean = np.clip(np.nan_to_num(sun), 0.0, None)
+    sun_down = zenith >= 90.0
+    night = (zen_start >= 90.0) & sun_down & (zen_end >= 90.0)
+    out = {c: np.zeros((n, k)) for c in ("poa_direct", "poa_sky_diffuse", "poa_ground_diffuse")}
+    day = ~night & ~missing
+    if day.any():
+        def rep(a):  # one entry per (row, plane), planes fastest
+            return np.repeat(a[day], k)
+
+        m = int(day.sum())
+        down = rep(sun_down)
+        args = (np.tile(tilts, m), np.tile(azimuths, m), rep(zenith), rep(azimuth),
+                np.where(down, 0.0, rep(clean[:, 1])),  # no beam from below the horizon
+                rep(clean[:, 0]), rep(clean[:, 2]))
+
+        def total(model):
+            return pvlib.irradiance.get_total_irradiance(
+                *args, dni_extra=rep(dni_extra), albedo=albedo, model=model)
+
+        poa = total(sky_model)
+        sky = np.asarray(poa["poa_sky_diffuse"], dtype=float)
+        if sky_model != "isotropic" and down.any():
+            iso = np.asarray(total("isotropic")["poa_sky_diffuse"], dtype=float)
+            sky = np.where(down, iso, sky)
+        # no diffuse light -> no sky diffuse on any plane (Perez divides 0 by 0 there)
+        sky = np.where(rep(clean[:, 2]) <= 0.0, 0.0, sky)
+        for name, comp in (("poa_direct", poa["poa_direct"]), ("poa_sky_diffuse", sky),
+                           ("poa_ground_diffuse", poa["poa_ground_diffuse"])):
+            out[name][day] = np.clip(np.asarray(comp, dtype=float), 0.0, None).reshape(m, k)
+    for comp in out.values():
+        comp[missing] = np.nan
+    return out
+
+
+def _inputs(times, ghi, dni, dhi, latitude, longitude, elevation, interval, label):
+    """Validated columns and the sun geometry of each row's interval."""
+    idx = _as_times(times)
+    n = len(idx)
+    cols = [_as_column(name, a, n) for name, a in (("ghi", ghi), ("dni", dni), ("dhi", dhi))]
     if not (-90.0 <= latitude <= 90.0 and -180.0 <= longitude <= 360.0):
         raise SolarInputError(
             f"latitude must be in [-90, 90] and longitude in [-180, 360] deg, "
@@ -135,64 +291,8 @@ def _prepare(times, ghi, dni, dhi, latitude, longitude, elevation, albedo, sky_m
     step = pd.Timedelta(interval)
     if step <= pd.Timedelta(0):
         raise SolarInputError(f"interval must be positive, got {interval!r}")
-    start, mid, end = _midpoints(idx, step, label)
-
-    all_times = start.append(mid).append(end)
-    sp = pvlib.solarposition.get_solarposition(
-        all_times, latitude, longitude, altitude=elevation,
-        pressure=pvlib.atmosphere.alt2pres(elevation),
-    )
-    zen_all = sp["apparent_zenith"].to_numpy()
-    zen_start, zenith, zen_end = zen_all[:n], zen_all[n : 2 * n], zen_all[2 * n :]
-    sun_down = zenith >= 90.0
-    missing = np.isnan(ghi_a) | np.isnan(dni_a) | np.isnan(dhi_a)
-    ghi_c, dni_c, dhi_c = (np.clip(np.nan_to_num(a), 0.0, None) for a in (ghi_a, dni_a, dhi_a))
-    return _Prepared(
-        index=idx,
-        ghi=ghi_c,
-        dni=np.where(sun_down, 0.0, dni_c),  # no beam from below the horizon
-        dhi=dhi_c,
-        dni_extra=np.asarray(pvlib.irradiance.get_extra_radiation(mid), dtype=float),
-        zenith=zenith,
-        azimuth=sp["azimuth"].to_numpy()[n : 2 * n],
-        sun_down=sun_down,
-        night=(zen_start >= 90.0) & sun_down & (zen_end >= 90.0),
-        missing=missing,
-        albedo=float(albedo),
-        sky_model=sky_model,
-    )
-
-
-def _poa(prep: _Prepared, surface_tilt: float, surface_azimuth: float) -> pd.DataFrame:
-    if not 0.0 <= surface_tilt <= 180.0:
-        raise SolarInputError(f"surface_tilt must be in [0, 180] deg, got {surface_tilt}")
-
-    def total(model: str) -> dict:
-        return pvlib.irradiance.get_total_irradiance(
-            surface_tilt, surface_azimuth, prep.zenith, prep.azimuth,
-            prep.dni, prep.ghi, prep.dhi,
-            dni_extra=prep.dni_extra, albedo=prep.albedo, model=model,
-        )
-
-    poa = total(prep.sky_model)
-    sky = np.asarray(poa["poa_sky_diffuse"], dtype=float)
-    if prep.sky_model != "isotropic" and prep.sun_down.any():
-        iso = np.asarray(total("isotropic")["poa_sky_diffuse"], dtype=float)
-        sky = np.where(prep.sun_down, iso, sky)
-    # no diffuse light -> no sky diffuse on any plane (Perez divides 0 by 0 there)
-    sky = np.where(prep.dhi <= 0.0, 0.0, sky)
-    out = {}
-    for name, comp in (("poa_direct", poa["poa_direct"]), ("poa_sky_diffuse", sky),
-                       ("poa_ground_diffuse", poa["poa_ground_diffuse"])):
-        comp = np.clip(np.asarray(comp, dtype=float), 0.0, None)
-        comp = np.where(prep.night, 0.0, comp)
-        out[name] = np.where(prep.missing, np.nan, comp)
-    out["poa_global"] = out["poa_direct"] + out["poa_sky_diffuse"] + out["poa_ground_diffuse"]
-    out["solar_zenith"] = prep.zenith
-    out["solar_azimuth"] = prep.azimuth
-    cols = ["poa_global", "poa_direct", "poa_sky_diffuse", "poa_ground_diffuse",
-            "solar_zenith", "solar_azimuth"]
-    return pd.DataFrame(out, index=prep.index)[cols]
+    start, _, _ = _midpoints(idx, step, label)
+    return idx, cols, sun_geometry(start, step, latitude, longitude, elevation)
 
 
 def plane_of_array_irradiance(
@@ -253,9 +353,17 @@ def plane_of_array_irradiance(
     SolarTimeError
         ``times`` is not tz-aware.
     """
-    prep = _prepare(times, ghi, dni, dhi, latitude, longitude, elevation, albedo, sky_model,
-                    interval, label)
-    return _poa(prep, surface_tilt, surface_azimuth)
+    _check_options(albedo, sky_model)
+    idx, cols, geom = _inputs(times, ghi, dni, dhi, latitude, longitude, elevation, interval,
+                              label)
+    comp = transpose(geom, *cols, [(surface_tilt, surface_azimuth)], albedo=albedo,
+                     sky_model=sky_model)
+    out = {name: a[:, 0] for name, a in comp.items()}
+    out["poa_global"] = out["poa_direct"] + out["poa_sky_diffuse"] + out["poa_ground_diffuse"]
+    out["solar_zenith"], out["solar_azimuth"] = geom[1], geom[3]
+    cols_out = ["poa_global", "poa_direct", "poa_sky_diffuse", "poa_ground_diffuse",
+                "solar_zenith", "solar_azimuth"]
+    return pd.DataFrame(out, index=idx)[cols_out]
 
 
 def surface_irradiance(
@@ -290,11 +398,10 @@ def surface_irradiance(
     """
     if len(surfaces) == 0:
         raise SolarInputError("surfaces must list at least one (tilt, azimuth) pair")
-    prep = _prepare(times, ghi, dni, dhi, latitude, longitude, elevation, albedo, sky_model,
-                    interval, label)
-    return np.column_stack(
-        [_poa(prep, tilt, az)["poa_global"].to_numpy() for tilt, az in surfaces]
-    )
+    _check_options(albedo, sky_model)
+    _, cols, geom = _inputs(times, ghi, dni, dhi, latitude, longitude, elevation, interval, label)
+    comp = transpose(geom, *cols, surfaces, albedo=albedo, sky_model=sky_model)
+    return comp["poa_direct"] + comp["poa_sky_diffuse"] + comp["poa_ground_diffuse"]
 
 
 def facade_irradiance(

@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-
 from zonecast.estimator.site import Site
 from zonecast.estimator.units import to_si
 

@@ -27,7 +27,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.concurrency import run_in_threadpool
-
+from zonecast.estimator.pipeline import Pipeline
 from zonecast.service import schemas as S
 from zonecast.service.ingest import MessageRejected, PointSpec, validate_message
 from zonecast.service.settings import ServiceSettings
@@ -80,7 +80,6 @@ class ServiceContext:
     # lifecycle --------------------------------------------------------------------
     def start(self) -> None:
         from zonecast.service.metrics import ServiceMetrics
-        from zonecast.service.modelfile import load_model_file
         from zonecast.service.runner import Runner
         from zonecast.service.storage import open_storage
 
@@ -89,7 +88,7 @@ class ServiceContext:
         self.storage = open_storage(s.storage_url)
         for bid, path in s.buildings.items():
             try:
-                bundle = load_model_file(path)
+                bundle = Pipeline.from_model_file(path).bundle
                 if bundle.building != bid:
                     log.info("building %s: site names it %s; serving it as %s", bid,
                              bundle.building, bid)

@@ -31,7 +31,6 @@ from datetime import UTC, datetime, timedelta
 from typing import Any, Literal, Self
 
 from pydantic import BaseModel, Field, SecretStr
-
 from zonecast.service.ingest import (
     DEFAULT_PREFIX,
     IngestLimits,

@@ -17,7 +17,6 @@ from typing import Any
 from urllib.parse import urlsplit
 
 import pandas as pd
-
 from zonecast.service.mqtt import MqttSettings
 
 __all__ = ["ReplayResult", "connect_publisher", "parse_broker_url", "replay"]

@@ -32,30 +32,37 @@ from datetime import UTC, datetime
 
 import numpy as np
 import pandas as pd
-
-from zonecast.service.modelfile import ModelBundle
-from zonecast.service.online import STEP, Forecast, OnlineEstimator, StepReport
-from zonecast.service.rows import RowConverter
+from zonecast.estimator.artifact import ModelBundle
+from zonecast.estimator.constants import STEP, STEPS_PER_DAY
+from zonecast.estimator.forecast import Forecast
+from zonecast.estimator.streaming import (
+    OnlineEstimator,
+    RowConverter,
+    StepReport,
+    checkpoint_header,
+)
 from zonecast.service.settings import RunnerSettings
 from zonecast.service.storage import Storage
 
-__all__ = ["Runner", "pack_checkpoint", "unpack_checkpoint"]
+__all__ = ["Runner", "read_checkpoint"]
 
 log = logging.getLogger(__name__)
-_MAGIC = b"ZCR1"
+#: envelope of the checkpoints written before the estimator's header carried the runner's
+#: next row (read, never written)
+_LEGACY_MAGIC = b"ZCR1"
 
 
-def pack_checkpoint(meta: dict, blob: bytes) -> bytes:
-    """Runner checkpoint: magic, JSON header length, JSON header, estimator state."""
-    head = json.dumps(meta).encode()
-    return _MAGIC + len(head).to_bytes(4, "big") + head + blob
+def read_checkpoint(data: bytes) -> tuple[dict, bytes]:
+    """A stored checkpoint -> (header with ``version`` and ``next_time``, estimator state).
 
-
-def unpack_checkpoint(data: bytes) -> tuple[dict, bytes]:
-    if data[:4] != _MAGIC:
-        raise ValueError("checkpoint was not written by this runner version")
-    n = int.from_bytes(data[4:8], "big")
-    return json.loads(data[8:8 + n]), data[8 + n:]
+    One envelope: the estimator's own (:meth:`OnlineEstimator.to_bytes`) with the runner's
+    next row in its ``extra``; the runner envelope of earlier versions still loads.
+    """
+    if data[:4] == _LEGACY_MAGIC:
+        n = int.from_bytes(data[4:8], "big")
+        return json.loads(data[8:8 + n]), data[8 + n:]
+    head = checkpoint_header(data)
+    return {"version": head.get("version"), **head.get("extra", {})}, data
 
 
 class Runner:
@@ -103,7 +110,7 @@ class Runner:
         cp = self.storage.load_checkpoint(self.building)
         if cp is None:
             return
-        meta, blob = unpack_checkpoint(cp.state)
+        meta, blob = read_checkpoint(cp.state)
         if meta.get("version") != self.bundle.version:
             log.warning("building %s: checkpoint of model %s, now %s: starting the filter "
                         "afresh from the checkpoint's next row", self.building,
@@ -116,12 +123,11 @@ class Runner:
         log.info("building %s: resumed at %s", self.building, self.next_time)
 
     def _checkpoint(self) -> None:
-        meta = {"next_time": None if self.next_time is None else self.next_time.isoformat(),
-                "version": self.bundle.version}
+        extra = {"next_time": None if self.next_time is None else self.next_time.isoformat()}
         # not synced to disk per step: if a power cut loses it, the rows after the
         # previous one are recomputed from readings committed (synced) before them
         self.storage.save_checkpoint(self.building, self.est.time or self.next_time,
-                                     pack_checkpoint(meta, self.est.to_bytes()), sync=False)
+                                     self.est.to_bytes(extra), sync=False)
 
     # --- stepping ----------------------------------------------------------------------
     def poll(self) -> int:
@@ -133,7 +139,7 @@ class Runner:
             if first is None or last is None:
                 return done
             first = pd.Timestamp(first).floor(STEP)
-            if self.next_time is None or first > self.next_time + 96 * STEP:
+            if self.next_time is None or first > self.next_time + STEPS_PER_DAY * STEP:
                 self.next_time = first  # start, or a day without any data: jump
             n, more = self._poll_chunk(pd.Timestamp(last), pd.Timestamp(received))
             done += n
@@ -142,7 +148,7 @@ class Runner:
 
     def _poll_chunk(self, watermark: pd.Timestamp, received: pd.Timestamp) -> tuple[int, bool]:
         start = self.next_time
-        end = min(start + 96 * STEP, watermark.floor(STEP) + STEP)
+        end = min(start + STEPS_PER_DAY * STEP, watermark.floor(STEP) + STEP)
         times, values = self.storage.readings_matrix(self.building, start, end, self.points)
         rows = dict(zip(times.tolist(), values))
         now = pd.Timestamp(self.clock())

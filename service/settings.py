@@ -21,7 +21,6 @@ from pydantic_settings import (
     SettingsConfigDict,
     YamlConfigSettingsSource,
 )
-
 from zonecast.service.mqtt import MqttSettings
 from zonecast.service.storage import DEFAULT_URL
 

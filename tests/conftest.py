@@ -1,4 +1,6 @@
-"""Shared fixtures: a small valid site and telemetry written by hand (no testbed)."""
+"""Shared fixtures: a small valid site and telemetry written by hand (no testbed), and three
+weeks of the virtual building with a model file (testbed, real EnergyPlus) for the tests that
+need real data."""
 
 from __future__ import annotations
 
@@ -57,3 +59,43 @@ def telemetry_csv(tmp_path):
         df.to_csv(path, index=False)
         return path
     return write
+
+
+# --------------------------------------------------------------------------- virtual building
+@pytest.fixture(scope="session")
+def vb(tmp_path_factory):
+    """Three consecutive virtual-building weeks (real EnergyPlus, ~10 s) and a model file
+    (with its structure .npz) with gamma_IW = 9 and a weekly internal-gains profile
+    (6 W/m2 on weekdays 8-18 h, else 0.5 W/m2)."""
+    import datetime as dt
+
+    import numpy as np
+    from zonecast.estimator.artifact import write_model_file
+    from zonecast.estimator.pipeline import Pipeline
+    from zonecast.testbed.run import run_weeks
+
+    out = tmp_path_factory.mktemp("vb")
+    run_weeks([dt.date(2015, 4, 13), dt.date(2015, 4, 20), dt.date(2015, 4, 27)], out, seed=3)
+    pipe = Pipeline.from_site(out / "site.yaml")
+    zones = list(pipe.site.zones)
+    bins = np.arange(672)
+    office = ((bins % 96) >= 32) & ((bins % 96) < 72) & (bins < 480)
+    values = np.where(office[:, None], 6.0, 0.5) * np.ones((1, len(zones)))
+    write_model_file(out / "model.json", out / "site.yaml", parameters={"gamma_IW": 9.0},
+                     weekly_profile={"zones": zones, "values": values.tolist()},
+                     structure=pipe.structure(), room_volume=pipe.room_volume)
+    return out
+
+
+@pytest.fixture(scope="session")
+def bundle(vb):
+    from zonecast.estimator.artifact import load_model_file
+
+    return load_model_file(vb / "model.json")
+
+
+@pytest.fixture(scope="session")
+def telemetry(vb):
+    import pandas as pd
+
+    return pd.read_csv(vb / "telemetry.csv", dtype={"time": str})

@@ -29,8 +29,8 @@ def results(**over):
 
 
 def test_schema_accepts_a_complete_result_and_round_trips():
+    from zonecast.estimator.artifact import model_options_dict
     from zonecast.estimator.rc.network import ModelOptions
-    from zonecast.service.modelfile import model_options_dict
     r = results(model_options=model_options_dict(ModelOptions()),
                 table2_window_solar_air={"training": {"mean": 0.44}, "validation": None})
     again = Results.model_validate(json.loads(r.model_dump_json()))

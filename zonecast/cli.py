@@ -1,13 +1,21 @@
-"""The ``zonecast`` command line. Heavy imports happen inside the commands."""
+"""The ``zonecast`` command line: arguments, progress and printing; the work is in
+:mod:`zonecast.jobs`. The testbed (EnergyPlus) and the service (FastAPI, MQTT) are optional
+extras, imported inside their commands."""
 
 from __future__ import annotations
 
 import datetime as dt
+import os
 import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+from threadpoolctl import threadpool_limits
+
+from zonecast.jobs import diagnosis, reproduce
+from zonecast.jobs.pipelines import build_model, check_site, forecast_at, identify_site
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Bilinear RC building models identified from telemetry; 24-hour "
@@ -32,8 +40,7 @@ def _fail(exc: Exception) -> None:
     raise typer.Exit(2)
 
 
-def _progress():
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+def _progress() -> Progress:
     return Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
                     transient=False)
 
@@ -92,11 +99,8 @@ def testbed_run(out: Annotated[Path, typer.Option(help="Output folder.")],
 def check(site: Annotated[Path, typer.Option(help="site.yaml")],
           data: Annotated[Path, typer.Option(help="telemetry file, or a folder holding telemetry.csv")]) -> None:
     """Validate a site description and its telemetry against the data contract."""
-    from zonecast.estimator.site import load_site
-    from zonecast.estimator.telemetry import load_telemetry
     try:
-        s = load_site(site)
-        tel = load_telemetry(data / "telemetry.csv" if data.is_dir() else data, s)
+        s, tel = check_site(site, data)
     except ValueError as exc:
         _fail(exc)
     f = tel.frame
@@ -126,27 +130,9 @@ def model_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the building
               window_solar: WindowSolar = "surfaces") -> None:
     """Build the bilinear RC model of a site from its EnergyPlus description (paper section
     3) and write its summary and matrices."""
-    from zonecast.estimator.idf import read_building
-    from zonecast.estimator.model import build_model, write_model_summary
-    from zonecast.estimator.rc.network import ModelOptions
-    from zonecast.estimator.rc.parameters import ParameterSet
-    from zonecast.estimator.site import load_site
     try:
-        s = load_site(site)
-        building = read_building(s.idf_path, energyplus_dir)
-        if params == "start":
-            values = None
-        elif params == "paper":
-            paper = ParameterSet.paper_table1()
-            if sorted(paper.zones) != sorted(s.zones):
-                raise ValueError(f"--params paper needs the paper's zones {list(paper.zones)}; "
-                                 f"this site has {list(s.zones)}")
-            values = {n: paper[n] for n in paper.param_names}
-        else:
-            raise ValueError(f"--params {params}: use 'start' or 'paper'")
-        model = build_model(building, s.zones, {b: spec.room for b, spec in s.boxes.items()},
-                            values, options=ModelOptions(window_solar=window_solar))
-        write_model_summary(model, out, out.with_suffix(".npz"))
+        s, model, building = build_model(site, out, params=params, energyplus_dir=energyplus_dir,
+                                         window_solar=window_solar)
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
     counts = ", ".join(f"{k} {v}" for k, v in model.structure.state_counts().items())
@@ -179,53 +165,16 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the
     service."""
-    from zonecast.estimator.dataset import model_data
-    from zonecast.estimator.identify import excitation_saturdays, identify
-    from zonecast.estimator.idf import read_building
-    from zonecast.estimator.model import build_model
-    from zonecast.estimator.rc.network import ModelOptions
-    from zonecast.estimator.site import load_site
-    from zonecast.estimator.telemetry import load_telemetry
-    from zonecast.service.modelfile import model_options_dict, write_model_file
     try:
-        s = load_site(site)
-        tel = load_telemetry(data / "telemetry.csv" if data.is_dir() else data, s)
-        model = build_model(read_building(s.idf_path), s.zones,
-                            {b: spec.room for b, spec in s.boxes.items()},
-                            options=ModelOptions(window_solar=window_solar))
-        d = model_data(tel, model.room_weights())
-        sats = [str(x.date()) for x in excitation_saturdays(d)]
-        train = train or sats[1:3]
-        validate = validate if validate is not None else sats[:1]
-        if not train:
-            raise ValueError("no excitation weekend found: give --train SATURDAY (the site's "
-                             "experiments list marks excitation periods)")
         with _progress() as prog:
             task = prog.add_task("identification", total=None)
-            res = identify(model, d, train, validate, n_starts=starts, seed=seed,
-                           progress=lambda m: prog.update(task, description=f"identification: {m}"))
-            profile, used = None, []
-            if profile_weeks:
-                from zonecast.estimator.forecast import fixed_profile, track_week, whole_weeks
-                weeks = whole_weeks(d)
-                if weeks:
-                    fitted = model.with_params(res.params)
-                    task = prog.add_task("weekly internal-gains profile", total=len(weeks))
-                    tracks = []
-                    for w in weeks:
-                        tracks.append(track_week(fitted, d, w["rows"]))
-                        prog.advance(task)
-                    wp = fixed_profile(d, tracks)
-                    profile = {"zones": list(s.zones), "values": wp.values.tolist()}
-                    used = [w["start"] for w in weeks]
+            done = identify_site(site, data, out, train=train, validate=validate, starts=starts,
+                                 profile_weeks=profile_weeks, window_solar=window_solar,
+                                 seed=seed,
+                                 progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_model_file(out, site, parameters={n: float(v) for n, v in zip(res.param_names,
-                                                                         res.params)},
-                     weekly_profile=profile,
-                     model_options=model_options_dict(model.structure.options),
-                     extra={"identification": res.to_dict(), "profile_weeks": used})
+    res, used = done.result, done.profile_weeks
     t2 = res.to_dict()["table2"]
     typer.echo(f"identified on {', '.join(res.train_weekends)} in {res.seconds:.1f} s "
                f"({res.n_evaluations} evaluations, {starts} starts)")
@@ -233,10 +182,14 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     if t2["validation"]:
         typer.echo("validation RMS [degC]: "
                    + ", ".join(f"{k} {v:.3f}" for k, v in t2["validation"].items()))
-    if profile is not None:
+    pinned = res.at_bounds()
+    if pinned:
+        typer.secho(f"warning: at a bound (not determined by the data): {', '.join(pinned)}",
+                    fg=typer.colors.YELLOW)
+    if used:
         typer.echo(f"weekly internal-gains profile from {len(used)} weeks ({used[0]} ... "
                    f"{used[-1]})")
-    typer.echo(f"wrote {out}")
+    typer.echo(f"wrote {done.model_file} and {done.model_file.with_suffix('.npz')}")
 
 
 @app.command("forecast")
@@ -250,25 +203,11 @@ def forecast_cmd(model: Annotated[Path, typer.Option(help="identified-model file
                                                               "mean, 5 % and 95 % bounds)")] = None) -> None:
     """The day-ahead forecast the service would issue at AT, computed offline from recorded
     telemetry (same code as the online runner): zone temperatures with 90 % intervals."""
-    import pandas as pd
-
-    from zonecast.estimator.site import parse_step
-    from zonecast.service.offline import offline_forecasts
     try:
-        t = pd.Timestamp(at)
-        if t.tzinfo is None:
-            raise ValueError(f"--at {at}: give a UTC offset, e.g. 2015-05-12T00:00:00-07:00")
-        steps = int(parse_step(horizon.strip()).total_seconds() // 900)
-        if not 1 <= steps <= 96:
-            raise ValueError(f"--horizon {horizon}: between 15min and 24h")
-        fc = offline_forecasts(model, data / "telemetry.csv" if data.is_dir() else data, [t])
-        (f,) = fc.values()
+        f, steps, table = forecast_at(model, data, at, horizon)
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
     lo, hi = f.lower[:steps], f.upper[:steps]
-    rows = [{"time": tt.isoformat(), "zone": z, "mean_degC": f.mean[k, j], "p05_degC": lo[k, j],
-             "p95_degC": hi[k, j]} for k, tt in enumerate(f.times[:steps]) for j, z in enumerate(f.zones)]
-    table = pd.DataFrame(rows)
     if out is not None:
         table.to_csv(out, index=False, float_format="%.3f")
     typer.echo(f"forecast issued {f.issued.isoformat()} (model {f.model_version}), {steps} steps")
@@ -288,11 +227,10 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   starts: Annotated[int, typer.Option(min=1, help="identification starts")] = 3) -> None:
     """The paper's tables and figures on the virtual building: campaign, identification,
     internal gains, forecasts; writes results.json, figures and report.md."""
-    from zonecast.jobs.reproduce import run
     try:
         with _progress() as prog:
             task = prog.add_task("reproduce", total=None)
-            res = run(out, campaign, seed, starts,
+            res = reproduce.run(out, campaign, seed, starts,
                       progress=lambda m: prog.update(task, description=f"reproduce: {m}"))
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
@@ -322,11 +260,10 @@ def diagnose_cmd(model: Annotated[Path, typer.Option(help="identified-model file
                  seed: Annotated[int, typer.Option(help="seed of the week split")] = 0) -> None:
     """Where the model's error lies, which unmodelled effect causes it and how much adding it
     helps on held-out weeks: writes diagnosis.json, diagnosis.md and plots."""
-    from zonecast.jobs.diagnosis import run
     try:
         with _progress() as prog:
             task = prog.add_task("diagnose", total=None)
-            res = run(model, data, out, site_path=site, seed=seed, gains=gains,
+            res = diagnosis.run(model, data, out, site_path=site, seed=seed, gains=gains,
                       reference=reference,
                       progress=lambda m: prog.update(task, description=f"diagnose: {m}"))
     except (ValueError, FileNotFoundError) as exc:
@@ -345,9 +282,9 @@ def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-
          seed: Seed = 0) -> None:
     """The main job on embedded defaults: the virtual building's campaign (with its own
     report in OUT/campaign) and `zonecast reproduce` on it (OUT/report.md)."""
-    from zonecast.jobs.reproduce import run
     from zonecast.testbed.report import write_report
     from zonecast.testbed.run import run_campaign
+
     campaign = out / "campaign"
     with _progress() as prog:
         task = prog.add_task("demo", total=None)
@@ -355,7 +292,7 @@ def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-
                            progress=lambda s: prog.update(task, description=f"campaign: {s}"))
         prog.update(task, description="campaign report")
         write_report(res.out, campaign)
-        results = run(out, campaign, seed,
+        results = reproduce.run(out, campaign, seed,
                       progress=lambda m: prog.update(task, description=f"reproduce: {m}"))
     t2, t3 = results.table2, results.table3
     typer.echo(f"campaign: {campaign}/report.md ({res.timings['total_s']:.0f} s)")
@@ -374,14 +311,16 @@ def serve(config: Annotated[Path | None, typer.Option(
           port: Annotated[int, typer.Option(help="TCP port.")] = 8000,
           log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info") -> None:
     """Run the online service: MQTT ingest, one runner per building, REST API."""
-    import os
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads BLAS
     import uvicorn
 
     from zonecast.service.app import create_app
     from zonecast.service.settings import load_settings
     try:
         settings = load_settings(config)
+        # one BLAS thread unless OPENBLAS_NUM_THREADS says otherwise: the runners' products
+        # are small, and threads of several buildings only contend (docs/service.md)
+        if "OPENBLAS_NUM_THREADS" not in os.environ:
+            threadpool_limits(1, user_api="blas")
     except ValueError as exc:
         _fail(exc)
     uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level)

@@ -20,7 +20,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
 from zonecast.estimator.idf import Layer
 
 __all__ = ["MASSLESS_FACE_CAPACITY", "MIN_RESISTANCE", "NodeLayout", "discretise_layers"]

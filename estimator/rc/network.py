@@ -32,7 +32,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-
 from zonecast.estimator.idf import Building, Construction, Surface
 from zonecast.estimator.rc.elements import NodeLayout, discretise_layers
 
@@ -229,6 +228,26 @@ class RCStructure:
     def state_counts(self) -> dict[str, int]:
         """Number of states by kind."""
         return dict(Counter(label.kind for label in self.labels))
+
+    def air_states(self, *, measured_only: bool = False) -> np.ndarray:
+        """Indices of the air states.
+
+        Parameters
+        ----------
+        measured_only : bool
+            Only rooms in a model zone (``"room_air"``); default also rooms in none
+            (``"unmeasured_air"``, e.g. a plenum).
+        """
+        kinds = ("room_air",) if measured_only else ("room_air", "unmeasured_air")
+        return np.flatnonzero([lab.kind in kinds for lab in self.labels])
+
+    def state_zones(self) -> np.ndarray:
+        """Model-zone index of every state: the zone of the room the state belongs to (an
+        element's inside room), -1 for states of rooms in no model zone."""
+        zone_of_room = {r.upper(): i for i, rooms in enumerate(self.zones.values())
+                        for r in rooms}
+        return np.array([zone_of_room.get(lab.room.upper(), -1) for lab in self.labels],
+                        dtype=int)
 
     def A(self, theta: np.ndarray) -> sp.csr_matrix:
         """Continuous A(theta) [1/s]."""

@@ -30,7 +30,7 @@ def test_arrays_follow_the_paper_order(tel):
 
 
 def test_volume_weights_match_the_model_output(tel):
-    w = zone_weights(tel, {"room_a1": 30.0, "ROOM_A2": 90.0})
+    w = zone_weights(tel.site, {"room_a1": 30.0, "ROOM_A2": 90.0})
     np.testing.assert_allclose(w["A"], [30.0, 90.0])
     d = model_data(tel, {"Room_A1": 30.0, "Room_A2": 90.0, "Room_B": 10.0})
     f = tel.frame

@@ -114,7 +114,7 @@ def test_interval_coverage_is_near_nominal_on_model_data(model):
     rng = np.random.default_rng(7)
     n = 8 * DAY
     u, v, f = _weekly(n, seed=5)
-    air = np.flatnonzero([lab.kind.endswith("air") for lab in model.structure.labels])
+    air = model.structure.air_states()
     q = np.full(model.n, sw)
     q[air] = sa
     x = model.steady_state(u[0], v[0], f[0])

@@ -14,7 +14,6 @@ import time
 import numpy as np
 import pandas as pd
 import pytest
-from zonecast.service.modelfile import ModelFileError, load_model_file, write_model_file
 
 TOKEN = "test-token-1"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -102,50 +101,6 @@ def test_service_yaml_in_configs_is_valid(monkeypatch):
     assert {"zonecast", "mosquitto", "postgres"} <= set(compose["services"])
 
 
-def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
-    assert bundle.model.params.as_dict()["gamma_IW"]["value"] == 9.0
-    assert any("start values" in n for n in bundle.notes)
-    assert bundle.profile.values.shape == (672, len(bundle.zones))
-    bare = load_model_file(write_model_file(tmp_path / "m.json", vb / "site.yaml"))
-    assert np.all(bare.profile.values == 0) and "no weekly" in " ".join(bare.notes)
-    # model options round-trip; a file from before they existed is read as it was built
-    assert bare.model.structure.options.window_solar == "surfaces"
-    air = load_model_file(write_model_file(tmp_path / "a.json", vb / "site.yaml",
-                                           model_options={"window_solar": "air"}))
-    assert air.model.structure.options.window_solar == "air"
-    legacy = json.loads((tmp_path / "a.json").read_text())
-    del legacy["model_options"]
-    (tmp_path / "legacy.json").write_text(json.dumps(legacy))
-    old = load_model_file(tmp_path / "legacy.json")
-    assert old.model.structure.options.window_solar == "air"
-    assert any("no model_options" in n for n in old.notes)
-    cases = [
-        ({"schema_version": 2, "site": str(vb / "site.yaml")}, "schema_version must be 1"),
-        ({"schema_version": 1}, "'site' must be the path"),
-        ({"schema_version": 1, "site": "nope.yaml"}, "not found"),
-        ({"schema_version": 1, "site": str(vb / "site.yaml"), "parameters": {"gamma_XX": 1}},
-         "unknown parameter 'gamma_XX'"),
-        ({"schema_version": 1, "site": str(vb / "site.yaml"), "parameters": {"gamma_IW": -1}},
-         "outside its bounds"),
-        ({"schema_version": 1, "site": str(vb / "site.yaml"),
-          "weekly_profile": {"values": [[1.0]]}}, r"expected \(672, 6\)"),
-        ({"schema_version": 1, "site": str(vb / "site.yaml"), "noise": {"sigma_air": 0}},
-         "positive number"),
-        ({"schema_version": 1, "site": str(vb / "site.yaml"),
-          "model_options": {"window_solar": "wall"}}, "window_solar must be 'surfaces', 'floor'"),
-        ({"schema_version": 1, "site": str(vb / "site.yaml"),
-          "model_options": {"colour": "red"}}, r"unknown model_options \['colour'\]"),
-    ]
-    for doc, msg in cases:
-        path = tmp_path / "bad.json"
-        path.write_text(json.dumps(doc))
-        with pytest.raises(ModelFileError, match=msg):
-            load_model_file(path)
-    (tmp_path / "bad.json").write_text("{")
-    with pytest.raises(ModelFileError, match="not valid JSON"):
-        load_model_file(tmp_path / "bad.json")
-
-
 def test_catalogue_converts_plausible_ranges_to_the_wire_unit():
     from zonecast.service.app import catalogue_for_site
 
@@ -214,7 +169,7 @@ def test_runner_waits_for_late_points_then_closes_by_watermark_or_idle(bundle, t
     assert runner.poll() == 1
     assert "v:Ta" in runner.last_report.held_inputs
     # the same rows offline (row 1 complete, rows 3 and 6 without OAT) give the same numbers
-    from zonecast.service.offline import offline_forecasts
+    from zonecast.estimator.streaming import offline_forecasts
 
     t4 = pd.Timestamp(telemetry.iloc[4]["time"]).tz_convert("UTC")
     got = [f for f in runner.history if f.issued == t4]
@@ -236,7 +191,7 @@ def telemetry_si(bundle, rows: pd.DataFrame, drop_oat=()):
 
 
 def test_checkpoint_round_trip_is_exact(bundle, telemetry):
-    from zonecast.service.online import OnlineEstimator, rows_from_frame
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
 
     tt, u, v, y = rows_from_frame(bundle, telemetry_si(bundle, telemetry.iloc[:12]))
     a = OnlineEstimator(bundle)
@@ -259,7 +214,7 @@ def test_checkpoint_round_trip_is_exact(bundle, telemetry):
 def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemetry):
     """Steps without any measurement are predictions: the state's standard deviation
     after k of them is the forecast's at horizon k, and grows."""
-    from zonecast.service.online import OnlineEstimator, rows_from_frame
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
 
     tt, u, v, y = rows_from_frame(bundle, telemetry_si(bundle, telemetry.iloc[:14]))
     est = OnlineEstimator(bundle)
@@ -282,8 +237,7 @@ def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemet
 def test_forecast_with_supplied_inputs(bundle, telemetry, tmp_path):
     """Supplied horizon inputs replace persistence; the persistence inputs passed
     explicitly give the default forecast bitwise; bad shapes are refused."""
-    from zonecast.service.offline import offline_forecasts
-    from zonecast.service.online import OnlineEstimator, rows_from_frame
+    from zonecast.estimator.streaming import OnlineEstimator, offline_forecasts, rows_from_frame
 
     frame = telemetry_si(bundle, telemetry.iloc[:2 * DAY + 10])
     tt, u, v, y = rows_from_frame(bundle, frame)
@@ -303,17 +257,6 @@ def test_forecast_with_supplied_inputs(bundle, telemetry, tmp_path):
         est.forecast(persistence[:10])
     off = offline_forecasts(bundle, frame, [tt[k]], inputs={tt[k]: warmer})[tt[k]]
     assert np.array_equal(off.mean, c.mean)
-
-
-def test_model_file_site_path_is_relative_across_folders(vb, tmp_path):
-    """A model file written in another folder than the site's stores a relative path
-    that loads from there (reproduce writes REPORT/model.json beside REPORT/campaign)."""
-    out = tmp_path / "report" / "model.json"
-    out.parent.mkdir()
-    write_model_file(out, vb / "site.yaml", extra={"profile_weeks": []})
-    doc = json.loads(out.read_text())
-    assert not doc["site"].startswith("/") and doc["profile_weeks"] == []
-    assert load_model_file(out).building == "office6"
 
 
 # --------------------------------------------------------------------------- REST
@@ -347,8 +290,8 @@ def test_rest_ingest_state_gains_forecast(tmp_path, vb, bundle, telemetry):
     import gc
 
     from fastapi.testclient import TestClient
+    from zonecast.estimator.streaming import offline_forecasts
     from zonecast.service.app import create_app
-    from zonecast.service.offline import offline_forecasts
 
     app = create_app(make_settings(tmp_path, vb, forecast_every=4))
     n = 9
@@ -416,9 +359,9 @@ def test_replay_three_weeks_through_broker_with_restart_equals_offline(tmp_path,
     once and every forecast equals the offline one within 1e-9."""
     from fastapi.testclient import TestClient
     from typer.testing import CliRunner
+    from zonecast.estimator.streaming import offline_forecasts
     from zonecast.service.app import create_app
     from zonecast.service.mqtt import MqttSettings
-    from zonecast.service.offline import offline_forecasts
     from zonecast.service.replay import replay
 
     from zonecast.cli import app as cli
@@ -478,8 +421,8 @@ def test_state_and_forecast_are_published_retained_over_mqtt(tmp_path, vb, bundl
     import paho.mqtt.client as mqtt
     from fastapi.testclient import TestClient
     from paho.mqtt.enums import CallbackAPIVersion
+    from zonecast.estimator.streaming import offline_forecasts
     from zonecast.service.app import create_app
-    from zonecast.service.offline import offline_forecasts
 
     settings = make_settings(tmp_path, vb, broker, forecast_every=4, publish=True)
     prefix = f"zc{uuid.uuid4().hex[:8]}"

@@ -17,8 +17,7 @@ def si_frame(bundle, telemetry) -> pd.DataFrame:
 
 
 def test_row_converter_equals_rows_from_frame_on_every_row(bundle, telemetry):
-    from zonecast.service.online import rows_from_frame
-    from zonecast.service.rows import RowConverter
+    from zonecast.estimator.streaming import RowConverter, rows_from_frame
 
     frame = si_frame(bundle, telemetry)
     site = bundle.site
@@ -52,7 +51,7 @@ def test_row_converter_equals_rows_from_frame_on_every_row(bundle, telemetry):
 
 
 def test_dayahead_gains_on_arrays_equal_dayahead_issue(bundle, telemetry):
-    from zonecast.service.online import OnlineEstimator, rows_from_frame
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
 
     tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:3 * 96]))
     y = y.copy()
@@ -76,7 +75,7 @@ def test_dayahead_gains_on_arrays_equal_dayahead_issue(bundle, telemetry):
 
 def test_npz_checkpoint_of_the_earlier_format_still_loads(bundle, telemetry):
     """Checkpoints stored before the raw format (an .npz with ISO time lists) resume."""
-    from zonecast.service.online import OnlineEstimator, rows_from_frame
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
 
     tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:20]))
     a = OnlineEstimator(bundle)

@@ -9,8 +9,19 @@ from pathlib import Path
 
 import numpy as np
 
-from zonecast.estimator.diagnose import CONFIDENCE, MIN_SCORE, Diagnosis, diagnose
+from zonecast.estimator.dataset import model_data
+from zonecast.estimator.diagnose import (
+    CONFIDENCE,
+    MIN_SCORE,
+    Diagnosis,
+    DiagnosisError,
+    diagnose,
+    load_reference,
+)
 from zonecast.estimator.effects import SPECS
+from zonecast.estimator.pipeline import Pipeline
+from zonecast.estimator.site import load_site
+from zonecast.estimator.telemetry import load_telemetry
 
 
 def run(model_path: Path, data_path: Path, out: Path, *, site_path: Path | None = None,
@@ -19,21 +30,16 @@ def run(model_path: Path, data_path: Path, out: Path, *, site_path: Path | None 
     """Load the model file and telemetry, diagnose, write ``out``. ``reference``: the
     ``diagnosis.json`` of a period known to be clean; its confident effects are added to the
     base model (:func:`~zonecast.estimator.diagnose.diagnose`)."""
-    from zonecast.estimator.dataset import model_data
-    from zonecast.estimator.site import load_site
-    from zonecast.estimator.telemetry import load_telemetry
-    from zonecast.service.modelfile import load_model_file
-
-    bundle = load_model_file(model_path)
-    site = load_site(site_path) if site_path is not None else bundle.site
-    if list(site.zones) != list(bundle.site.zones):
+    pipe = Pipeline.from_model_file(model_path)
+    site = load_site(site_path) if site_path is not None else pipe.site
+    if list(site.zones) != list(pipe.site.zones):
         raise ValueError(f"--site zones {list(site.zones)} differ from the model file's "
-                         f"{list(bundle.site.zones)}: diagnose the model of this site")
+                         f"{list(pipe.site.zones)}: diagnose the model of this site")
     tel = load_telemetry(data_path / "telemetry.csv" if data_path.is_dir() else data_path, site)
-    data = model_data(tel, bundle.model.room_weights())
+    model = pipe.model()
+    data = model_data(tel, model.room_weights())
     ref = None
     if reference is not None:
-        from zonecast.estimator.diagnose import DiagnosisError, load_reference
         try:
             doc = json.loads(Path(reference).read_text())
         except (OSError, ValueError) as exc:
@@ -45,7 +51,7 @@ def run(model_path: Path, data_path: Path, out: Path, *, site_path: Path | None 
     setpoint = None
     if site.thermostat is not None:
         setpoint = site.thermostat.heating_setpoint(data.times, site.timezone, data.excitation)
-    res = diagnose(bundle.model, data, seed=seed, gains=gains, reference=ref,
+    res = diagnose(model, data, seed=seed, gains=gains, reference=ref,
                    heating_setpoint=setpoint, progress=progress)
     write(res, out, list(site.zones))
     return res

@@ -13,7 +13,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field
+
+from zonecast.estimator.artifact import model_options_dict
+from zonecast.estimator.constants import HORIZON
+from zonecast.estimator.dataset import ModelData
+from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
+from zonecast.estimator.forecast import coverage, forecast_study, issue_rows, week_split
+from zonecast.estimator.identify import weekend_simulations
+from zonecast.estimator.pipeline import Pipeline
+from zonecast.estimator.rc.network import ModelOptions
 
 RESULTS_SCHEMA_VERSION = 1
 
@@ -206,17 +216,13 @@ def plot_week(week: dict, zones: list[str], methods: list[str], title: str, path
     plt.close(fig)
 
 
-def service_check(model_file: Path, telemetry: Path, data, seed: int) -> dict:
-    """The service's day-ahead forecast (:class:`~zonecast.service.online.OnlineEstimator`:
+def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int) -> dict:
+    """The service's day-ahead forecast (:class:`~zonecast.estimator.streaming.OnlineEstimator`:
     steady-state filter, online f_IG, persistence inputs) issued at the same validation
     midnights as Table 3, computed offline from the telemetry file exactly as
     ``zonecast forecast`` does, and the same with the measured inputs over the horizon
     (``service_known_inputs``, comparable with Table 3's rows); RMS per zone, per horizon
     and interval coverage."""
-    from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
-    from zonecast.estimator.forecast import HORIZON, coverage, issue_rows, week_split
-    from zonecast.service.offline import offline_forecasts
-
     split = week_split(data, seed)
     issues = [(r, split["weeks"][i]["rows"][1]) for i in split["validation"]
               for r in issue_rows(data, split["weeks"][i]["rows"])]
@@ -229,9 +235,9 @@ def service_check(model_file: Path, telemetry: Path, data, seed: int) -> dict:
         ins = np.hstack([data.u[r:r + HORIZON], data.v[r:r + HORIZON]])
         if len(ins) == HORIZON and np.isfinite(ins).all():
             measured[data.times[r]] = ins
-    runs = {"service": offline_forecasts(model_file, telemetry, times),
-            "service_known_inputs": offline_forecasts(model_file, telemetry, times,
-                                                      inputs=measured)}
+    served = Pipeline.from_model_file(model_file)
+    runs = {"service": served.forecast(telemetry, times),
+            "service_known_inputs": served.forecast(telemetry, times, inputs=measured)}
     nz = len(data.zones)
     out: dict = {"table3": {}, "horizon_rms": {}, "coverage_90": {}}
     for name, fcs in runs.items():
@@ -254,64 +260,44 @@ def service_check(model_file: Path, telemetry: Path, data, seed: int) -> dict:
 def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
         progress=lambda s: None) -> Results:
     """The main job; see the module docstring."""
-    from zonecast.estimator.dataset import model_data
-    from zonecast.estimator.identify import excitation_saturdays, identify
-    from zonecast.estimator.idf import read_building
-    from zonecast.estimator.model import build_model
-    from zonecast.estimator.site import load_site
-    from zonecast.estimator.telemetry import load_telemetry
-
     out.mkdir(parents=True, exist_ok=True)
     timings = {}
     t0 = time.perf_counter()
     if campaign is None or not (campaign / "telemetry.csv").is_file():
-        from zonecast.testbed.run import run_campaign
+        from zonecast.testbed.run import run_campaign  # the testbed extra (EnergyPlus)
         campaign = campaign or out / "campaign"
         progress("virtual building campaign (EnergyPlus)")
         run_campaign(campaign, seed=seed, progress=lambda s: progress(f"campaign: {s}"))
     timings["campaign"] = time.perf_counter() - t0
-    site = load_site(campaign / "site.yaml")
-    tel = load_telemetry(campaign / "telemetry.csv", site)
-    building = read_building(site.idf_path)
-    model = build_model(building, site.zones,
-                        {b: s.room for b, s in site.boxes.items()})
-    data = model_data(tel, model.room_weights())
-    sats = [str(s.date()) for s in excitation_saturdays(data)]
+    pipe = Pipeline.from_site(campaign / "site.yaml")
+    site = pipe.site
+    data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()
     progress("identification")
-    ident = identify(model, data, sats[1:3], sats[:1], n_starts=starts, seed=seed,
-                     progress=lambda s: progress(f"identification: {s}"))
+    ident = pipe.identify(data, n_starts=starts, seed=seed,
+                          progress=lambda s: progress(f"identification: {s}"))
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
-    from zonecast.estimator.rc.network import ModelOptions
     progress("identification with window solar on the room air (paper's placement)")
-    air_model = build_model(building, site.zones,
-                            {b: s.room for b, s in site.boxes.items()},
-                            options=ModelOptions(window_solar="air"))
-    ident_air = identify(air_model, data, sats[1:3], sats[:1], n_starts=1, seed=seed)
-    fitted = model.with_params(ident.params)
+    ident_air = pipe.with_options(ModelOptions(window_solar="air")).identify(
+        data, n_starts=1, seed=seed)
+    fitted = ident.model
     truth = None
     if (campaign / "truth.csv").is_file():
-        import pandas as pd
         truth = pd.read_csv(campaign / "truth.csv", index_col=0)
     t = time.perf_counter()
     progress("internal gains and forecasts")
-    from zonecast.estimator.forecast import forecast_study
     study, figs = forecast_study(fitted, data, truth=truth, seed=seed)
     timings["gains_and_forecasts"] = time.perf_counter() - t
     # the model file the service and `zonecast forecast` use: identified parameters and
     # the fixed weekly profile of the training weeks
-    from zonecast.service.modelfile import model_options_dict, write_model_file
     zones = list(site.zones)
     prof = figs["fig2"]["profile_w_m2"]
-    model_file = write_model_file(
-        out / "model.json", campaign / "site.yaml",
-        parameters={n: float(v) for n, v in zip(ident.param_names, ident.params)},
+    model_file = pipe.write_model_file(
+        out / "model.json",
         weekly_profile={"zones": zones, "values": [[prof[z][b] for z in zones]
                                                    for b in range(len(prof[zones[0]]))]},
-        model_options=model_options_dict(model.structure.options),
-        extra={"identification": ident.to_dict(),
-               "profile_weeks": study["split"]["train_starts"]})
+        extra={"profile_weeks": study["split"]["train_starts"]})
     t = time.perf_counter()
     progress("service check: the online estimator's day-ahead forecasts")
     svc = service_check(model_file, campaign / "telemetry.csv", data, seed)
@@ -327,7 +313,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
                   table2={"training": ident.train_rms, "validation": ident.validation_rms},
                   table2_window_solar_air={"training": ident_air.train_rms,
                                            "validation": ident_air.validation_rms},
-                  model_options=model_options_dict(model.structure.options),
+                  model_options=model_options_dict(fitted.structure.options),
                   table3=study["table3"], horizon_rms=study["horizon_rms"],
                   gains_truth=study.get("gains_truth") or {},
                   coverage_90=study.get("coverage_90"),
@@ -337,7 +323,6 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
                   timings_s={k: round(v, 1) for k, v in timings.items()})
     (out / "results.json").write_text(res.model_dump_json(indent=2))
     figures = []
-    from zonecast.estimator.identify import weekend_simulations
     sims = weekend_simulations(fitted, data, ident.train_weekends + ident.validation_weekends)
     roles = {**{d: "training" for d in ident.train_weekends},
              **{d: "validation" for d in ident.validation_weekends}}

@@ -1,8 +1,11 @@
-"""The online estimator of one building: Kalman filter, online f_IG and day-ahead forecast.
+"""The streaming estimator of one building: row conversion, Kalman filter, online f_IG and
+day-ahead forecast, and its offline replay over a telemetry file.
 
-Pure numerics (no storage, network or clock): the runner (:mod:`.runner`) feeds it rows
-read from storage, :func:`zonecast.service.offline.offline_forecasts` feeds it rows of a
-telemetry file, and both get the same numbers.
+Pure numerics (no storage, network or clock), one implementation shared by every caller:
+the service's runner (:mod:`zonecast.service.runner`) feeds :class:`OnlineEstimator` rows
+read from storage and converted by :class:`RowConverter`; :func:`offline_forecasts` feeds
+it the rows of a telemetry file (converted by :func:`rows_from_frame`); both get the same
+numbers (the replay test checks 1e-9).
 
 A *row* is one time t on the 15-min grid with u(t), v(t) and y(t) (docs/data.md: row t
 holds the zone temperatures at t and the inputs averaged over [t, t + 15 min)).
@@ -40,61 +43,52 @@ without measurements.
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 from collections import deque
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from zonecast.estimator.artifact import ModelBundle, load_model_file
+from zonecast.estimator.constants import (
+    DAYAHEAD_TAU,
+    DAYAHEAD_WINDOW,
+    HORIZON,
+    MAX_GAP,
+    STEP,
+    Z90,
+)
+from zonecast.estimator.dataset import DISTURBANCES, model_data, zone_weights
+from zonecast.estimator.forecast import Forecast
+from zonecast.estimator.gains import (
+    DayAheadGains,
+    RankDeficientError,
+    estimate_gains_step,
+    time_of_week_bin,
+)
+from zonecast.estimator.integrate import StepperLadder
+from zonecast.estimator.kalman import (
+    SteadyStateFilter,
+    air_wall_covariance,
+    default_measurement_noise,
+    horizon_output_variances,
+    initial_state_from_measurement,
+    steady_state_covariance,
+)
+from zonecast.estimator.solar import FACADE_AZIMUTHS, SKY_MODELS, SolarGeometryCache, transpose
+from zonecast.estimator.telemetry import Telemetry, load_telemetry, segments_of
+from zonecast.estimator.units import to_si
 
-from zonecast.service.modelfile import ModelBundle
+__all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
+           "StepReport", "checkpoint_header", "offline_forecasts", "rows_from_frame",
+           "telemetry_frame"]
 
-__all__ = ["Forecast", "OnlineEstimator", "StepReport", "rows_from_frame"]
-
-STEP = pd.Timedelta("15min")
-Z90 = 1.6448536269514722  # standard normal 95 % quantile: two-sided 90 % interval
-HORIZON = 96
-MAX_GAP = pd.Timedelta("6h")
 _DAY_NS = 86_400 * 10**9
 _CKPT_MAGIC = b"ZCE2"
-
-
-@dataclass(frozen=True)
-class Forecast:
-    """A day-ahead forecast.
-
-    Attributes
-    ----------
-    issued : pandas.Timestamp
-        Issue time (UTC): the time of the last measurement used.
-    times : pandas.DatetimeIndex
-        Forecast times t + 15 min ... t + 24 h (UTC).
-    mean, std : ndarray, shape (96, n_zones)
-        Zone temperature [degC] and its standard deviation [K].
-    f_ig : ndarray, shape (96, n_zones)
-        Internal gains used per interval [W/m2].
-    zones : list of str
-    model_version : str
-    """
-
-    issued: pd.Timestamp
-    times: pd.DatetimeIndex
-    mean: np.ndarray
-    std: np.ndarray
-    f_ig: np.ndarray
-    zones: list[str]
-    model_version: str
-
-    @property
-    def lower(self) -> np.ndarray:
-        """Lower end of the 90 % interval [degC]."""
-        return self.mean - Z90 * self.std
-
-    @property
-    def upper(self) -> np.ndarray:
-        """Upper end of the 90 % interval [degC]."""
-        return self.mean + Z90 * self.std
 
 
 @dataclass(frozen=True)
@@ -116,9 +110,6 @@ def rows_from_frame(bundle: ModelBundle, frame: pd.DataFrame):
     Missing points are NaN columns. The same function serves the runner (a few rows
     from storage) and the offline path (a whole file).
     """
-    from zonecast.estimator.dataset import model_data
-    from zonecast.estimator.telemetry import Telemetry, segments_of
-
     site = bundle.site
     cols = list(site.point_units())
     frame = frame.reindex(columns=cols).astype(float)
@@ -128,8 +119,6 @@ def rows_from_frame(bundle: ModelBundle, frame: pd.DataFrame):
 
 
 def _input_names(bundle: ModelBundle) -> list[str]:
-    from zonecast.estimator.dataset import DISTURBANCES
-
     return [f"u:{b}" for b in bundle.site.boxes] + [f"v:{d}" for d in DISTURBANCES]
 
 
@@ -137,7 +126,7 @@ def _input_names(bundle: ModelBundle) -> list[str]:
 class _SteadyParts:
     """What the steady-state filter of a model needs, computed once per model."""
 
-    filt: object            # SteadyStateFilter
+    filt: SteadyStateFilter
     horizon_var: np.ndarray  # (HORIZON, n_zones) [K²]
 
 
@@ -147,14 +136,6 @@ _STEADY: dict[str, _SteadyParts] = {}
 def _steady_parts(bundle: ModelBundle, Q: np.ndarray, R: np.ndarray) -> _SteadyParts:
     """Steady-state filter and forecast variances of ``bundle``'s model (cached by the
     bytes of the nominal transition matrix and the noise, so identical models share it)."""
-    import hashlib
-
-    from zonecast.estimator.kalman import (
-        SteadyStateFilter,
-        horizon_output_variances,
-        steady_state_covariance,
-    )
-
     m = bundle.model
     phi = m.step_matrices(m.u_nominal)[0]
     key = hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes()
@@ -176,26 +157,19 @@ class OnlineEstimator:
     Parameters
     ----------
     bundle : ModelBundle
-        Model, profile and noise (:func:`~zonecast.service.modelfile.load_model_file`).
+        Model, profile and noise (:func:`~zonecast.estimator.artifact.load_model_file`).
     max_gap : pandas.Timedelta
         Longest stretch without any data that is bridged by prediction; after a longer
         gap the filter restarts from the next measurement.
     """
 
     def __init__(self, bundle: ModelBundle, *, max_gap: pd.Timedelta = MAX_GAP):
-        from zonecast.estimator.gains import DayAheadGains
-        from zonecast.estimator.integrate import StepperLadder
-        from zonecast.estimator.kalman import (
-            air_wall_covariance,
-            default_measurement_noise,
-        )
-
         self.bundle = bundle
         self.max_gap = pd.Timedelta(max_gap)
         m = bundle.model
         self._n, self._nz = m.n, m.n_zones
         self._nin = m.n_boxes + 6
-        air = np.flatnonzero([lbl.kind == "room_air" for lbl in m.structure.labels])
+        air = m.structure.air_states(measured_only=True)
         ns = bundle.noise
         Q = air_wall_covariance(m.n, air, ns.sigma_air, ns.sigma_wall)
         R = default_measurement_noise(m.n_zones, sigma=ns.sigma_meas)
@@ -203,8 +177,6 @@ class OnlineEstimator:
         self._ladder = StepperLadder(m.structure.A(m.params.physical), m._rooms, m._bxu,
                                      m.step, m.structure.capacity,
                                      float(np.max(m.u_nominal)))
-        from zonecast.estimator.forecast import DAYAHEAD_TAU, DAYAHEAD_WINDOW
-
         # the day-ahead offset's decay and window as chosen on the training weeks (the
         # offline study's; docs/numerics.md)
         self._dayahead = DayAheadGains(bundle.profile, tau=DAYAHEAD_TAU, window=DAYAHEAD_WINDOW,
@@ -268,8 +240,6 @@ class OnlineEstimator:
         return self.bundle.model.C @ self._x, np.sqrt(np.maximum(var, 0.0))
 
     def _start(self, t: pd.Timestamp, y: np.ndarray) -> None:
-        from zonecast.estimator.kalman import initial_state_from_measurement
-
         self._x = initial_state_from_measurement(y, self.bundle.state_zone)
         self.time = t
         self._online = np.zeros(self._nz)
@@ -334,8 +304,6 @@ class OnlineEstimator:
         return self._step(t, y)
 
     def _step(self, t: pd.Timestamp, y: np.ndarray) -> tuple[float, int]:
-        from zonecast.estimator.gains import RankDeficientError, estimate_gains_step
-
         m = self.bundle.model
         if not np.isfinite(self._pending).all():
             # an input never seen since the start: the model cannot be stepped; the
@@ -417,13 +385,11 @@ class OnlineEstimator:
         xs = self._ladder.for_airflows(u).run(self._x, u, forcing, v[:, 1])
         std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
         times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
-        return Forecast(t, times, xs[1:] @ m.C.T, std, f_ig,
-                        self.bundle.zones, self.bundle.version)
+        return Forecast(t, times, xs[1:] @ m.C.T, std, f_ig, self.bundle.zones,
+                        self.bundle.version)
 
     def _bins(self, times_ns: np.ndarray) -> np.ndarray:
         """Time-of-week bin of the profile for UTC grid times (ns since the epoch)."""
-        from zonecast.estimator.gains import time_of_week_bin
-
         prof = self.bundle.profile
         step = pd.Timedelta(prof.step).value
         per_day = _DAY_NS // step
@@ -465,13 +431,14 @@ class OnlineEstimator:
         return base + self._decay[:, None] * d[None, :]
 
     # --- checkpoint --------------------------------------------------------------------
-    def to_bytes(self) -> bytes:
+    def to_bytes(self, extra: dict | None = None) -> bytes:
         """Exact (bitwise) serialisation of the state: a JSON header and the raw bytes of
-        the arrays (``ZCE2``; no pickles)."""
+        the arrays (``ZCE2``; no pickles). ``extra`` (JSON-ready) rides in the header, e.g.
+        the runner's next row; :func:`checkpoint_header` reads it back without the arrays."""
         meta = {"time": None if self.time is None else self.time.isoformat(),
                 "started": self.started, "steps": self.steps, "resets": self.resets,
                 "nis_sum": self.nis_sum, "dof_sum": self.dof_sum,
-                "version": self.bundle.version, "since": self._since}
+                "version": self.bundle.version, "since": self._since, "extra": extra or {}}
         arrays = {"pending": self._pending, "held": self._held, "online": self._online,
                   "last_y": self.last_y, "last_f": self.last_f, "observed": self._observed,
                   "gain_times": np.array([s.value for s, _ in self._gains], dtype=np.int64),
@@ -522,3 +489,178 @@ class OnlineEstimator:
             self._observed = arr["observed"].astype(bool)
         if meta["started"]:
             self._x = arr["x"]
+
+
+def checkpoint_header(data: bytes) -> dict:
+    """The JSON header of a checkpoint written by :meth:`OnlineEstimator.to_bytes`:
+    ``version`` (model file version), ``time``, ``extra`` and the counters.
+
+    Raises
+    ------
+    ValueError
+        Not a checkpoint of this format.
+    """
+    if data[:4] != _CKPT_MAGIC:
+        raise ValueError("not a streaming-estimator checkpoint (ZCE2)")
+    n = int.from_bytes(data[4:8], "big")
+    return json.loads(data[8:8 + n])
+
+
+# --------------------------------------------------------------------------- row conversion
+class RowConverter:
+    """Readings of a site's points in their wire units -> the model's u, v, y, without
+    pandas: the runner's per-row conversion.
+
+    Gives the numbers of :func:`rows_from_frame` (tested on every row of three
+    virtual-building weeks) at a fraction of its fixed cost for the one row a runner step
+    needs: unit conversion with :func:`~zonecast.estimator.units.to_si` per group of
+    points of one unit; zone temperatures as the same weighted mean over the sensors that
+    reported (:func:`~zonecast.estimator.dataset.zone_weights`); facade irradiance with
+    :func:`~zonecast.estimator.solar.transpose` (the rules of the offline path) on sun
+    geometry cached a UTC day at a time (:class:`~zonecast.estimator.solar.SolarGeometryCache`).
+
+    Parameters
+    ----------
+    bundle : ModelBundle
+    albedo, sky_model : as :func:`zonecast.estimator.dataset.model_data` (its defaults).
+    """
+
+    def __init__(self, bundle: ModelBundle, *, albedo: float = 0.2, sky_model: str = "perez"):
+        if sky_model not in SKY_MODELS:
+            raise ValueError(f"sky_model must be one of {SKY_MODELS}, got {sky_model!r}")
+        site = bundle.site
+        self.units = site.point_units()
+        self.points = list(self.units)
+        col = {p: i for i, p in enumerate(self.points)}
+        by_unit: dict[str, list[int]] = {}
+        for p, unit in self.units.items():
+            by_unit.setdefault(unit, []).append(col[p])
+        self._groups = [(unit, np.array(idx)) for unit, idx in by_unit.items()]
+        self._box = np.array([col[b.airflow.point] for b in site.boxes.values()], dtype=int)
+        pts = site.points
+        self._ta = col[pts.outdoor_air_temperature.point]
+        self._ts = col[pts.supply_air_temperature.point]
+        self._sun = np.array([col[pts.solar.global_horizontal.point],
+                              col[pts.solar.direct_normal.point],
+                              col[pts.solar.diffuse_horizontal.point]])
+        weights = zone_weights(site, bundle.room_volume)
+        self._zones = []
+        for zone in site.zones:
+            idx = np.array([col[s.point] for s in pts.zone_temperature[zone]], dtype=int)
+            w = (np.ones(len(idx)) if weights is None or zone not in weights
+                 else np.asarray(weights[zone], float))
+            self._zones.append((idx, w))
+        loc = site.location
+        self.solar = SolarGeometryCache(loc.latitude, loc.longitude, loc.elevation, site.step)
+        self._facades = [(90.0, az) for az in FACADE_AZIMUTHS]
+        self.albedo, self.sky_model = float(albedo), sky_model
+
+    def convert(self, times_ns, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Rows of readings -> (u, v, y).
+
+        Parameters
+        ----------
+        times_ns : array (N,) of int
+            Row times as UTC nanoseconds since the epoch (interval starts).
+        values : array (N, n_points)
+            Readings in the units of the site's point map, columns in the order of
+            :attr:`points`; NaN = missing.
+
+        Returns
+        -------
+        u (N, n_boxes) [kg/s], v (N, 6) [degC, degC, W/m2 x 4], y (N, n_zones) [degC]
+        """
+        raw = np.asarray(values, dtype=float)
+        if raw.ndim != 2 or raw.shape[1] != len(self.points):
+            raise ValueError(f"values must have shape (N, {len(self.points)})")
+        si = np.empty_like(raw)
+        for unit, idx in self._groups:
+            si[:, idx] = to_si(raw[:, idx], unit)
+        n = len(si)
+        sol = np.full((n, 4), np.nan)
+        sun = si[:, self._sun]
+        ok = np.isfinite(sun).all(axis=1)
+        if ok.any():
+            geom = self.solar.geometry(np.asarray(times_ns, dtype=np.int64)[ok])
+            comp = transpose(geom, sun[ok, 0], sun[ok, 1], sun[ok, 2], self._facades,
+                             albedo=self.albedo, sky_model=self.sky_model)
+            sol[ok] = comp["poa_direct"] + comp["poa_sky_diffuse"] + comp["poa_ground_diffuse"]
+        v = np.column_stack([si[:, self._ta], si[:, self._ts], sol])
+        y = np.full((n, len(self._zones)), np.nan)
+        for j, (idx, w) in enumerate(self._zones):
+            vals = si[:, idx]
+            good = np.isfinite(vals)
+            wsum = (good * w).sum(axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                y[:, j] = np.where(wsum > 0, np.nansum(vals * w, axis=1) / wsum, np.nan)
+        return si[:, self._box], v, y
+
+
+# --------------------------------------------------------------------------- offline replay
+def telemetry_frame(telemetry: Telemetry | str | Path | pd.DataFrame,
+                    bundle: ModelBundle) -> pd.DataFrame:
+    """Telemetry (a :class:`Telemetry`, a file or folder holding telemetry.csv, or an SI
+    frame indexed by UTC time) -> SI frame with one column per site point."""
+    if isinstance(telemetry, pd.DataFrame):
+        return telemetry
+    if isinstance(telemetry, Telemetry):
+        return telemetry.frame
+    path = Path(telemetry)
+    return load_telemetry(path / "telemetry.csv" if path.is_dir() else path, bundle.site).frame
+
+
+def offline_forecasts(model_file: ModelBundle | str | Path,
+                      telemetry: Telemetry | str | Path | pd.DataFrame, times: Iterable, *,
+                      max_gap: pd.Timedelta = MAX_GAP,
+                      inputs: Mapping | None = None) -> dict[pd.Timestamp, Forecast]:
+    """Forecasts issued at ``times`` by the online estimator run over ``telemetry``.
+
+    Feeds every row of recorded telemetry that holds any data, in time order, to the
+    same :class:`OnlineEstimator` the service's runner uses. A replay of the same
+    telemetry through MQTT into the service must give the same numbers.
+
+    Parameters
+    ----------
+    model_file : path or ModelBundle
+        Identified-model file (:func:`~zonecast.estimator.artifact.load_model_file`).
+    telemetry : Telemetry, path or DataFrame
+        Recorded telemetry of the site (SI units when a frame).
+    times : iterable of tz-aware timestamps
+        Issue times; each must be a row of the telemetry with data at or after the
+        filter's start.
+    max_gap : pandas.Timedelta
+        As for :class:`OnlineEstimator`.
+    inputs : mapping, optional
+        UTC issue time -> (96, n_boxes + 6) inputs over the horizon for
+        :meth:`OnlineEstimator.forecast` (default persistence inputs).
+
+    Returns
+    -------
+    dict
+        UTC issue time -> :class:`~zonecast.estimator.forecast.Forecast`.
+    """
+    bundle = model_file if isinstance(model_file, ModelBundle) else load_model_file(model_file)
+    wanted = set()
+    for t in times:
+        ts = pd.Timestamp(t)
+        if ts.tzinfo is None:
+            raise ValueError(f"issue time {t!r} needs a UTC offset")
+        wanted.add(ts.tz_convert("UTC"))
+    frame = telemetry_frame(telemetry, bundle)
+    frame = frame[frame.notna().any(axis=1)]
+    est = OnlineEstimator(bundle, max_gap=max_gap)
+    out: dict[pd.Timestamp, Forecast] = {}
+    last = max(wanted) if wanted else None
+    tt, u, v, y = rows_from_frame(bundle, frame)
+    for k, t in enumerate(tt):
+        if last is not None and t > last:
+            break
+        est.advance(t, u[k], v[k], y[k])
+        if t in wanted and est.started:
+            out[t] = est.forecast(None if inputs is None else inputs.get(t))
+    missing = sorted(wanted - set(out))
+    if missing:
+        raise ValueError(f"no forecast at {len(missing)} requested times (first "
+                         f"{missing[0].isoformat()}): not a telemetry row with data, or before "
+                         "the first measurement")
+    return out

@@ -1,9 +1,15 @@
-"""Read an identified-model file (the output of ``zonecast identify``) into a ready model.
+"""The identified-model artefact: parameters, weekly internal-gains profile, filter noise,
+modelling options and the model's structure matrices.
 
-File format (JSON, ``schema_version`` 1)::
+A model file is a JSON document and, beside it, an ``.npz`` of the RC structure (paper
+eq:ct_model, affine in the parameters: A0, A_p, Bv0, Bv_p, B_IG, C, capacities, the
+box-room map and the state labels), so that serving and forecasting need neither the
+EnergyPlus file nor EnergyPlus itself::
 
-    {"schema_version": 1,
+    {"schema_version": 2,
      "site": "site.yaml",                      # relative to the JSON file (or absolute)
+     "structure": "model.npz",                 # relative to the JSON file; schema 2
+     "structure_sha256": "...",                # of the .npz bytes; checked when loading
      "parameters": {"gamma_EW": 25.0, ...},    # optional; missing names -> start values
      "weekly_profile": {"zones": ["NW", ...],  # optional; null -> zeros
                         "values": [[...], ...]},   # 672 rows x n_zones [W/m2]
@@ -14,26 +20,50 @@ File format (JSON, ``schema_version`` 1)::
                                                # without them was written before they
                                                # existed: window solar on the room air
 
+Schema 1 files (no ``structure``) still load: the structure is then rebuilt from the
+site's EnergyPlus file, which needs EnergyPlus (about a second for a floor of rooms).
+
 Everything that is wrong raises :class:`ModelFileError` (a ``ValueError``) with a
-message naming the field. Loading reads the site description and its EnergyPlus
-file and builds the bilinear model (about a second for a floor of rooms).
+message naming the field.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass, field
+import os
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
+import scipy.sparse as sp
+from zonecast.estimator.constants import (
+    SIGMA_AIR_ONLINE,
+    SIGMA_MEAS,
+    SIGMA_WALL_FORECAST,
+    STEP,
+)
+from zonecast.estimator.gains import WeeklyProfile
+from zonecast.estimator.idf import read_building
+from zonecast.estimator.model import BilinearModel, build_model
+from zonecast.estimator.rc.network import (
+    ModelDefinitionError,
+    ModelOptions,
+    RCStructure,
+    StateLabel,
+)
+from zonecast.estimator.rc.parameters import ParameterSet
+from zonecast.estimator.site import Site, load_site
 
 __all__ = ["ModelBundle", "ModelFileError", "NoiseSettings", "load_model_file",
-           "write_model_file"]
+           "load_structure", "save_structure", "write_model_file"]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: schema versions this module reads (1: no structure file, rebuilt from the IDF)
+READABLE_SCHEMAS = (1, 2)
+#: format of the structure .npz
+STRUCTURE_FORMAT = 1
 _NOISE_KEYS = ("sigma_air", "sigma_wall", "sigma_meas", "p0_sigma_air", "p0_sigma_wall")
 
 
@@ -58,9 +88,9 @@ class NoiseSettings:
         Initial standard deviations of air and element states [K].
     """
 
-    sigma_air: float = 0.3
-    sigma_wall: float = 0.01
-    sigma_meas: float = 0.2
+    sigma_air: float = SIGMA_AIR_ONLINE
+    sigma_wall: float = SIGMA_WALL_FORECAST
+    sigma_meas: float = SIGMA_MEAS
     p0_sigma_air: float = 0.3
     p0_sigma_wall: float = 2.0
 
@@ -89,18 +119,21 @@ class ModelBundle:
         Zone index of every state (-1: no single zone), for the initial state.
     notes : list of str
         What was defaulted (missing parameters, missing profile).
+    site_path : Path, optional
+        The site description the model file refers to.
     """
 
     building: str
-    site: Any
-    model: Any
-    profile: Any
+    site: Site
+    model: BilinearModel
+    profile: WeeklyProfile
     noise: NoiseSettings
     version: str
     path: Path
     room_volume: dict[str, float]
     state_zone: np.ndarray
     notes: list[str] = field(default_factory=list)
+    site_path: Path | None = None
 
     @property
     def zones(self) -> list[str]:
@@ -119,15 +152,13 @@ def _read_json(path: Path) -> tuple[dict, bytes]:
         raise ModelFileError(f"model file {path} must hold a JSON object, got "
                              f"{type(doc).__name__}")
     version = doc.get("schema_version")
-    if version != SCHEMA_VERSION:
-        raise ModelFileError(f"model file {path}: schema_version must be {SCHEMA_VERSION}, "
-                             f"got {version!r}")
+    if version not in READABLE_SCHEMAS:
+        raise ModelFileError(f"model file {path}: schema_version must be one of "
+                             f"{list(READABLE_SCHEMAS)}, got {version!r}")
     return doc, raw
 
 
 def _parameters(doc: dict, zones: list[str], path: Path, notes: list[str]):
-    from zonecast.estimator.rc.parameters import ParameterSet
-
     params = ParameterSet(zones)
     given = doc.get("parameters") or {}
     if not isinstance(given, dict):
@@ -147,8 +178,6 @@ def _parameters(doc: dict, zones: list[str], path: Path, notes: list[str]):
 
 
 def _profile(doc: dict, zones: list[str], timezone: str, path: Path, notes: list[str]):
-    from zonecast.estimator.gains import WeeklyProfile
-
     n_bins = 672
     wp = doc.get("weekly_profile")
     if wp is None:
@@ -200,8 +229,6 @@ LEGACY_OPTIONS = {"window_solar": "air"}
 
 
 def _model_options(doc: dict, path: Path, notes: list[str]):
-    from zonecast.estimator.rc.network import ModelDefinitionError, ModelOptions
-
     raw = doc.get("model_options")
     if raw is None:
         notes.append("no model_options: window solar on the room air (files written before "
@@ -225,13 +252,6 @@ def model_options_dict(options) -> dict:
     return {k: getattr(options, k) for k in _OPTION_KEYS}
 
 
-def state_zones(structure, zones: list[str]) -> np.ndarray:
-    """Zone index of every state: the zone of the room the state belongs to, else -1."""
-    room_zone = {r.upper(): i for i, z in enumerate(zones) for r in structure.zones[z]}
-    return np.array([room_zone.get(lbl.room.upper(), -1) if lbl.kind != "unmeasured_air"
-                     else -1 for lbl in structure.labels], dtype=int)
-
-
 def load_model_file(path: str | Path) -> ModelBundle:
     """Read an identified-model file and build the model.
 
@@ -250,10 +270,6 @@ def load_model_file(path: str | Path) -> ModelBundle:
         Missing file, bad JSON, wrong schema version, unknown parameter, profile of the
         wrong shape, or a site/IDF that cannot be read (its message is included).
     """
-    from zonecast.estimator.idf import read_building
-    from zonecast.estimator.model import build_model
-    from zonecast.estimator.site import load_site
-
     path = Path(path)
     doc, raw = _read_json(path)
     site_ref = doc.get("site")
@@ -267,7 +283,7 @@ def load_model_file(path: str | Path) -> ModelBundle:
         raise ModelFileError(f"{path}: site description {site_path} not found") from None
     except ValueError as exc:
         raise ModelFileError(f"{path}: site description {site_ref}: {exc}") from None
-    if site.step != pd.Timedelta("15min"):
+    if site.step != STEP:
         raise ModelFileError(f"{path}: the service runs on a 15-min step; the site has "
                              f"{site.step}")
     notes: list[str] = []
@@ -276,17 +292,133 @@ def load_model_file(path: str | Path) -> ModelBundle:
     profile = _profile(doc, zones, site.timezone, path, notes)
     noise = _noise(doc, path)
     options = _model_options(doc, path, notes)
-    try:
-        building = read_building(site.idf_path)
-    except (ValueError, FileNotFoundError) as exc:
-        raise ModelFileError(f"{path}: building {site.idf_path}: {exc}") from None
-    model = build_model(building, site.zones, {b: box.room for b, box in site.boxes.items()},
-                        params, options=options)
-    volume = {name: z.volume for name, z in building.zones.items()}
+    if doc.get("structure") is not None:
+        structure, volume = _stored_structure(doc, path, site, options)
+        model = BilinearModel(structure, params)
+    else:
+        notes.append("no structure file: model rebuilt from the site's EnergyPlus file")
+        try:
+            building = read_building(site.idf_path)
+        except (ValueError, FileNotFoundError) as exc:
+            raise ModelFileError(f"{path}: building {site.idf_path}: {exc}") from None
+        model = build_model(building, site.zones,
+                            {b: box.room for b, box in site.boxes.items()}, params,
+                            options=options)
+        volume = {name: z.volume for name, z in building.zones.items()}
     return ModelBundle(
         building=site.building, site=site, model=model, profile=profile, noise=noise,
         version="sha256:" + hashlib.sha256(raw).hexdigest()[:16], path=path,
-        room_volume=volume, state_zone=state_zones(model.structure, zones), notes=notes)
+        room_volume=volume, state_zone=model.structure.state_zones(), notes=notes,
+        site_path=site_path)
+
+
+def _stored_structure(doc: dict, path: Path, site: Site,
+                      options: ModelOptions) -> tuple[RCStructure, dict[str, float]]:
+    """The structure file a model file names, checked against the file and the site."""
+    ref = doc["structure"]
+    if not isinstance(ref, str) or not ref:
+        raise ModelFileError(f"{path}: 'structure' must be the path of the structure .npz, "
+                             "relative to the model file")
+    npz = (path.parent / ref).resolve()
+    if not npz.is_file():
+        raise ModelFileError(f"{path}: structure file {npz} not found; copy it beside the "
+                             "model file or write the model again with zonecast identify")
+    want = doc.get("structure_sha256")
+    if want is not None and hashlib.sha256(npz.read_bytes()).hexdigest() != want:
+        raise ModelFileError(f"{path}: structure file {npz} does not match structure_sha256 "
+                             "(it was replaced after the model file was written)")
+    try:
+        structure, volume = load_structure(npz)
+    except (ValueError, KeyError, OSError) as exc:
+        raise ModelFileError(f"{path}: structure file {npz}: {exc}") from None
+    if list(structure.zones) != list(site.zones):
+        raise ModelFileError(f"{path}: the structure's zones {list(structure.zones)} differ "
+                             f"from the site's {list(site.zones)}")
+    if list(structure.boxes) != list(site.boxes):
+        raise ModelFileError(f"{path}: the structure's boxes {list(structure.boxes)} differ "
+                             f"from the site's {list(site.boxes)}")
+    if structure.options != options:
+        raise ModelFileError(f"{path}: model_options {options} differ from the options the "
+                             f"structure was built with {structure.options}")
+    return structure, volume
+
+
+# --------------------------------------------------------------------------- structure file
+def _csr_arrays(name: str, m: sp.csr_matrix, out: dict[str, np.ndarray]) -> None:
+    m = sp.csr_matrix(m)
+    out[f"{name}.data"], out[f"{name}.indices"] = m.data, m.indices
+    out[f"{name}.indptr"], out[f"{name}.shape"] = m.indptr, np.array(m.shape)
+
+
+def _csr(name: str, z) -> sp.csr_matrix:
+    return sp.csr_matrix((z[f"{name}.data"], z[f"{name}.indices"], z[f"{name}.indptr"]),
+                         shape=tuple(int(s) for s in z[f"{name}.shape"]))
+
+
+def save_structure(path: str | Path, structure: RCStructure,
+                   room_volume: dict[str, float]) -> Path:
+    """Write an RC structure and the rooms' air volumes to ``path`` (.npz, no pickles).
+
+    The arrays are stored bit for bit, so a model rebuilt with :func:`load_structure`
+    steps exactly like the one built from the EnergyPlus file.
+
+    Parameters
+    ----------
+    path : path
+    structure : RCStructure
+    room_volume : dict
+        Room -> air volume [m3] (weights of several sensors of one zone).
+    """
+    arrays: dict[str, np.ndarray] = {
+        "capacity": structure.capacity, "B_ig": structure.B_ig, "C": structure.C,
+        "room_of_box": structure.room_of_box,
+    }
+    _csr_arrays("A0", structure.A0, arrays)
+    _csr_arrays("Bv0", structure.Bv0, arrays)
+    for i, m in enumerate(structure.A_p):
+        _csr_arrays(f"A_p{i}", m, arrays)
+    for i, m in enumerate(structure.Bv_p):
+        _csr_arrays(f"Bv_p{i}", m, arrays)
+    for room, w in structure.window_area.items():
+        arrays[f"window_area.{room}"] = np.asarray(w, dtype=float)
+    meta = {"format": STRUCTURE_FORMAT,
+            "labels": [[lab.kind, lab.room, lab.element, lab.layer] for lab in structure.labels],
+            "rooms": structure.rooms, "zones": structure.zones, "boxes": structure.boxes,
+            "cp_air": structure.cp_air, "notes": structure.notes, "areas": structure.areas,
+            "window_rooms": list(structure.window_area), "n_A_p": len(structure.A_p),
+            "n_Bv_p": len(structure.Bv_p), "options": asdict(structure.options),
+            "room_volume": {k: float(v) for k, v in room_volume.items()}}
+    path = Path(path)
+    with path.open("wb") as fh:
+        np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)
+    return path
+
+
+def load_structure(path: str | Path) -> tuple[RCStructure, dict[str, float]]:
+    """Read a structure file written by :func:`save_structure`.
+
+    Returns
+    -------
+    structure : RCStructure
+    room_volume : dict
+        Room -> air volume [m3].
+    """
+    with np.load(path, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"]))
+        if meta.get("format") != STRUCTURE_FORMAT:
+            raise ValueError(f"structure format {meta.get('format')!r}; this version reads "
+                             f"{STRUCTURE_FORMAT}")
+        structure = RCStructure(
+            labels=[StateLabel(*lab) for lab in meta["labels"]],
+            rooms=list(meta["rooms"]), zones={k: list(v) for k, v in meta["zones"].items()},
+            boxes=dict(meta["boxes"]), capacity=z["capacity"],
+            A0=_csr("A0", z), A_p=[_csr(f"A_p{i}", z) for i in range(meta["n_A_p"])],
+            Bv0=_csr("Bv0", z), Bv_p=[_csr(f"Bv_p{i}", z) for i in range(meta["n_Bv_p"])],
+            B_ig=z["B_ig"], room_of_box=z["room_of_box"], C=z["C"], cp_air=meta["cp_air"],
+            notes=list(meta["notes"]), areas=dict(meta["areas"]),
+            window_area={r: z[f"window_area.{r}"] for r in meta["window_rooms"]},
+            options=ModelOptions(**meta["options"]))
+    return structure, {k: float(v) for k, v in meta["room_volume"].items()}
 
 
 def write_model_file(path: str | Path, site: str | Path, *,
@@ -294,28 +426,37 @@ def write_model_file(path: str | Path, site: str | Path, *,
                      weekly_profile: dict | None = None,
                      noise: dict[str, float] | None = None,
                      model_options: dict[str, str | float] | None = None,
+                     structure: RCStructure | None = None,
+                     room_volume: dict[str, float] | None = None,
                      extra: dict[str, Any] | None = None) -> Path:
-    """Write a model file (schema 1) pointing to ``site`` (stored relative to the file
-    when both are on one drive, else absolute).
+    """Write a model file pointing to ``site`` (stored relative to the file when both are
+    on one drive, else absolute).
 
     Used by ``zonecast identify`` and ``zonecast reproduce``, by tests, and for sites
     without identification. ``model_options`` are the :class:`ModelOptions` the model was
-    built with (default: the current defaults). ``extra`` adds informational keys (e.g.
+    built with (default: the structure's, else the current defaults). With ``structure``
+    (and the rooms' ``room_volume`` [m3]) the structure goes to the same name with
+    ``.npz`` and loading needs no EnergyPlus. ``extra`` adds informational keys (e.g.
     ``identification``).
     """
-    import os
-
-    from zonecast.estimator.rc.network import ModelOptions
-
     path = Path(path)
     site = Path(site).resolve()
     try:
         ref = os.path.relpath(site, path.parent.resolve())
     except ValueError:  # another drive (Windows)
         ref = str(site)
-    doc = {"schema_version": SCHEMA_VERSION, "site": ref, "parameters": parameters or {},
-           "weekly_profile": weekly_profile, "noise": noise,
-           "model_options": model_options or model_options_dict(ModelOptions()),
-           **(extra or {})}
+    if model_options is None:
+        model_options = model_options_dict(structure.options if structure is not None
+                                           else ModelOptions())
+    doc: dict[str, Any] = {"schema_version": SCHEMA_VERSION, "site": ref}
+    if structure is not None:
+        if room_volume is None:
+            raise ValueError("write_model_file: give room_volume (room -> air volume [m3]) "
+                             "with the structure")
+        npz = save_structure(path.with_suffix(".npz"), structure, room_volume)
+        doc["structure"] = npz.name
+        doc["structure_sha256"] = hashlib.sha256(npz.read_bytes()).hexdigest()
+    doc.update({"parameters": parameters or {}, "weekly_profile": weekly_profile,
+                "noise": noise, "model_options": model_options, **(extra or {})})
     path.write_text(json.dumps(doc, indent=1))
     return path

@@ -1,0 +1,262 @@
+"""The pipeline facade: site -> model -> data -> identify -> forecast, in one object.
+
+pvlib's ``ModelChain`` is the anchor: :class:`Pipeline` holds a site and what has been
+computed for it, and each step calls the estimator's functions (which stay usable on
+their own)::
+
+    pipe = Pipeline.from_site("site.yaml")        # or Pipeline.from_model_file("model.json")
+    data = pipe.data("telemetry.csv")             # paper's u, v, y on the model step
+    res = pipe.identify(data)                     # paper section 4-A (IdentificationResult)
+    prof = pipe.weekly_profile(data)              # paper Eq:fixed_ig (WeeklyProfile)
+    pipe.write_model_file("model.json")           # the artefact the service serves
+    fc = pipe.forecast("telemetry.csv", [t])      # the streaming estimator's forecasts
+
+The CLI, the jobs (reproduce, diagnosis report), the service's model loader and the
+benchmarks call it. Reading the building's EnergyPlus file needs EnergyPlus; a pipeline
+made from a model file with a stored structure (:mod:`~zonecast.estimator.artifact`) does
+not.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from pathlib import Path
+
+import pandas as pd
+from zonecast.estimator.artifact import (
+    ModelBundle,
+    NoiseSettings,
+    load_model_file,
+    model_options_dict,
+    write_model_file,
+)
+from zonecast.estimator.dataset import ModelData, model_data
+from zonecast.estimator.forecast import Forecast, fixed_profile, track_week, whole_weeks
+from zonecast.estimator.gains import WeeklyProfile
+from zonecast.estimator.identify import IdentificationResult, excitation_saturdays, identify
+from zonecast.estimator.idf import Building, read_building
+from zonecast.estimator.model import BilinearModel
+from zonecast.estimator.rc.network import ModelOptions, RCStructure, build_structure
+from zonecast.estimator.rc.parameters import ParameterSet
+from zonecast.estimator.site import Site, load_site
+from zonecast.estimator.streaming import offline_forecasts
+from zonecast.estimator.telemetry import Telemetry, load_telemetry
+
+__all__ = ["Pipeline", "PipelineError"]
+
+Progress = Callable[[str], None]
+
+
+class PipelineError(ValueError):
+    """A pipeline step was asked for before what it needs; the message says which step."""
+
+
+def _quiet(_: str) -> None:
+    return None
+
+
+class Pipeline:
+    """One building's way from its description to forecasts.
+
+    Parameters
+    ----------
+    site : Site
+        The site description (:func:`~zonecast.estimator.site.load_site`).
+    site_path : path, optional
+        The file ``site`` was read from (model files refer to it).
+    options : ModelOptions, optional
+        Modelling choices (default :class:`ModelOptions`).
+    energyplus_dir : path, optional
+        EnergyPlus used to read the building's IDF (default as
+        :func:`~zonecast.estimator.idf.find_energyplus`).
+    """
+
+    def __init__(self, site: Site, *, site_path: str | os.PathLike | None = None,
+                 options: ModelOptions | None = None,
+                 energyplus_dir: str | os.PathLike | None = None):
+        self.site = site
+        self.site_path = None if site_path is None else Path(site_path)
+        self.options = options or ModelOptions()
+        self.energyplus_dir = energyplus_dir
+        self._building: Building | None = None
+        self._structure: RCStructure | None = None
+        self._room_volume: dict[str, float] | None = None
+        #: parameters of the last :meth:`identify` (or of the model file)
+        self.params: ParameterSet | None = None
+        #: the last :meth:`identify` result
+        self.identification: IdentificationResult | None = None
+        #: the last :meth:`weekly_profile` (or the model file's)
+        self.profile: WeeklyProfile | None = None
+        #: start dates of the weeks the profile was estimated from
+        self.profile_weeks: list[str] = []
+        #: filter noise of the streaming estimator (the model file's, else defaults)
+        self.noise = NoiseSettings()
+        self._bundle: ModelBundle | None = None
+
+    # --- construction ------------------------------------------------------------------
+    @classmethod
+    def from_site(cls, site: Site | str | os.PathLike, *, options: ModelOptions | None = None,
+                  energyplus_dir: str | os.PathLike | None = None) -> Pipeline:
+        """A pipeline for a site description (a :class:`Site` or the path of its YAML)."""
+        if isinstance(site, Site):
+            return cls(site, options=options, energyplus_dir=energyplus_dir)
+        return cls(load_site(site), site_path=site, options=options,
+                   energyplus_dir=energyplus_dir)
+
+    @classmethod
+    def from_model_file(cls, path: str | os.PathLike) -> Pipeline:
+        """A pipeline holding an identified model (:func:`~.artifact.load_model_file`):
+        its site, structure, parameters, profile and noise."""
+        bundle = load_model_file(path)
+        pipe = cls(bundle.site, site_path=bundle.site_path,
+                   options=bundle.model.structure.options)
+        pipe._structure = bundle.model.structure
+        pipe._room_volume = dict(bundle.room_volume)
+        pipe.params = bundle.model.params
+        pipe.profile = bundle.profile
+        pipe.noise = bundle.noise
+        pipe._bundle = bundle
+        return pipe
+
+    def with_options(self, options: ModelOptions) -> Pipeline:
+        """A pipeline for the same site with other modelling choices (shares the building
+        already read, so EnergyPlus is not run again)."""
+        other = Pipeline(self.site, site_path=self.site_path, options=options,
+                         energyplus_dir=self.energyplus_dir)
+        other._building = self._building
+        return other
+
+    # --- model -------------------------------------------------------------------------
+    def building(self) -> Building:
+        """The building read from the site's EnergyPlus file (needs EnergyPlus; cached)."""
+        if self._building is None:
+            self._building = read_building(self.site.idf_path, self.energyplus_dir)
+        return self._building
+
+    def structure(self) -> RCStructure:
+        """The parameter-free RC structure (paper section 3; cached)."""
+        if self._structure is None:
+            building = self.building()
+            self._structure = build_structure(
+                building, self.site.zones, {b: box.room for b, box in self.site.boxes.items()},
+                self.options)
+            self._room_volume = {name: z.volume for name, z in building.zones.items()}
+        return self._structure
+
+    @property
+    def room_volume(self) -> dict[str, float]:
+        """Room -> air volume [m3]."""
+        self.structure()
+        assert self._room_volume is not None
+        return self._room_volume
+
+    def model(self, params: ParameterSet | Mapping[str, float] | Sequence[float] | None = None
+              ) -> BilinearModel:
+        """The bilinear model with ``params`` (default: the identified ones if any, else
+        the physical starting values)."""
+        structure = self.structure()
+        if params is None:
+            params = self.params
+        if params is not None and not isinstance(params, ParameterSet):
+            params = ParameterSet(list(structure.zones), params)
+        return BilinearModel(structure, params)
+
+    # --- data --------------------------------------------------------------------------
+    def telemetry(self, path: str | os.PathLike) -> Telemetry:
+        """Validated telemetry: a file, or a folder holding ``telemetry.csv``."""
+        path = Path(path)
+        return load_telemetry(path / "telemetry.csv" if path.is_dir() else path, self.site)
+
+    def data(self, telemetry: Telemetry | str | os.PathLike) -> ModelData:
+        """Telemetry in the model's terms (paper u, v, y; sensors weighted like C)."""
+        tel = telemetry if isinstance(telemetry, Telemetry) else self.telemetry(telemetry)
+        return model_data(tel, self.model().room_weights())
+
+    # --- identification ----------------------------------------------------------------
+    def identify(self, data: ModelData, train: Sequence[str] | None = None,
+                 validation: Sequence[str] | None = None, *, n_starts: int = 3, seed: int = 0,
+                 progress: Progress = _quiet) -> IdentificationResult:
+        """Identify the 13 parameters (paper section 4-A) from excitation weekends.
+
+        Defaults follow the paper's split of the site's excitation weekends (its
+        ``experiments``): training on the second and third, validation on the first.
+        """
+        sats = [str(s.date()) for s in excitation_saturdays(data)]
+        train = list(train) if train else sats[1:3]
+        validation = list(validation) if validation is not None else sats[:1]
+        if not train:
+            raise PipelineError("no excitation weekend found: give the training Saturdays "
+                                "(the site's experiments list marks excitation periods)")
+        res = identify(self.model(ParameterSet(list(self.site.zones))), data, train,
+                       validation, n_starts=n_starts, seed=seed, progress=progress)
+        self.identification = res
+        self.params = res.model.params
+        self._bundle = None
+        return res
+
+    def weekly_profile(self, data: ModelData, *, progress: Progress = _quiet
+                       ) -> WeeklyProfile | None:
+        """The fixed weekly internal-gains profile (paper Eq:fixed_ig) from every whole
+        week of ``data`` with the current parameters; None without a whole week."""
+        weeks = whole_weeks(data)
+        if not weeks:
+            return None
+        fitted = self.model()
+        tracks = []
+        for i, w in enumerate(weeks):
+            progress(f"week {i + 1}/{len(weeks)}")
+            tracks.append(track_week(fitted, data, w["rows"]))
+        self.profile = fixed_profile(data, tracks)
+        self.profile_weeks = [w["start"] for w in weeks]
+        self._bundle = None
+        return self.profile
+
+    # --- artefact ----------------------------------------------------------------------
+    def write_model_file(self, path: str | os.PathLike, *,
+                         weekly_profile: dict | None = None,
+                         extra: dict | None = None) -> Path:
+        """Write the model file and its structure (:mod:`~zonecast.estimator.artifact`).
+
+        ``weekly_profile`` overrides the pipeline's profile ({"zones", "values"}); the
+        identification result and the profile's weeks go in as informational keys.
+        """
+        if self.site_path is None:
+            raise PipelineError("the pipeline was made from a Site object: make it with "
+                                "Pipeline.from_site(path) so the model file can refer to it")
+        site_file = self.site_path
+        if site_file.is_dir():
+            raise PipelineError(f"{site_file} is a folder; the pipeline needs the site file")
+        structure = self.structure()
+        if weekly_profile is None and self.profile is not None:
+            weekly_profile = {"zones": list(self.site.zones),
+                              "values": self.profile.values.tolist()}
+        info: dict = {}
+        if self.identification is not None:
+            info["identification"] = self.identification.to_dict()
+        if self.profile_weeks:
+            info["profile_weeks"] = self.profile_weeks
+        params = self.params
+        return write_model_file(
+            path, site_file,
+            parameters=None if params is None else dict(zip(params.param_names,
+                                                            map(float, params.values))),
+            weekly_profile=weekly_profile, model_options=model_options_dict(structure.options),
+            structure=structure, room_volume=self.room_volume, extra={**info, **(extra or {})})
+
+    # --- forecasts ---------------------------------------------------------------------
+    @property
+    def bundle(self) -> ModelBundle:
+        """The model as the streaming estimator uses it (read from a model file)."""
+        if self._bundle is None:
+            raise PipelineError("no model file: write one with write_model_file() and use "
+                                "Pipeline.from_model_file(path)")
+        return self._bundle
+
+    def forecast(self, telemetry: Telemetry | str | os.PathLike | pd.DataFrame,
+                 times: Iterable, *, inputs: Mapping | None = None
+                 ) -> dict[pd.Timestamp, Forecast]:
+        """Day-ahead forecasts issued at ``times`` by the streaming estimator run over
+        ``telemetry`` (:func:`~zonecast.estimator.streaming.offline_forecasts`): the same
+        numbers the service serves."""
+        return offline_forecasts(self.bundle, telemetry, times, inputs=inputs)

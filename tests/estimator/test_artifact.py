@@ -1,0 +1,157 @@
+"""The model artefact: model file + structure .npz (estimator/artifact.py).
+
+A model file with its structure loads without EnergyPlus and gives a model that steps
+bit for bit like the one built from the EnergyPlus file; files without a structure (schema
+1, or written without one) still load by rebuilding it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import numpy as np
+import pytest
+from zonecast.estimator import artifact
+from zonecast.estimator.artifact import (
+    ModelFileError,
+    load_model_file,
+    load_structure,
+    save_structure,
+    write_model_file,
+)
+from zonecast.estimator.pipeline import Pipeline
+
+
+def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
+    assert bundle.model.params.as_dict()["gamma_IW"]["value"] == 9.0
+    assert any("start values" in n for n in bundle.notes)
+    assert bundle.profile.values.shape == (672, len(bundle.zones))
+    bare = load_model_file(write_model_file(tmp_path / "m.json", vb / "site.yaml"))
+    assert np.all(bare.profile.values == 0) and "no weekly" in " ".join(bare.notes)
+    # model options round-trip; a file from before they existed is read as it was built
+    assert bare.model.structure.options.window_solar == "surfaces"
+    air = load_model_file(write_model_file(tmp_path / "a.json", vb / "site.yaml",
+                                           model_options={"window_solar": "air"}))
+    assert air.model.structure.options.window_solar == "air"
+    legacy = json.loads((tmp_path / "a.json").read_text())
+    del legacy["model_options"]
+    (tmp_path / "legacy.json").write_text(json.dumps(legacy))
+    old = load_model_file(tmp_path / "legacy.json")
+    assert old.model.structure.options.window_solar == "air"
+    assert any("no model_options" in n for n in old.notes)
+    cases = [
+        ({"schema_version": 3, "site": str(vb / "site.yaml")},
+         r"schema_version must be one of \[1, 2\]"),
+        ({"schema_version": 1}, "'site' must be the path"),
+        ({"schema_version": 1, "site": "nope.yaml"}, "not found"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"), "parameters": {"gamma_XX": 1}},
+         "unknown parameter 'gamma_XX'"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"), "parameters": {"gamma_IW": -1}},
+         "outside its bounds"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"),
+          "weekly_profile": {"values": [[1.0]]}}, r"expected \(672, 6\)"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"), "noise": {"sigma_air": 0}},
+         "positive number"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"),
+          "model_options": {"window_solar": "wall"}}, "window_solar must be 'surfaces', 'floor'"),
+        ({"schema_version": 1, "site": str(vb / "site.yaml"),
+          "model_options": {"colour": "red"}}, r"unknown model_options \['colour'\]"),
+    ]
+    for doc, msg in cases:
+        path = tmp_path / "bad.json"
+        path.write_text(json.dumps(doc))
+        with pytest.raises(ModelFileError, match=msg):
+            load_model_file(path)
+    (tmp_path / "bad.json").write_text("{")
+    with pytest.raises(ModelFileError, match="not valid JSON"):
+        load_model_file(tmp_path / "bad.json")
+
+
+def test_model_file_site_path_is_relative_across_folders(vb, tmp_path):
+    """A model file written in another folder than the site's stores a relative path
+    that loads from there (reproduce writes REPORT/model.json beside REPORT/campaign)."""
+    out = tmp_path / "report" / "model.json"
+    out.parent.mkdir()
+    write_model_file(out, vb / "site.yaml", extra={"profile_weeks": []})
+    doc = json.loads(out.read_text())
+    assert not doc["site"].startswith("/") and doc["profile_weeks"] == []
+    assert load_model_file(out).building == "office6"
+
+
+def _same_structure(a, b) -> None:
+    assert a.labels == b.labels and a.rooms == b.rooms and a.zones == b.zones
+    assert a.boxes == b.boxes and a.cp_air == b.cp_air and a.options == b.options
+    assert a.notes == b.notes and a.areas == b.areas
+    assert set(a.window_area) == set(b.window_area)
+    for r in a.window_area:
+        assert np.array_equal(a.window_area[r], b.window_area[r])
+    for name in ("capacity", "B_ig", "C", "room_of_box"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    for x, y in zip([a.A0, a.Bv0, *a.A_p, *a.Bv_p], [b.A0, b.Bv0, *b.A_p, *b.Bv_p]):
+        assert (x != y).nnz == 0 and x.shape == y.shape
+        assert np.array_equal(x.indptr, y.indptr) and np.array_equal(x.indices, y.indices)
+
+
+def test_stored_structure_equals_the_one_built_from_the_idf_bit_for_bit(vb, bundle, tmp_path):
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    built = pipe.structure()
+    _same_structure(bundle.model.structure, built)
+    assert bundle.room_volume == pipe.room_volume
+    # the same model steps the same, to the bit, on real inputs
+    tel = pipe.telemetry(vb)
+    d = pipe.data(tel)
+    rebuilt = pipe.model(bundle.model.params)
+    rows = slice(0, 96)
+    a = bundle.model.simulate(20.0, d.u[rows], d.v[rows])
+    b = rebuilt.simulate(20.0, d.u[rows], d.v[rows])
+    assert np.array_equal(a.x, b.x)
+    # round trip of the file itself
+    path = save_structure(tmp_path / "s.npz", built, pipe.room_volume)
+    again, volume = load_structure(path)
+    _same_structure(again, built)
+    assert volume == pipe.room_volume
+
+
+def test_model_file_with_structure_loads_without_energyplus(vb, monkeypatch):
+    def no_energyplus(*args, **kwargs):
+        raise AssertionError("EnergyPlus was called")
+
+    monkeypatch.setattr(artifact, "read_building", no_energyplus)
+    doc = json.loads((vb / "model.json").read_text())
+    assert doc["schema_version"] == 2 and doc["structure"] == "model.npz"
+    b = load_model_file(vb / "model.json")
+    assert b.model.params["gamma_IW"] == 9.0
+    assert not any("rebuilt" in n for n in b.notes)
+    # without a structure, the file needs the IDF (and says so in its notes)
+    legacy = {k: v for k, v in doc.items() if not k.startswith("structure")}
+    (vb / "legacy-schema.json").write_text(json.dumps({**legacy, "schema_version": 1}))
+    with pytest.raises(AssertionError, match="EnergyPlus was called"):
+        load_model_file(vb / "legacy-schema.json")
+    monkeypatch.undo()
+    old = load_model_file(vb / "legacy-schema.json")
+    assert any("rebuilt from the site's EnergyPlus file" in n for n in old.notes)
+    _same_structure(old.model.structure, b.model.structure)
+
+
+def test_structure_file_errors_say_what_to_fix(vb, tmp_path):
+    doc = json.loads((vb / "model.json").read_text())
+    doc["site"] = str(vb / "site.yaml")
+    npz = vb / "model.npz"
+
+    def load(**change):
+        path = tmp_path / "m.json"
+        path.write_text(json.dumps({**doc, **change}))
+        return load_model_file(path)
+
+    with pytest.raises(ModelFileError, match="structure file .* not found"):
+        load(structure="missing.npz")
+    with pytest.raises(ModelFileError, match="does not match structure_sha256"):
+        load(structure=str(npz), structure_sha256="0" * 64)
+    with pytest.raises(ModelFileError, match="model_options .* differ from the options"):
+        load(structure=str(npz), model_options={"window_solar": "air"})
+    assert load(structure=str(npz)).model.n == load_model_file(vb / "model.json").model.n
+    assert doc["structure_sha256"] == hashlib.sha256(npz.read_bytes()).hexdigest()
+    with pytest.raises(ValueError, match="give room_volume"):
+        write_model_file(tmp_path / "x.json", vb / "site.yaml",
+                         structure=load_model_file(vb / "model.json").model.structure)

@@ -1,0 +1,105 @@
+"""The CLI's pipelines: check a site's data, build its model, identify it, forecast from a
+model file. Each takes paths, returns what the command prints, and leaves printing and
+progress display to the CLI (:mod:`zonecast.cli`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from zonecast.estimator.constants import HORIZON, STEP
+from zonecast.estimator.forecast import Forecast
+from zonecast.estimator.identify import IdentificationResult
+from zonecast.estimator.idf import Building
+from zonecast.estimator.model import BilinearModel, write_model_summary
+from zonecast.estimator.pipeline import Pipeline
+from zonecast.estimator.rc.network import ModelOptions
+from zonecast.estimator.rc.parameters import ParameterSet
+from zonecast.estimator.site import Site, parse_step
+from zonecast.estimator.telemetry import Telemetry
+
+__all__ = ["IdentifyOutcome", "build_model", "check_site", "forecast_at", "identify_site"]
+
+Progress = Callable[[str], None]
+
+
+def _quiet(_: str) -> None:
+    return None
+
+
+def check_site(site: Path, data: Path) -> tuple[Site, Telemetry]:
+    """Validate a site description and its telemetry (raises ``ValueError`` naming what to
+    fix)."""
+    pipe = Pipeline.from_site(site)
+    return pipe.site, pipe.telemetry(data)
+
+
+def build_model(site: Path, out: Path, *, params: str = "start",
+                energyplus_dir: Path | None = None,
+                window_solar: str = "surfaces") -> tuple[Site, BilinearModel, Building]:
+    """Build a site's bilinear RC model (paper section 3) and write its summary (JSON) and
+    matrices (``out`` with ``.npz``). ``params``: ``start`` or ``paper`` (Table 1)."""
+    pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar),
+                              energyplus_dir=energyplus_dir)
+    if params == "start":
+        values = None
+    elif params == "paper":
+        paper = ParameterSet.paper_table1()
+        if sorted(paper.zones) != sorted(pipe.site.zones):
+            raise ValueError(f"--params paper needs the paper's zones {list(paper.zones)}; "
+                             f"this site has {list(pipe.site.zones)}")
+        values = {n: paper[n] for n in paper.param_names}
+    else:
+        raise ValueError(f"--params {params}: use 'start' or 'paper'")
+    model = pipe.model(values)
+    write_model_summary(model, out, out.with_suffix(".npz"))
+    return pipe.site, model, pipe.building()
+
+
+@dataclass
+class IdentifyOutcome:
+    """What ``zonecast identify`` did."""
+
+    result: IdentificationResult
+    model_file: Path
+    profile_weeks: list[str] = field(default_factory=list)
+
+
+def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None = None,
+                  validate: list[str] | None = None, starts: int = 3,
+                  profile_weeks: bool = True, window_solar: str = "surfaces", seed: int = 0,
+                  progress: Progress = _quiet) -> IdentifyOutcome:
+    """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
+    profile (4-B) from every whole week, and write the model file."""
+    pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar))
+    d = pipe.data(data)
+    res = pipe.identify(d, train, validate, n_starts=starts, seed=seed,
+                        progress=lambda m: progress(f"identification: {m}"))
+    if profile_weeks:
+        pipe.weekly_profile(d, progress=lambda m: progress(f"weekly internal-gains profile: {m}"))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    path = pipe.write_model_file(out, extra={"profile_weeks": pipe.profile_weeks})
+    return IdentifyOutcome(res, path, pipe.profile_weeks)
+
+
+def forecast_at(model: Path, data: Path, at: str, horizon: str = "24h"
+                ) -> tuple[Forecast, int, pd.DataFrame]:
+    """The forecast the service would issue at ``at`` (ISO-8601 with offset), computed
+    offline from recorded telemetry; returns it, the number of steps asked for, and a table
+    (time, zone, mean and 90 % bounds)."""
+    t = pd.Timestamp(at)
+    if t.tzinfo is None:
+        raise ValueError(f"--at {at}: give a UTC offset, e.g. 2015-05-12T00:00:00-07:00")
+    steps = int(parse_step(horizon.strip()) // STEP)
+    if not 1 <= steps <= HORIZON:
+        raise ValueError(f"--horizon {horizon}: between 15min and 24h")
+    pipe = Pipeline.from_model_file(model)
+    (f,) = pipe.forecast(data / "telemetry.csv" if data.is_dir() else data, [t]).values()
+    lo, hi = f.lower[:steps], f.upper[:steps]
+    rows = [{"time": tt.isoformat(), "zone": z, "mean_degC": f.mean[k, j], "p05_degC": lo[k, j],
+             "p95_degC": hi[k, j]} for k, tt in enumerate(f.times[:steps])
+            for j, z in enumerate(f.zones)]
+    return f, steps, pd.DataFrame(rows)

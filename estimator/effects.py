@@ -42,6 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from zonecast.estimator.dataset import ModelData
+from zonecast.estimator.forecast import fill_profile, zone_floor_area
+from zonecast.estimator.gains import fit_weekly_profile
 from zonecast.estimator.model import BilinearModel
 from zonecast.estimator.rc.network import CP_AIR as C_P
 
@@ -236,7 +238,6 @@ def heat_regressor(name: str, variant, model: BilinearModel, data: ModelData,
         step = (data.times[1] - data.times[0]).total_seconds()
         return first_order_lag(q, float(variant), step, data.segments)
     if name == "occupancy_gains":
-        from zonecast.estimator.forecast import zone_floor_area
         return _workday_hours(data)[:, None] * zone_floor_area(model)[None, :]
     if name == "supply_offset":
         return C_P * (data.u @ bz)
@@ -250,8 +251,6 @@ def time_of_week_mean(values: np.ndarray, data: ModelData, rows: np.ndarray) -> 
     """(N, k) what a weekly internal-gains profile fitted on ``rows`` absorbs of an extra
     term: ``values`` averaged as paper Eq:fixed_ig (:func:`~.gains.fit_weekly_profile`,
     empty bins filled as :func:`~.forecast.fill_profile`), evaluated at every row."""
-    from zonecast.estimator.forecast import fill_profile
-    from zonecast.estimator.gains import fit_weekly_profile
     step = data.times[1] - data.times[0]
     prof = fit_weekly_profile(data.times[rows], np.asarray(values, float)[rows], data.timezone,
                               step=step)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import ArpackNoConvergence, eigsh
 from scipy.special import ive
 
 try:  # numba is a dependency; keep a pure-Python fallback for platforms without it
@@ -137,8 +138,6 @@ def tight_bound(A, rooms: np.ndarray, bxu: np.ndarray, u: np.ndarray, capacity: 
     inequality the most negative eigenvalue over all rows of ``u`` is bounded by the one at
     the element-wise maximum airflow. ``margin`` covers the eigensolver's tolerance.
     """
-    from scipy.sparse.linalg import ArpackNoConvergence, eigsh
-
     A = sp.csr_matrix(A, dtype=float)
     umax = np.max(u, axis=0) if len(u) else np.zeros(len(bxu))
     dd = np.zeros(A.shape[0])

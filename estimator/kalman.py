@@ -29,6 +29,7 @@ from typing import Literal
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
+from scipy.linalg import solve_discrete_are
 
 __all__ = [
     "FilterResult",
@@ -236,8 +237,6 @@ def steady_state_covariance(F, H, Q, R) -> np.ndarray:
     F : (n, n) state transition [-]; H : (m, n) output matrix [-];
     Q : (n, n) or (n,) process noise [K²]; R : (m, m) or (m,) measurement noise [K²].
     """
-    from scipy.linalg import solve_discrete_are
-
     F = np.asarray(F, dtype=float)
     n = F.shape[0]
     if F.shape != (n, n):

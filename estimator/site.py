@@ -15,6 +15,8 @@ from pathlib import Path
 from typing import ClassVar
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
+import numpy as np
+import pandas as pd
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 from zonecast.estimator.units import check_unit
@@ -172,8 +174,6 @@ class Thermostat(_Strict):
     def heating_setpoint(self, times, timezone: str, experiment=None):
         """Scheduled heating set point at each time [degC], shape (N,); ``experiment``
         (N,) bool marks rows of experiments (they take ``experiment_heating`` if given)."""
-        import numpy as np
-        import pandas as pd
         local = pd.DatetimeIndex(times).tz_convert(timezone)
         hour = np.asarray(local.hour + local.minute / 60.0)
         h0, h1 = self.occupied_hours

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
 from zonecast.estimator.site import load_site
 from zonecast.estimator.telemetry import load_telemetry
 from zonecast.testbed.config import load_config
@@ -17,20 +18,13 @@ ZONE_COLOURS = {"NW": "#4e79a7", "W": "#f28e2b", "S": "#e15759", "E": "#76b7b2",
                 "NE": "#59a14f", "C": "#edc948"}
 
 
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
 def plot_floor(cfg, path: Path) -> None:
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(9, 4.8))
+    fig = Figure(figsize=(9, 4.8))
+    ax = fig.subplots()
     walls = plan_walls({n: r.rect for n, r in cfg.rooms.items()})
     for name, room in cfg.rooms.items():
         x0, y0, x1, y1 = room.rect
-        ax.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, fc=ZONE_COLOURS.get(room.zone, "#ccc"),
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fc=ZONE_COLOURS.get(room.zone, "#ccc"),
                                    ec="k", alpha=0.55))
         ax.text((x0 + x1) / 2, (y0 + y1) / 2, f"{name}\n{room.kind}", ha="center", va="center",
                 fontsize=7)
@@ -45,16 +39,15 @@ def plot_floor(cfg, path: Path) -> None:
     ax.set_title(f"{cfg.name}: model zones (colour), windows (blue), one VAV box per room")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_excitation(tel, site, day: pd.Timestamp, path: Path) -> None:
-    plt = _plt()
     local = tel.local_times()
     sel = (local >= day - pd.Timedelta(hours=12)) & (local < day + pd.Timedelta(days=2))
     y = tel.zone_temperature()[sel]
     u = tel.airflow()[sel]
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    fig = Figure(figsize=(10, 6))
+    (a1, a2) = fig.subplots(2, 1, sharex=True)
     boxes = list(site.boxes.values())
     for j, z in enumerate(site.zones):
         c = ZONE_COLOURS.get(z)
@@ -68,16 +61,15 @@ def plot_excitation(tel, site, day: pd.Timestamp, path: Path) -> None:
     fig.autofmt_xdate()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_gains(truth: pd.DataFrame, zones, tz, path: Path) -> None:
     """True internal heat per zone on a time-of-week axis: weeks in grey, mean in red."""
-    plt = _plt()
     local = pd.DatetimeIndex(truth.index).tz_convert(tz)
     tow = (local.day_of_week * 96 + local.hour * 4 + local.minute // 15).to_numpy()
     week = (local - pd.to_timedelta(tow * 15, unit="m")).normalize()
-    fig, axes = plt.subplots(len(zones), 1, figsize=(10, 1.6 * len(zones)), sharex=True)
+    fig = Figure(figsize=(10, 1.6 * len(zones)))
+    axes = fig.subplots(len(zones), 1, sharex=True)
     for ax, z in zip(np.atleast_1d(axes), zones):
         q = sum(truth[f"{k}:zone:{z}"] for k in ("people", "lights", "equipment")).to_numpy() / 1e3
         frame = pd.DataFrame({"tow": tow, "week": week, "q": q})
@@ -89,14 +81,13 @@ def plot_gains(truth: pd.DataFrame, zones, tz, path: Path) -> None:
     fig.suptitle("True internal gains (people + lights + equipment): each week grey, mean red")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_weather(tel, path: Path) -> None:
-    plt = _plt()
     w = tel.weather()
     local = tel.local_times()
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
+    fig = Figure(figsize=(10, 5))
+    (a1, a2) = fig.subplots(2, 1, sharex=True)
     a1.plot(local, w.Ta, ".", ms=1, label="outdoor air")
     a1.plot(local, w.Ts, ".", ms=1, label="AHU supply air")
     a1.set_ylabel("[°C]")
@@ -106,7 +97,6 @@ def plot_weather(tel, path: Path) -> None:
     fig.suptitle("Weather and supply air over the campaign weeks")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def write_report(run_dir: Path, out: Path) -> Path:

@@ -19,10 +19,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from zoneinfo import ZoneInfo
 
 import numpy as np
 import pandas as pd
-
 from zonecast.estimator.site import Site
 from zonecast.testbed.config import BuildingConfig, load_config
 from zonecast.testbed.effects import Effects
@@ -52,7 +52,6 @@ def energyplus_dir() -> Path:
 
 def standard_offset(cfg: BuildingConfig) -> dt.timezone:
     """The building's standard-time UTC offset (EnergyPlus reports in standard time)."""
-    from zoneinfo import ZoneInfo
     jan = dt.datetime(2015, 1, 15, tzinfo=ZoneInfo(cfg.location.timezone))
     return dt.timezone(jan.utcoffset())
 
@@ -330,7 +329,6 @@ def run_weeks(weeks: list[dt.date], out: Path, seed: int = 0, effects: Effects |
     out = Path(out)
     t0 = time.perf_counter()
     wide, blocks, t_ep = simulate(cfg, periods, out, seed, effects, exc_days, progress)
-    from zoneinfo import ZoneInfo
     tz = ZoneInfo(cfg.location.timezone)
     keep = [(pd.Timestamp(dt.datetime.combine(w, dt.time(0)), tz=tz).tz_convert("UTC"),
              pd.Timestamp(dt.datetime.combine(w + dt.timedelta(days=7), dt.time(0)), tz=tz)

@@ -8,6 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from zonecast.estimator.dataset import model_data
 from zonecast.estimator.diagnose import (
@@ -65,14 +66,12 @@ def write(res: Diagnosis, out: Path, zones: list[str]) -> None:
 
 
 def _plot_where(res: Diagnosis, path: Path, zones: list[str]) -> str:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     dims = ["zone", "hour_of_day", "lead", "season", "regime", "solar_level",
             "outdoor_temperature", "operation"]
     fc = res.where["forecast"]
-    fig, axes = plt.subplots(2, 4, figsize=(16, 6.5))
+    fig = Figure(figsize=(16, 6.5))
+    axes = fig.subplots(2, 4)
     for ax, d in zip(axes.flat, dims):
         rows = fc.get(d, [])
         ax.bar(range(len(rows)), [r["rms"] for r in rows], color="tab:blue", label="forecast")
@@ -87,20 +86,17 @@ def _plot_where(res: Diagnosis, path: Path, zones: list[str]) -> str:
     fig.suptitle("Where the error lies: RMS of measured minus model by slice")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
     return path.name
 
 
 def _plot_effects(res: Diagnosis, path: Path) -> str:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     zones = list(res.per_zone)
     effects = list(SPECS)
     grid = np.array([[next((c.score for c in res.per_zone[z] if c.effect == e), np.nan)
                       for z in zones] for e in effects])
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(13, 4.2))
+    fig = Figure(figsize=(13, 4.2))
+    (a1, a2) = fig.subplots(1, 2)
     im = a1.imshow(np.clip(grid, 0, None), cmap="viridis", aspect="auto")
     a1.set_xticks(range(len(zones)), zones)
     a1.set_yticks(range(len(effects)), effects)
@@ -125,7 +121,6 @@ def _plot_effects(res: Diagnosis, path: Path) -> str:
     a2.set_title("Held-out weeks (used neither to find nor to fit)")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
     return path.name
 
 

@@ -14,16 +14,18 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from zonecast.estimator.artifact import model_options_dict
 from zonecast.estimator.constants import HORIZON
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
-from zonecast.estimator.forecast import coverage, forecast_study, issue_rows, week_split
+from zonecast.estimator.forecast import coverage, issue_rows, week_split
 from zonecast.estimator.identify import weekend_simulations
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.rc.network import ModelOptions
+from zonecast.estimator.study import forecast_study
 
 RESULTS_SCHEMA_VERSION = 1
 
@@ -117,10 +119,8 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
 def plot_gains(fig2: dict, zones: list[str], path: Path) -> None:
     """Fig. 2: temperature rise per step due to internal gains, C B_IG (c_IG + f_IG,w), per
     zone on the local time-of-week axis: each training week in grey, their mean in red."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(len(zones), 1, figsize=(10, 1.5 * len(zones)), sharex=True)
+    fig = Figure(figsize=(10, 1.5 * len(zones)))
+    axes = fig.subplots(len(zones), 1, sharex=True)
     for ax, z in zip(np.atleast_1d(axes), zones):
         days = np.arange(len(fig2[z]["mean"])) / 96.0
         for w in fig2[z]["weeks"]:
@@ -131,16 +131,13 @@ def plot_gains(fig2: dict, zones: list[str], path: Path) -> None:
     fig.suptitle("Temperature rise per 15-min step due to internal gains: weeks grey, mean red")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_horizon(horizon: dict[str, dict[str, list[float]]], zones: list[str], path: Path) -> None:
     """Fig. 3: RMS versus prediction horizon, per zone, one panel per method."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     methods = list(horizon)
-    fig, axes = plt.subplots(1, len(methods), figsize=(4.5 * len(methods), 3.6), sharey=True)
+    fig = Figure(figsize=(4.5 * len(methods), 3.6))
+    axes = fig.subplots(1, len(methods), sharey=True)
     for ax, m in zip(np.atleast_1d(axes), methods):
         for z in zones + ["mean"]:
             vals = horizon[m].get(z)
@@ -155,17 +152,13 @@ def plot_horizon(horizon: dict[str, dict[str, list[float]]], zones: list[str], p
     np.atleast_1d(axes)[0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_weekends(sims: list[dict], roles: dict[str, str], zones: list[str], path: Path) -> None:
     """Fig. 1: the identification's simulations (f_IG = 0) against the measured zone
     temperatures on each excitation weekend, one row per zone, one column per weekend."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(len(zones), len(sims), figsize=(4.2 * len(sims), 1.5 * len(zones)),
-                             sharex="col", squeeze=False)
+    fig = Figure(figsize=(4.2 * len(sims), 1.5 * len(zones)))
+    axes = fig.subplots(len(zones), len(sims), sharex='col', squeeze=False)
     for c, w in enumerate(sims):
         hours = np.arange(len(w["measured"])) * 0.25
         for r, z in enumerate(zones):
@@ -184,21 +177,18 @@ def plot_weekends(sims: list[dict], roles: dict[str, str], zones: list[str], pat
     fig.suptitle("Fig. 1: identification weekends, model with f_IG = 0 (red) and measured (dots)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_week(week: dict, zones: list[str], methods: list[str], title: str, path: Path) -> None:
     """Figs. 4 and 5: one validation week, measured zone temperatures (black) and the
     predictions of ``methods`` (24-h forecasts laid end to end per issue day, or the
     paper's online one-step predictions), one panel per zone."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import pandas as pd
+
     t = pd.to_datetime(week["times"], utc=True)
     colors = {"fixed": "tab:blue", "dayahead": "tab:orange", "online_paper": "tab:green",
               "service": "tab:purple"}
-    fig, axes = plt.subplots(len(zones), 1, figsize=(11, 1.7 * len(zones)), sharex=True)
+    fig = Figure(figsize=(11, 1.7 * len(zones)))
+    axes = fig.subplots(len(zones), 1, sharex=True)
     for ax, z in zip(np.atleast_1d(axes), zones):
         meas = np.asarray(week["measured"][z], dtype=float)
         ax.plot(t, meas, color="k", lw=1.0, label="measured")
@@ -213,7 +203,6 @@ def plot_week(week: dict, zones: list[str], methods: list[str], title: str, path
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int) -> dict:

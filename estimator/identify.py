@@ -68,6 +68,15 @@ def weekend_spans(data: ModelData, saturdays: Sequence) -> list[tuple[int, int]]
     return spans
 
 
+def measured_rows(data: ModelData, a: int, b: int) -> slice:
+    """Rows of y a simulation of span [a, b) is scored against: x(k+1) is driven by row k,
+    so the simulation meets rows a + 1 ... b, but never past the end of the contiguous
+    segment holding row a (the next row after a segment is a later week, not the state
+    after row b - 1)."""
+    stop = next((e for s, e in data.segments if s <= a < e), len(data))
+    return slice(a + 1, min(b + 1, stop))
+
+
 def excitation_saturdays(data: ModelData) -> list[pd.Timestamp]:
     """Saturdays of weekends with excitation experiments (from the site's experiments)."""
     local = data.local_times()[data.excitation]
@@ -122,8 +131,9 @@ def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequen
     for a, b in weekend_spans(data, saturdays):
         x0 = kalman_state(model, data, a - X0_WINDOW, a)
         y = model.simulate(x0, data.u[a:b], data.v[a:b], np.zeros((b - a, model.n_zones))).y
-        meas = data.y[a + 1:b + 1]
-        out.append({"saturday": str(local[a].date()), "times": data.times[a + 1:a + 1 + len(meas)],
+        rows = measured_rows(data, a, b)
+        meas = data.y[rows]
+        out.append({"saturday": str(local[a].date()), "times": data.times[rows],
                     "simulated": y[1:1 + len(meas)], "measured": meas})
     return out
 
@@ -319,7 +329,7 @@ class _Problem:
         res = []
         for (a, b), y in zip(self.spans, self.simulate(theta, L)):
             # x(k+1) is driven by row k, so y from simulation row k+1 meets measurement row k+1
-            meas = self.data.y[a + 1:b + 1]
+            meas = self.data.y[measured_rows(self.data, a, b)]
             e = y[:len(meas)] - meas
             res.append(np.where(np.isfinite(e), e, 0.0).ravel())
         return np.concatenate(res)
@@ -375,7 +385,7 @@ def _fit_rms(problem: _Problem, theta: np.ndarray, zones) -> dict:
     sims = problem.simulate(theta)
     preds, meas = [], []
     for (a, b), y in zip(problem.spans, sims):
-        mm = problem.data.y[a + 1:b + 1]
+        mm = problem.data.y[measured_rows(problem.data, a, b)]
         preds.append(y[:len(mm)])
         meas.append(mm)
     return rms_by_zone(np.vstack(preds), np.vstack(meas), zones)

@@ -76,3 +76,33 @@ def test_weekend_needs_the_day_before(truth_and_data):
     late = data.rows(slice(96, None))       # starts on the Saturday itself
     with pytest.raises(IdentificationError, match="needs the 24 h before it"):
         identify(model, late, train=["2015-04-18"], n_starts=1)
+
+
+def test_a_weekend_at_a_segment_end_is_not_scored_against_the_next_segment(truth_and_data):
+    """Issue 13 item 3: the last simulated row of a weekend that ends its data segment has no
+    measurement (the next row is the first of a later week); it must not enter the fit or
+    Table 2."""
+    from zonecast.estimator.identify import measured_rows, weekend_simulations
+
+    model, _, data = truth_and_data
+    alone = data.rows(slice(None))
+    later = data.times + pd.Timedelta(days=14)
+    times = data.times.append(later)
+    y2 = np.vstack([data.y, data.y + 40.0])  # the later week is far off: it must not count
+    two = ModelData(times, np.vstack([data.u, data.u]), np.vstack([data.v, data.v]), y2,
+                    data.zones, data.boxes, segments_of(times, pd.Timedelta("15min")),
+                    np.zeros(len(times), bool), data.timezone)
+    assert len(two.segments) == 2
+    (a, b), = weekend_spans(two, ["2015-04-18"])
+    assert b == two.segments[0][1]  # the weekend ends the first segment
+    assert measured_rows(two, a, b) == slice(a + 1, b)
+    assert measured_rows(two, a, b - 1) == slice(a + 1, b)  # inside a segment: a+1 ... b
+    fitted = model.with_params(model.params.start_params)
+    s1 = weekend_simulations(fitted, alone, ["2015-04-18"])[0]
+    s2 = weekend_simulations(fitted, two, ["2015-04-18"])[0]
+    assert len(s2["measured"]) == b - a - 1 and s2["times"][-1] < later[0]
+    np.testing.assert_array_equal(s1["measured"], s2["measured"])
+    r1 = identify(model, alone, train=["2015-04-18"], n_starts=1, max_nfev=3)
+    r2 = identify(model, two, train=["2015-04-18"], n_starts=1, max_nfev=3)
+    np.testing.assert_array_equal(r1.params, r2.params)
+    assert r2.train_rms["mean"] == r1.train_rms["mean"] < 1.0

@@ -159,6 +159,10 @@ class IdentificationResult:
         Bounds the parameters were fitted within.
     model : BilinearModel or None
         The model with the identified parameters.
+    rank, condition : int, float
+        Numerical rank and condition number of the residuals' Jacobian at the optimum, its
+        columns scaled by the parameters' typical sizes: how many parameter combinations
+        the data determine (identifiability).
     """
 
     param_names: list[str]
@@ -177,6 +181,8 @@ class IdentificationResult:
     seed: int = 0
     bounds: list[tuple[float, float]] = field(default_factory=list)
     model: BilinearModel | None = field(default=None, repr=False)
+    rank: int | None = None
+    condition: float | None = None
 
     @property
     def bse(self) -> np.ndarray:
@@ -229,6 +235,11 @@ class IdentificationResult:
                            ("validation RMS [K]", self.validation_rms)):
             if row:
                 lines.append(f"{label}: " + ", ".join(f"{k} {v:.3f}" for k, v in row.items()))
+        if self.rank is not None:
+            lines.append(f"Jacobian rank {self.rank} of {len(self.params)}, condition number "
+                         f"{self.condition:.3g}")
+        if pinned:
+            lines.append(f"at a bound (not determined by the data): {', '.join(sorted(pinned))}")
         pairs = self.strongly_correlated()
         if pairs:
             lines.append("strongly correlated (|r| >= 0.9): "
@@ -243,7 +254,8 @@ class IdentificationResult:
                 "starts": self.starts, "train_weekends": self.train_weekends,
                 "validation_weekends": self.validation_weekends, "n_residuals": self.n_residuals,
                 "n_evaluations": self.n_evaluations, "seconds": round(self.seconds, 2),
-                "seed": self.seed}
+                "seed": self.seed, "at_bounds": self.at_bounds() if self.bounds else [],
+                "jacobian_rank": self.rank, "jacobian_condition": self.condition}
 
 
 class _Problem:
@@ -458,6 +470,10 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(se, se)
     corr = np.nan_to_num(corr)
+    singular = np.linalg.svd(J * scale[None, :], compute_uv=False)
+    tol = singular.max() * max(J.shape) * np.finfo(float).eps if len(singular) else 0.0
+    rank = int(np.sum(singular > tol))
+    condition = float(singular.max() / singular.min()) if singular.min() > 0 else float("inf")
     fitted = model.with_params(theta)
     # Table 2 as the paper defines it: simulations from x(0) = x_KF(0) of the identified
     # model, the same for training and validation weekends (the last refit started from
@@ -475,4 +491,5 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         val_rms, starts_report, [str(local[a].date()) for a, _ in train_spans],
         [str(local[a].date()) for a, _ in val_spans], len(sol.fun),
         sum(s["nfev"] for s in starts_report) + int(sol.nfev), time.perf_counter() - t0, seed,
-        bounds=[(float(lo_), float(hi_)) for lo_, hi_ in zip(lo, hi)], model=fitted)
+        bounds=[(float(lo_), float(hi_)) for lo_, hi_ in zip(lo, hi)], model=fitted, rank=rank,
+        condition=condition)

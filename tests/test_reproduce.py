@@ -81,3 +81,18 @@ def test_weekend_figure_has_a_panel_per_zone_and_weekend(tmp_path):
     path = tmp_path / "fig1.png"
     plot_weekends(sims, {"2015-04-18": "training", "2014-10-11": "validation"}, ZONES, path)
     assert path.stat().st_size > 5000
+
+
+def test_report_names_parameters_at_a_bound_and_identifiability(tmp_path):
+    r = results(parameters={
+        "gamma_EW": {"value": 10.5, "unit": "W/(m2 K)", "stderr": 0.4, "bounds": [1.0, 100.0]},
+        "gamma_ceil": {"value": 0.001, "unit": "W/(m2 K)", "stderr": 2.0,
+                       "bounds": [0.001, 50.0], "at_bound": True}},
+        identification={"jacobian_rank": 11, "jacobian_condition": 3.2e5,
+                        "strongly_correlated": [["gamma_EW", "U_win", -0.93]]})
+    text = write_report(r, tmp_path, [], ZONES).read_text()
+    assert "| gamma_ceil | 0.001 | 2 | W/(m2 K) | [0.001, 50] | **at a bound** |" in text
+    assert "Parameters at a bound (the data do not determine them; the bound does): gamma_ceil." \
+        in text
+    assert "Jacobian rank 11 of 2, condition number 3.2e+05" in text
+    assert "gamma_EW/U_win -0.93" in text

@@ -45,6 +45,13 @@ def _progress() -> Progress:
                     transient=False)
 
 
+def _warn_bounds(results: reproduce.Results) -> None:
+    pinned = [n for n, p in results.parameters.items() if p.at_bound]
+    if pinned:
+        typer.secho(f"warning: identified parameters at a bound (not determined by the data): "
+                    f"{', '.join(pinned)}", fg=typer.colors.YELLOW)
+
+
 def _run_testbed(fn, **kw):
     from zonecast.testbed.config import load_config
     from zonecast.testbed.effects import parse_switches
@@ -235,6 +242,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3
+    _warn_bounds(res)
     typer.echo(f"Table 2 mean RMS: training {t2['training']['mean']:.3f}, validation "
                f"{t2['validation']['mean']:.3f} (paper 0.333, 0.413)")
     typer.echo("Table 3 mean RMS: " + ", ".join(f"{k} {v['mean']:.3f}" for k, v in t3.items())
@@ -295,6 +303,7 @@ def demo(out: Annotated[Path, typer.Option(help="Report folder.")] = Path("demo-
         results = reproduce.run(out, campaign, seed,
                       progress=lambda m: prog.update(task, description=f"reproduce: {m}"))
     t2, t3 = results.table2, results.table3
+    _warn_bounds(results)
     typer.echo(f"campaign: {campaign}/report.md ({res.timings['total_s']:.0f} s)")
     typer.echo(f"Table 2 mean RMS: training {t2['training']['mean']:.3f}, validation "
                f"{t2['validation']['mean']:.3f} (paper 0.333, 0.413); Table 3: fixed "

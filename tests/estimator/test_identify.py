@@ -4,7 +4,12 @@ import numpy as np
 import pandas as pd
 import pytest
 from zonecast.estimator.dataset import ModelData
-from zonecast.estimator.identify import IdentificationError, identify, weekend_spans
+from zonecast.estimator.identify import (
+    IdentificationError,
+    IdentificationResult,
+    identify,
+    weekend_spans,
+)
 from zonecast.estimator.telemetry import segments_of
 
 
@@ -106,3 +111,25 @@ def test_a_weekend_at_a_segment_end_is_not_scored_against_the_next_segment(truth
     r2 = identify(model, two, train=["2015-04-18"], n_starts=1, max_nfev=3)
     np.testing.assert_array_equal(r1.params, r2.params)
     assert r2.train_rms["mean"] == r1.train_rms["mean"] < 1.0
+
+
+def test_results_object_in_the_statsmodels_manner(truth_and_data):
+    model, _, data = truth_and_data
+    res = identify(model, data, train=["2015-04-18"], n_starts=1, max_nfev=5)
+    names = res.param_names
+    assert res.bse is res.stderr
+    cov = res.cov_params()
+    np.testing.assert_allclose(cov, cov.T, atol=1e-12)
+    np.testing.assert_allclose(np.diag(cov), res.bse ** 2, rtol=1e-9)
+    assert res.model is not None and np.array_equal(res.model.params.values, res.params)
+    assert 1 <= res.rank <= len(names) and res.condition >= 1.0
+    assert len(res.bounds) == len(names)
+    # a parameter pinned at its bound is named, in the summary too
+    i = names.index("gamma_IW")
+    pinned = IdentificationResult(**{**res.__dict__, "params": res.params.copy()})
+    pinned.params[i] = res.bounds[i][1]
+    assert "gamma_IW" in pinned.at_bounds() and "gamma_IW" not in res.at_bounds()
+    text = pinned.summary()
+    assert "gamma_IW" in text.split("at a bound")[-1] and "Jacobian rank" in text
+    d = pinned.to_dict()
+    assert d["at_bounds"] == pinned.at_bounds() and d["jacobian_rank"] == res.rank

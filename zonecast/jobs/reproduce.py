@@ -48,6 +48,8 @@ class Parameter(BaseModel):
     value: float
     unit: str
     stderr: float | None = None
+    bounds: tuple[float, float] | None = None
+    at_bound: bool = False
 
 
 class Results(BaseModel):
@@ -66,6 +68,9 @@ class Results(BaseModel):
                           "one start: a sensitivity")
     model_options: dict[str, str | float] | None = Field(
         None, description="ModelOptions of the model")
+    identification: dict[str, Any] | None = Field(
+        None, description="identification details: correlations, starts, at_bounds, Jacobian "
+                          "rank and condition")
     gains_truth: dict[str, Any] = Field(description="zone -> correlation with the true gains")
     coverage_90: Any = Field(description="empirical coverage of the 90 % forecast intervals")
     split: dict[str, Any] = Field(description="identification weekends and gains/forecast weeks")
@@ -91,11 +96,23 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
     """``report.md`` with Tables 1-3 beside the paper's figures."""
     lines = ["# zonecast reproduce: Hu et al., tables and figures on the virtual building", "",
              f"Seed {results.seed}. Split: {json.dumps(results.split)}.", "",
-             "## Table 1: identified parameters", "", "| parameter | value | std. error | unit |",
-             "|---|---|---|---|"]
+             "## Table 1: identified parameters", "",
+             "| parameter | value | std. error | unit | bounds | |", "|---|---|---|---|---|---|"]
     for n, p in results.parameters.items():
         se = "" if p.stderr is None else f"{p.stderr:.3g}"
-        lines.append(f"| {n} | {p.value:.4g} | {se} | {p.unit} |")
+        bounds = "" if p.bounds is None else f"[{p.bounds[0]:.4g}, {p.bounds[1]:.4g}]"
+        flag = "**at a bound**" if p.at_bound else ""
+        lines.append(f"| {n} | {p.value:.4g} | {se} | {p.unit} | {bounds} | {flag} |")
+    pinned = [n for n, p in results.parameters.items() if p.at_bound]
+    ident = results.identification or {}
+    lines += ["", "Parameters at a bound (the data do not determine them; the bound does): "
+              + (", ".join(pinned) if pinned else "none") + "."]
+    if ident.get("jacobian_rank") is not None:
+        lines.append(f"Identifiability: Jacobian rank {ident['jacobian_rank']} of "
+                     f"{len(results.parameters)}, condition number "
+                     f"{ident['jacobian_condition']:.3g}; strongly correlated pairs (|r| >= 0.9): "
+                     + ("; ".join(f"{a}/{b} {r:+.2f}" for a, b, r in ident["strongly_correlated"])
+                        or "none") + ".")
     lines += ["", "## Table 2: identification RMS [°C] (weekend data, f_IG = 0)", ""]
     lines += _table(results.table2, zones, PAPER["table2"])
     if results.table2_window_solar_air:
@@ -295,10 +312,13 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
     study.setdefault("coverage_90", {}).update(svc["coverage_90"])
     timings["service_check"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
+    pinned = set(ident.at_bounds())
     res = Results(seed=seed,
-                  parameters={n: {"value": float(v), "unit": u, "stderr": float(s)}
-                              for n, v, u, s in zip(ident.param_names, ident.params, ident.units,
-                                                    ident.stderr)},
+                  parameters={n: {"value": float(v), "unit": u, "stderr": float(s),
+                                  "bounds": bd, "at_bound": n in pinned}
+                              for n, v, u, s, bd in zip(ident.param_names, ident.params,
+                                                        ident.units, ident.stderr, ident.bounds)},
+                  identification=ident.to_dict(),
                   table2={"training": ident.train_rms, "validation": ident.validation_rms},
                   table2_window_solar_air={"training": ident_air.train_rms,
                                            "validation": ident_air.validation_rms},

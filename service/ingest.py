@@ -30,6 +30,8 @@ from datetime import UTC, datetime, timedelta
 from enum import Enum
 from typing import Any, NamedTuple
 
+from zonecast.service.settings import DEFAULT_PREFIX, IngestLimits
+
 __all__ = [
     "DEFAULT_PREFIX",
     "IngestLimits",
@@ -46,7 +48,7 @@ __all__ = [
     "validate_message",
 ]
 
-DEFAULT_PREFIX = "zonecast"
+_DEFAULT_LIMITS = IngestLimits()
 
 
 class Reason(str, Enum):
@@ -138,26 +140,6 @@ class PointSpec:
 
 #: A building's points: BMS point name -> its spec.
 PointCatalogue = Mapping[str, PointSpec]
-
-
-@dataclass(frozen=True)
-class IngestLimits:
-    """Limits that protect storage from broken or hostile publishers.
-
-    Parameters
-    ----------
-    max_payload_bytes : int
-        Largest accepted payload [bytes]; default 64 KiB.
-    max_readings : int
-        Most readings accepted in one message; default 5000.
-    max_future : timedelta
-        How far ahead of ``now`` a timestamp may lie (clock skew allowance);
-        default 10 minutes.
-    """
-
-    max_payload_bytes: int = 64 * 1024
-    max_readings: int = 5000
-    max_future: timedelta = timedelta(minutes=10)
 
 
 class Reading(NamedTuple):
@@ -342,7 +324,7 @@ def validate_message(
     catalogues: Mapping[str, PointCatalogue],
     *,
     now: datetime | None = None,
-    limits: IngestLimits = IngestLimits(),
+    limits: IngestLimits = _DEFAULT_LIMITS,
     prefix: str = DEFAULT_PREFIX,
     properties: Mapping[str, str] | None = None,
 ) -> ValidatedMessage:

@@ -27,100 +27,22 @@ import queue
 import threading
 from collections import Counter
 from collections.abc import Mapping
-from datetime import UTC, datetime, timedelta
-from typing import Any, Literal, Self
+from datetime import UTC, datetime
+from typing import Any, Self
 
-from pydantic import BaseModel, Field, SecretStr
 from zonecast.service.ingest import (
-    DEFAULT_PREFIX,
-    IngestLimits,
     MessageRejected,
     PointCatalogue,
     Reason,
     RejectedReading,
     validate_message,
 )
+from zonecast.service.settings import DEFAULT_PREFIX, MqttSettings
 from zonecast.service.storage import Storage
 
-__all__ = ["Ingester", "MqttSettings", "TLSSettings", "dead_letter_topic"]
+__all__ = ["Ingester", "dead_letter_topic"]
 
 log = logging.getLogger(__name__)
-
-
-class TLSSettings(BaseModel):
-    """TLS towards the broker.
-
-    Parameters
-    ----------
-    ca_certs : str, optional
-        CA bundle file; default: the system's trusted CAs.
-    certfile, keyfile : str, optional
-        Client certificate and key for mutual TLS.
-    insecure : bool
-        Skip the broker hostname check (testing only).
-    """
-
-    ca_certs: str | None = None
-    certfile: str | None = None
-    keyfile: str | None = None
-    insecure: bool = False
-
-
-class MqttSettings(BaseModel):
-    """Connection, session and validation settings of the ingester.
-
-    Parameters
-    ----------
-    host, port : str, int
-        Broker address.
-    client_id : str
-        FIXED client id: the broker keys the persistent session on it, so a
-        restarted ingester receives what it missed. One id per ingester.
-    username, password : str, optional
-        Broker credentials.
-    tls : TLSSettings, optional
-        Enable TLS (use port 8883 on most brokers).
-    protocol : {"5", "3.1.1"}
-        MQTT version. "3.1.1" for brokers without v5 (e.g. amqtt); the bare
-        number point payload needs v5 (its time is a user property).
-    session_expiry : int
-        MQTT v5: how long the broker keeps the session while the ingester is
-        disconnected [s]; default 7 days. (3.1.1 sessions do not expire unless
-        the broker is configured so.)
-    keepalive : int
-        [s].
-    receive_maximum : int
-        MQTT v5: most unacknowledged messages the broker may send at once.
-    batch_max_messages : int
-        Most messages committed in one storage transaction.
-    topic_prefix : str
-        First topic level (``zonecast``).
-    max_payload_bytes, max_readings, max_future : int, int, float
-        Validation limits, see :class:`~zonecast.service.ingest.IngestLimits`
-        (``max_future`` in seconds).
-    """
-
-    host: str = "127.0.0.1"
-    port: int = Field(1883, ge=1, le=65535)
-    client_id: str = Field("zonecast-ingest", min_length=1)
-    username: str | None = None
-    password: SecretStr | None = None
-    tls: TLSSettings | None = None
-    protocol: Literal["5", "3.1.1"] = "5"
-    session_expiry: int = Field(7 * 24 * 3600, ge=1)
-    keepalive: int = Field(30, ge=5)
-    receive_maximum: int = Field(100, ge=1, le=65535)
-    batch_max_messages: int = Field(100, ge=1)
-    topic_prefix: str = DEFAULT_PREFIX
-    max_payload_bytes: int = Field(64 * 1024, ge=1)
-    max_readings: int = Field(5000, ge=1)
-    max_future: float = Field(600.0, ge=0)
-
-    @property
-    def limits(self) -> IngestLimits:
-        """The validation limits as :class:`IngestLimits`."""
-        return IngestLimits(self.max_payload_bytes, self.max_readings,
-                            timedelta(seconds=self.max_future))
 
 
 def dead_letter_topic(building: str | None, prefix: str = DEFAULT_PREFIX) -> str:

@@ -17,7 +17,7 @@ from typing import Any
 from urllib.parse import urlsplit
 
 import pandas as pd
-from zonecast.service.mqtt import MqttSettings
+from zonecast.service.settings import MqttSettings
 
 __all__ = ["ReplayResult", "connect_publisher", "parse_broker_url", "replay"]
 

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Self
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 from zonecast.service.ingest import parse_time
+from zonecast.service.settings import DEFAULT_URL
 
 if TYPE_CHECKING:  # pandas is imported lazily (only readings() needs it)
     import pandas as pd
@@ -55,7 +56,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-DEFAULT_URL = "sqlite:///zonecast.db"
 _EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 #: Longest payload excerpt kept in a dead letter [characters].
 EXCERPT_CHARS = 1024

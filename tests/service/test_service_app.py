@@ -361,8 +361,8 @@ def test_replay_three_weeks_through_broker_with_restart_equals_offline(tmp_path,
     from typer.testing import CliRunner
     from zonecast.estimator.streaming import offline_forecasts
     from zonecast.service.app import create_app
-    from zonecast.service.mqtt import MqttSettings
     from zonecast.service.replay import replay
+    from zonecast.service.settings import MqttSettings
 
     from zonecast.cli import app as cli
 

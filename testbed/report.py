@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-
 from zonecast.estimator.site import load_site
 from zonecast.estimator.telemetry import load_telemetry
 from zonecast.testbed.config import load_config

@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-
 from zonecast.estimator.site import Site
 from zonecast.testbed.config import BuildingConfig, load_config
 from zonecast.testbed.effects import Effects

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-
 from zonecast.testbed.config import BuildingConfig
 
 STEPS_PER_DAY = 96

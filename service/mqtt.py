@@ -31,14 +31,15 @@ from datetime import UTC, datetime
 from typing import Any, Self
 
 from zonecast.service.ingest import (
+    Accepted,
     MessageRejected,
     PointCatalogue,
     Reason,
-    RejectedReading,
-    validate_message,
+    accept,
+    refuse,
 )
 from zonecast.service.settings import DEFAULT_PREFIX, MqttSettings
-from zonecast.service.storage import Storage
+from zonecast.service.storage import PutResult, Storage
 
 __all__ = ["Ingester", "dead_letter_topic"]
 
@@ -48,6 +49,18 @@ log = logging.getLogger(__name__)
 def dead_letter_topic(building: str | None, prefix: str = DEFAULT_PREFIX) -> str:
     """``<prefix>/<building>/deadletter``, or ``<prefix>/deadletter`` without a building."""
     return f"{prefix}/{building}/deadletter" if building else f"{prefix}/deadletter"
+
+
+def _notice(message: Any, received: datetime, acc: Accepted) -> dict:
+    """What the ingester publishes on the dead-letter topic about a message."""
+    return {
+        "topic": message.topic,
+        "building": acc.building,
+        "received_at": received.isoformat(),
+        "rejections": [{"point": r.point, "reason": r.reason.value, "detail": r.detail}
+                       for r in acc.rejections],
+        "payload": message.payload[:1024].decode("utf-8", errors="replace"),
+    }
 
 
 class _Stopped(Exception):
@@ -273,66 +286,48 @@ class Ingester:
                               "for redelivery")
                 self._count("storage_errors")
 
-    def _validate(self, message: Any, received: datetime) -> tuple[Any, list[dict], dict | None]:
-        """(ValidatedMessage or None, dead-letter rows, dead-letter notice)."""
+    def _accept(self, message: Any, received: datetime) -> tuple[Any, Accepted, dict | None]:
+        """(message, what to store, dead-letter notice or None), counted."""
         props = getattr(message, "properties", None)
         user = dict(getattr(props, "UserProperty", []) or [])
-        try:
-            result = validate_message(message.topic, message.payload, self.catalogues,
-                                      now=received, limits=self._limits,
-                                      prefix=self.settings.topic_prefix, properties=user)
-        except MessageRejected as rej:
-            self._count("messages_rejected")
-            self._count_reason(rej.reason.value)
-            return None, *self._dead_letter(message, received, rej.building,
-                                             [RejectedReading(None, rej.reason, rej.detail)])
-        if not result.rejected:
-            return result, [], None
-        self._count("readings_rejected", len(result.rejected))
-        for r in result.rejected:
-            self._count_reason(r.reason.value)
-        return result, *self._dead_letter(message, received, result.building,
-                                          list(result.rejected))
-
-    def _dead_letter(self, message: Any, received: datetime, building: str | None,
-                     rejections: list[RejectedReading]) -> tuple[list[dict], dict]:
-        rows = [{"topic": message.topic, "payload": message.payload, "building": building,
-                 "reason": f"{r.reason.value}: {r.detail}", "received_at": received}
-                for r in rejections]
-        notice = {
-            "topic": message.topic,
-            "building": building,
-            "received_at": received.isoformat(),
-            "rejections": [{"point": r.point, "reason": r.reason.value, "detail": r.detail}
-                           for r in rejections],
-            "payload": rows[0]["payload"][:1024].decode("utf-8", errors="replace"),
-        }
-        return rows, notice
+        acc = accept(message.topic, message.payload, received, self.catalogues,
+                     limits=self._limits, prefix=self.settings.topic_prefix, properties=user)
+        if not acc.rejections:
+            return message, acc, None
+        with self._count_lock:
+            if acc.error is not None:
+                self._counts["messages_rejected"] += 1
+            else:
+                self._counts["readings_rejected"] += len(acc.rejections)
+            self._rejected.update(acc.reasons)
+        return message, acc, _notice(message, received, acc)
 
     def _process(self, batch: list[tuple[Any, datetime]]) -> None:
-        checked = [(message, *self._validate(message, received)) for message, received in batch]
+        checked = [self._accept(message, received) for message, received in batch]
         try:
             results = self._commit(checked)
         except ValueError:
             # Storage refused some data validation let through: commit message
             # by message and dead-letter the culprit instead of stalling.
             results = []
-            for message, result, rows, notice in checked:
+            for message, acc, notice in checked:
                 try:
-                    results += self._commit([(message, result, rows, notice)])
+                    results += self._commit([(message, acc, notice)])
                 except ValueError as exc:
                     log.exception("storage rejected a validated message on %s", message.topic)
-                    building = result.building if result is not None else None
-                    rows, notice = self._dead_letter(message, batch[0][1], building, [
-                        RejectedReading(None, Reason.STORAGE_REJECTED, str(exc))])
+                    building = acc.building if acc.error is None else None
+                    received = batch[0][1]
+                    refused = refuse(message.topic, message.payload, received,
+                                     MessageRejected(Reason.STORAGE_REJECTED, str(exc), building))
                     self._count_reason(Reason.STORAGE_REJECTED.value)
-                    results += self._commit([(message, None, rows, notice)])
+                    results += self._commit([(message, refused,
+                                              _notice(message, received, refused))])
         client = self._client
         if self._aborted or client is None:
             return  # simulated crash: committed but never acknowledged
         letters = 0
-        for message, _, rows, notice in checked:
-            letters += len(rows)
+        for message, acc, notice in checked:
+            letters += len(acc.dead_letters)
             if notice is not None:
                 client.publish(dead_letter_topic(notice["building"],
                                                        self.settings.topic_prefix),
@@ -346,11 +341,10 @@ class Ingester:
         self._count("readings_duplicate", sum(r.duplicates for r in results))
         self._count("readings_conflict", sum(r.conflicts for r in results))
 
-    def _commit(self, checked: list[tuple[Any, Any, list[dict], Any]]) -> list:
+    def _commit(self, checked: list[tuple[Any, Accepted, dict | None]]) -> list[PutResult]:
         """One transaction; on storage outage retry (messages stay unacknowledged)."""
-        batches = [(result.building, result.readings) for _, result, _, _ in checked
-                   if result is not None and result.readings]
-        letters = [row for _, _, rows, _ in checked for row in rows]
+        batches = [(acc.building, acc.readings) for _, acc, _ in checked if acc.readings]
+        letters = [row for _, acc, _ in checked for row in acc.dead_letters]
         delay = 0.1
         while True:
             try:

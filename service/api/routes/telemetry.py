@@ -9,7 +9,7 @@ from fastapi import APIRouter, HTTPException, Request
 from starlette.concurrency import run_in_threadpool
 from zonecast.service import schemas as S
 from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, get_runner
-from zonecast.service.ingest import MessageRejected, validate_message
+from zonecast.service.ingest import accept
 
 router = APIRouter(prefix="/buildings", tags=["telemetry"], dependencies=AUTH,
                    responses={**ERRORS, 413: {"model": S.ErrorBody}})
@@ -42,26 +42,19 @@ async def post_telemetry(ctx: Ctx, building_id: BuildingId, request: Request):
     topic = f"{ctx.settings.mqtt.topic_prefix}/{building_id}/telemetry"
     received = datetime.now(UTC)
     ctx.rest["messages_in"] += 1
-    try:
-        result = validate_message(topic, body, ctx.catalogues, now=received,
-                                  limits=ctx.settings.mqtt.limits,
-                                  prefix=ctx.settings.mqtt.topic_prefix)
-    except MessageRejected as rej:
+    acc = accept(topic, body, received, ctx.catalogues, limits=ctx.settings.mqtt.limits,
+                 prefix=ctx.settings.mqtt.topic_prefix)
+    if acc.error is not None:
         ctx.rest["messages_rejected"] += 1
-        ctx.rest_rejected[rej.reason.value] += 1
-        await run_in_threadpool(ctx.storage.put_dead_letter, topic, body, str(rej),
-                                building=building_id, received_at=received)
-        raise HTTPException(422, str(rej)) from None
-    letters = [{"topic": topic, "payload": body, "reason": f"{r.reason.value}: {r.detail}",
-                "building": building_id, "received_at": received} for r in result.rejected]
-    for r in result.rejected:
-        ctx.rest_rejected[r.reason.value] += 1
-    stored = await run_in_threadpool(ctx.storage.put_many,
-                                     [(building_id, result.readings)], letters,
+    ctx.rest_rejected.update(acc.reasons)
+    batches = [] if acc.error is not None else [(building_id, acc.readings)]
+    stored = await run_in_threadpool(ctx.storage.put_many, batches, acc.dead_letters,
                                      received_at=received)
+    if acc.error is not None:
+        raise HTTPException(422, str(acc.error))
     ctx.rest["readings_stored"] += stored[0].inserted
     return S.TelemetryResult(
-        building=building_id, accepted=len(result.readings), stored=stored[0].inserted,
+        building=building_id, accepted=len(acc.readings), stored=stored[0].inserted,
         duplicates=stored[0].duplicates,
         rejected=[S.TelemetryRejection(point=r.point, reason=r.reason.value, detail=r.detail)
-                  for r in result.rejected])
+                  for r in acc.rejections])

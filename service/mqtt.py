@@ -30,6 +30,11 @@ from collections.abc import Mapping
 from datetime import UTC, datetime
 from typing import Any, Self
 
+import paho.mqtt.client as mqtt
+from paho.mqtt.enums import CallbackAPIVersion
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
+from paho.mqtt.subscribeoptions import SubscribeOptions
 from zonecast.service.ingest import (
     Accepted,
     MessageRejected,
@@ -51,7 +56,7 @@ def dead_letter_topic(building: str | None, prefix: str = DEFAULT_PREFIX) -> str
     return f"{prefix}/{building}/deadletter" if building else f"{prefix}/deadletter"
 
 
-def _notice(message: Any, received: datetime, acc: Accepted) -> dict:
+def _notice(message: mqtt.MQTTMessage, received: datetime, acc: Accepted) -> dict[str, Any]:
     """What the ingester publishes on the dead-letter topic about a message."""
     return {
         "topic": message.topic,
@@ -61,6 +66,10 @@ def _notice(message: Any, received: datetime, acc: Accepted) -> dict:
                        for r in acc.rejections],
         "payload": message.payload[:1024].decode("utf-8", errors="replace"),
     }
+
+
+#: a received message, what to store of it and its dead-letter notice (None if no rejection)
+_Checked = tuple[mqtt.MQTTMessage, Accepted, dict[str, Any] | None]
 
 
 class _Stopped(Exception):
@@ -93,12 +102,12 @@ class Ingester:
         self.storage = storage
         self.catalogues = catalogues
         self._limits = settings.limits
-        self._queue: queue.Queue[Any] = queue.Queue()
+        self._queue: queue.Queue[tuple[mqtt.MQTTMessage, datetime]] = queue.Queue()
         self._stopping = threading.Event()
         self._aborted = False
         self._ready = threading.Event()
         self._worker: threading.Thread | None = None
-        self._client: Any = None
+        self._client: mqtt.Client | None = None
         self._count_lock = threading.Lock()
         self._counts: Counter[str] = Counter()
         self._rejected: Counter[str] = Counter()
@@ -150,7 +159,7 @@ class Ingester:
         if sock is not None:
             sock.close()
 
-    def counters(self) -> dict[str, Any]:
+    def counters(self) -> dict[str, int | dict[str, int]]:
         """Snapshot of the counters (plain data for /metrics).
 
         Keys: ``messages_in``, ``messages_stored`` (acknowledged after commit,
@@ -164,7 +173,7 @@ class Ingester:
                 "readings_duplicate", "readings_conflict", "readings_rejected",
                 "dead_letters", "storage_errors", "connects")
         with self._count_lock:
-            out: dict[str, Any] = {k: self._counts[k] for k in keys}
+            out: dict[str, int | dict[str, int]] = {k: self._counts[k] for k in keys}
             out["rejected"] = dict(self._rejected)
         return out
 
@@ -175,10 +184,7 @@ class Ingester:
         self.stop()
 
     # --- MQTT -------------------------------------------------------------------
-    def _make_client(self) -> Any:
-        import paho.mqtt.client as mqtt
-        from paho.mqtt.enums import CallbackAPIVersion
-
+    def _make_client(self) -> mqtt.Client:
         s = self.settings
         v5 = s.protocol == "5"
         kwargs: dict[str, Any] = {"protocol": mqtt.MQTTv5 if v5 else mqtt.MQTTv311}
@@ -203,9 +209,6 @@ class Ingester:
     def _connect(self) -> None:
         s = self.settings
         if s.protocol == "5":
-            from paho.mqtt.packettypes import PacketTypes
-            from paho.mqtt.properties import Properties
-
             props = Properties(PacketTypes.CONNECT)
             props.SessionExpiryInterval = s.session_expiry
             props.ReceiveMaximum = s.receive_maximum
@@ -227,8 +230,6 @@ class Ingester:
         log.info("MQTT connected to %s:%d as %s (session present: %s)", self.settings.host,
                  self.settings.port, self.settings.client_id, flags.session_present)
         if self.settings.protocol == "5":
-            from paho.mqtt.subscribeoptions import SubscribeOptions
-
             # retainHandling=1: retained messages only for a new subscription.
             options = SubscribeOptions(qos=1, retainHandling=1)
             client.subscribe([(t, options) for t in self._topics()])
@@ -286,7 +287,7 @@ class Ingester:
                               "for redelivery")
                 self._count("storage_errors")
 
-    def _accept(self, message: Any, received: datetime) -> tuple[Any, Accepted, dict | None]:
+    def _accept(self, message: mqtt.MQTTMessage, received: datetime) -> _Checked:
         """(message, what to store, dead-letter notice or None), counted."""
         props = getattr(message, "properties", None)
         user = dict(getattr(props, "UserProperty", []) or [])
@@ -302,7 +303,7 @@ class Ingester:
             self._rejected.update(acc.reasons)
         return message, acc, _notice(message, received, acc)
 
-    def _process(self, batch: list[tuple[Any, datetime]]) -> None:
+    def _process(self, batch: list[tuple[mqtt.MQTTMessage, datetime]]) -> None:
         checked = [self._accept(message, received) for message, received in batch]
         try:
             results = self._commit(checked)
@@ -329,9 +330,8 @@ class Ingester:
         for message, acc, notice in checked:
             letters += len(acc.dead_letters)
             if notice is not None:
-                client.publish(dead_letter_topic(notice["building"],
-                                                       self.settings.topic_prefix),
-                                     json.dumps(notice), qos=1)
+                client.publish(dead_letter_topic(notice["building"], self.settings.topic_prefix),
+                               json.dumps(notice), qos=1)
         for message, _ in batch:
             if message.qos > 0:
                 client.ack(message.mid, message.qos)
@@ -341,7 +341,7 @@ class Ingester:
         self._count("readings_duplicate", sum(r.duplicates for r in results))
         self._count("readings_conflict", sum(r.conflicts for r in results))
 
-    def _commit(self, checked: list[tuple[Any, Accepted, dict | None]]) -> list[PutResult]:
+    def _commit(self, checked: list[_Checked]) -> list[PutResult]:
         """One transaction; on storage outage retry (messages stay unacknowledged)."""
         batches = [(acc.building, acc.readings) for _, acc, _ in checked if acc.readings]
         letters = [row for _, acc, _ in checked for row in acc.dead_letters]

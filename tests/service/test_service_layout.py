@@ -32,6 +32,17 @@ def test_service_uses_absolute_imports_only():
         assert None not in imported_modules(path), f"relative import in {path}"
 
 
+def test_service_imports_at_module_level():
+    """Function-level imports only for psycopg (PostgreSQL URLs only, storage.py says why)."""
+    lazy = []
+    for path in SERVICE.rglob("*.py"):
+        for fn in ast.walk(ast.parse(path.read_text())):
+            if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lazy += [(path.name, fn.name, ast.unparse(node)) for node in ast.walk(fn)
+                         if isinstance(node, (ast.Import, ast.ImportFrom))]
+    assert lazy == [("storage.py", "_connect", "import psycopg")]
+
+
 # Every operation of the API: (method, path) -> (operation id, tags, parameters, answers).
 # The contract of docs/service.md, "REST API"; a change here is a change of the API.
 OPERATIONS = {

@@ -39,7 +39,8 @@ from pathlib import Path
 import paho.mqtt.client as mqtt
 from paho.mqtt.enums import CallbackAPIVersion
 from zonecast.service.ingest import PointSpec
-from zonecast.service.mqtt import Ingester, MqttSettings
+from zonecast.service.mqtt import Ingester
+from zonecast.service.settings import MqttSettings
 from zonecast.service.storage import open_storage
 
 TARGET = 2000.0  # readings/s

@@ -64,7 +64,7 @@ def virtual_building(data: Path | None, work: Path) -> Path:
 
 def bench_steps(data: Path, work: Path, days: int) -> dict:
     from zonecast.estimator.streaming import STEP, OnlineEstimator, rows_from_frame, telemetry_frame
-    from zonecast.service.app import forecast_json
+    from zonecast.service.bodies import forecast_json
     from zonecast.service.runner import Runner
     from zonecast.service.settings import RunnerSettings
     from zonecast.service.storage import open_storage

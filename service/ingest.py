@@ -1,10 +1,12 @@
 """Validate telemetry messages from a building management system (BMS).
 
 Pure functions: no network, no database, no clock except the ``now`` a caller
-passes (it defaults to the current UTC time). The MQTT ingester
-(:mod:`zonecast.service.mqtt`) calls :func:`validate_message` for every message
-it receives and stores what comes back; ``docs/service.md`` is the user-facing
-description of the topic scheme, payload forms and rejection reasons.
+passes (it defaults to the current UTC time). Both ingest paths, the MQTT ingester
+(:mod:`zonecast.service.mqtt`) and the REST route (``POST .../telemetry``), call
+:func:`accept` for every message they receive and store what it returns: the
+accepted readings and the dead letters, in one transaction. :func:`validate_message`
+is the validation itself. ``docs/service.md`` is the user-facing description of the
+topic scheme, payload forms and rejection reasons.
 
 Topic scheme (``prefix`` defaults to ``zonecast``)::
 
@@ -24,14 +26,18 @@ from __future__ import annotations
 
 import json
 import math
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from enum import Enum
 from typing import Any, NamedTuple
 
+from zonecast.service.settings import DEFAULT_PREFIX, IngestLimits
+
 __all__ = [
     "DEFAULT_PREFIX",
+    "Accepted",
     "IngestLimits",
     "MessageRejected",
     "PointCatalogue",
@@ -41,12 +47,15 @@ __all__ = [
     "Reason",
     "RejectedReading",
     "ValidatedMessage",
+    "accept",
+    "dead_letters",
     "parse_time",
     "parse_topic",
+    "refuse",
     "validate_message",
 ]
 
-DEFAULT_PREFIX = "zonecast"
+_DEFAULT_LIMITS = IngestLimits()
 
 
 class Reason(str, Enum):
@@ -138,26 +147,6 @@ class PointSpec:
 
 #: A building's points: BMS point name -> its spec.
 PointCatalogue = Mapping[str, PointSpec]
-
-
-@dataclass(frozen=True)
-class IngestLimits:
-    """Limits that protect storage from broken or hostile publishers.
-
-    Parameters
-    ----------
-    max_payload_bytes : int
-        Largest accepted payload [bytes]; default 64 KiB.
-    max_readings : int
-        Most readings accepted in one message; default 5000.
-    max_future : timedelta
-        How far ahead of ``now`` a timestamp may lie (clock skew allowance);
-        default 10 minutes.
-    """
-
-    max_payload_bytes: int = 64 * 1024
-    max_readings: int = 5000
-    max_future: timedelta = timedelta(minutes=10)
 
 
 class Reading(NamedTuple):
@@ -342,7 +331,7 @@ def validate_message(
     catalogues: Mapping[str, PointCatalogue],
     *,
     now: datetime | None = None,
-    limits: IngestLimits = IngestLimits(),
+    limits: IngestLimits = _DEFAULT_LIMITS,
     prefix: str = DEFAULT_PREFIX,
     properties: Mapping[str, str] | None = None,
 ) -> ValidatedMessage:
@@ -475,3 +464,80 @@ def validate_message(
         except _Bad as bad:
             rejected.append(RejectedReading(point, bad.reason, bad.detail))
     return ValidatedMessage(building, tuple(accepted), tuple(rejected))
+
+
+@dataclass(frozen=True, slots=True)
+class Accepted:
+    """What one message leaves to store and to count (:func:`accept`, :func:`refuse`).
+
+    Attributes
+    ----------
+    building : str or None
+        The building the topic names (None when it names none).
+    readings : tuple of Reading
+        Readings to store for ``building`` (none when the whole message was rejected).
+    rejections : tuple of RejectedReading
+        The readings rejected one by one, or the whole message as one rejection with
+        ``point`` None.
+    dead_letters : tuple of dict
+        One per rejection: keyword arguments of ``Storage.put_dead_letter``, as
+        ``Storage.put_many`` takes them.
+    error : MessageRejected or None
+        Set when the message was rejected as a whole.
+    """
+
+    building: str | None
+    readings: tuple[Reading, ...] = ()
+    rejections: tuple[RejectedReading, ...] = ()
+    dead_letters: tuple[dict[str, Any], ...] = ()
+    error: MessageRejected | None = None
+
+    @property
+    def reasons(self) -> Counter[str]:
+        """Rejections by reason code (``rejected`` of the counters and metrics)."""
+        return Counter(r.reason.value for r in self.rejections)
+
+
+def dead_letters(topic: str, payload: bytes | str, received: datetime, building: str | None,
+                 rejections: tuple[RejectedReading, ...]) -> tuple[dict[str, Any], ...]:
+    """One dead letter per rejection, reason ``"<code>: <detail>"`` (keyword arguments of
+    ``Storage.put_dead_letter``)."""
+    return tuple({"topic": topic, "payload": payload, "building": building,
+                  "reason": f"{r.reason.value}: {r.detail}", "received_at": received}
+                 for r in rejections)
+
+
+def refuse(topic: str, payload: bytes | str, received: datetime,
+           error: MessageRejected) -> Accepted:
+    """A message rejected as a whole: no readings, one dead letter with ``error``'s reason."""
+    rejections = (RejectedReading(None, error.reason, error.detail),)
+    return Accepted(error.building, (), rejections,
+                    dead_letters(topic, payload, received, error.building, rejections), error)
+
+
+def accept(
+    topic: str,
+    payload: bytes | str,
+    received: datetime,
+    catalogues: Mapping[str, PointCatalogue],
+    *,
+    limits: IngestLimits = _DEFAULT_LIMITS,
+    prefix: str = DEFAULT_PREFIX,
+    properties: Mapping[str, str] | None = None,
+) -> Accepted:
+    """Validate one message received at ``received`` (also the reference time of the
+    future check) and say what to store: readings and dead letters.
+
+    The one ingest path of MQTT and REST. Parameters as :func:`validate_message`; a message
+    rejected as a whole does not raise but comes back with :attr:`Accepted.error` set
+    (:func:`refuse`).
+    """
+    try:
+        result = validate_message(topic, payload, catalogues, now=received, limits=limits,
+                                  prefix=prefix, properties=properties)
+    except MessageRejected as rej:
+        return refuse(topic, payload, received, rej)
+    if not result.rejected:
+        return Accepted(result.building, result.readings)
+    return Accepted(result.building, result.readings, result.rejected,
+                    dead_letters(topic, payload, received, result.building, result.rejected))

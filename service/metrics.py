@@ -7,11 +7,15 @@ the last update are gauges computed at scrape time.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from datetime import UTC, datetime
-from typing import Any
+from typing import TYPE_CHECKING
 
 from prometheus_client import CollectorRegistry, Histogram
-from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
+
+if TYPE_CHECKING:  # the context creates the metrics (a cycle at run time)
+    from zonecast.service.context import ServiceContext
 
 __all__ = ["ServiceMetrics"]
 
@@ -19,10 +23,10 @@ _BUCKETS = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)
 
 
 class _Collector:
-    def __init__(self, ctx: Any):
+    def __init__(self, ctx: ServiceContext):
         self.ctx = ctx
 
-    def collect(self):
+    def collect(self) -> Iterator[Metric]:
         ctx = self.ctx
         mqtt = ctx.ingester.counters() if ctx.ingester is not None else {"rejected": {}}
         msgs = CounterMetricFamily("zonecast_messages", "telemetry messages received",
@@ -69,7 +73,7 @@ class _Collector:
 class ServiceMetrics:
     """Registry and instruments of one app."""
 
-    def __init__(self, ctx: Any):
+    def __init__(self, ctx: ServiceContext):
         self.registry = CollectorRegistry()
         self.step_latency = Histogram("zonecast_step_latency_seconds",
                                       "wall time of one runner step (filter, f_IG, forecast, "

@@ -27,105 +27,49 @@ import queue
 import threading
 from collections import Counter
 from collections.abc import Mapping
-from datetime import UTC, datetime, timedelta
-from typing import Any, Literal, Self
+from datetime import UTC, datetime
+from typing import Any, Self
 
-from pydantic import BaseModel, Field, SecretStr
+import paho.mqtt.client as mqtt
+from paho.mqtt.enums import CallbackAPIVersion
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
+from paho.mqtt.subscribeoptions import SubscribeOptions
 from zonecast.service.ingest import (
-    DEFAULT_PREFIX,
-    IngestLimits,
+    Accepted,
     MessageRejected,
     PointCatalogue,
     Reason,
-    RejectedReading,
-    validate_message,
+    accept,
+    refuse,
 )
-from zonecast.service.storage import Storage
+from zonecast.service.settings import DEFAULT_PREFIX, MqttSettings
+from zonecast.service.storage import PutResult, Storage
 
-__all__ = ["Ingester", "MqttSettings", "TLSSettings", "dead_letter_topic"]
+__all__ = ["Ingester", "dead_letter_topic"]
 
 log = logging.getLogger(__name__)
-
-
-class TLSSettings(BaseModel):
-    """TLS towards the broker.
-
-    Parameters
-    ----------
-    ca_certs : str, optional
-        CA bundle file; default: the system's trusted CAs.
-    certfile, keyfile : str, optional
-        Client certificate and key for mutual TLS.
-    insecure : bool
-        Skip the broker hostname check (testing only).
-    """
-
-    ca_certs: str | None = None
-    certfile: str | None = None
-    keyfile: str | None = None
-    insecure: bool = False
-
-
-class MqttSettings(BaseModel):
-    """Connection, session and validation settings of the ingester.
-
-    Parameters
-    ----------
-    host, port : str, int
-        Broker address.
-    client_id : str
-        FIXED client id: the broker keys the persistent session on it, so a
-        restarted ingester receives what it missed. One id per ingester.
-    username, password : str, optional
-        Broker credentials.
-    tls : TLSSettings, optional
-        Enable TLS (use port 8883 on most brokers).
-    protocol : {"5", "3.1.1"}
-        MQTT version. "3.1.1" for brokers without v5 (e.g. amqtt); the bare
-        number point payload needs v5 (its time is a user property).
-    session_expiry : int
-        MQTT v5: how long the broker keeps the session while the ingester is
-        disconnected [s]; default 7 days. (3.1.1 sessions do not expire unless
-        the broker is configured so.)
-    keepalive : int
-        [s].
-    receive_maximum : int
-        MQTT v5: most unacknowledged messages the broker may send at once.
-    batch_max_messages : int
-        Most messages committed in one storage transaction.
-    topic_prefix : str
-        First topic level (``zonecast``).
-    max_payload_bytes, max_readings, max_future : int, int, float
-        Validation limits, see :class:`~zonecast.service.ingest.IngestLimits`
-        (``max_future`` in seconds).
-    """
-
-    host: str = "127.0.0.1"
-    port: int = Field(1883, ge=1, le=65535)
-    client_id: str = Field("zonecast-ingest", min_length=1)
-    username: str | None = None
-    password: SecretStr | None = None
-    tls: TLSSettings | None = None
-    protocol: Literal["5", "3.1.1"] = "5"
-    session_expiry: int = Field(7 * 24 * 3600, ge=1)
-    keepalive: int = Field(30, ge=5)
-    receive_maximum: int = Field(100, ge=1, le=65535)
-    batch_max_messages: int = Field(100, ge=1)
-    topic_prefix: str = DEFAULT_PREFIX
-    max_payload_bytes: int = Field(64 * 1024, ge=1)
-    max_readings: int = Field(5000, ge=1)
-    max_future: float = Field(600.0, ge=0)
-
-    @property
-    def limits(self) -> IngestLimits:
-        """The validation limits as :class:`IngestLimits`."""
-        return IngestLimits(self.max_payload_bytes, self.max_readings,
-                            timedelta(seconds=self.max_future))
 
 
 def dead_letter_topic(building: str | None, prefix: str = DEFAULT_PREFIX) -> str:
     """``<prefix>/<building>/deadletter``, or ``<prefix>/deadletter`` without a building."""
     return f"{prefix}/{building}/deadletter" if building else f"{prefix}/deadletter"
+
+
+def _notice(message: mqtt.MQTTMessage, received: datetime, acc: Accepted) -> dict[str, Any]:
+    """What the ingester publishes on the dead-letter topic about a message."""
+    return {
+        "topic": message.topic,
+        "building": acc.building,
+        "received_at": received.isoformat(),
+        "rejections": [{"point": r.point, "reason": r.reason.value, "detail": r.detail}
+                       for r in acc.rejections],
+        "payload": message.payload[:1024].decode("utf-8", errors="replace"),
+    }
+
+
+#: a received message, what to store of it and its dead-letter notice (None if no rejection)
+_Checked = tuple[mqtt.MQTTMessage, Accepted, dict[str, Any] | None]
 
 
 class _Stopped(Exception):
@@ -158,12 +102,12 @@ class Ingester:
         self.storage = storage
         self.catalogues = catalogues
         self._limits = settings.limits
-        self._queue: queue.Queue[Any] = queue.Queue()
+        self._queue: queue.Queue[tuple[mqtt.MQTTMessage, datetime]] = queue.Queue()
         self._stopping = threading.Event()
         self._aborted = False
         self._ready = threading.Event()
         self._worker: threading.Thread | None = None
-        self._client: Any = None
+        self._client: mqtt.Client | None = None
         self._count_lock = threading.Lock()
         self._counts: Counter[str] = Counter()
         self._rejected: Counter[str] = Counter()
@@ -215,7 +159,7 @@ class Ingester:
         if sock is not None:
             sock.close()
 
-    def counters(self) -> dict[str, Any]:
+    def counters(self) -> dict[str, int | dict[str, int]]:
         """Snapshot of the counters (plain data for /metrics).
 
         Keys: ``messages_in``, ``messages_stored`` (acknowledged after commit,
@@ -229,7 +173,7 @@ class Ingester:
                 "readings_duplicate", "readings_conflict", "readings_rejected",
                 "dead_letters", "storage_errors", "connects")
         with self._count_lock:
-            out: dict[str, Any] = {k: self._counts[k] for k in keys}
+            out: dict[str, int | dict[str, int]] = {k: self._counts[k] for k in keys}
             out["rejected"] = dict(self._rejected)
         return out
 
@@ -240,10 +184,7 @@ class Ingester:
         self.stop()
 
     # --- MQTT -------------------------------------------------------------------
-    def _make_client(self) -> Any:
-        import paho.mqtt.client as mqtt
-        from paho.mqtt.enums import CallbackAPIVersion
-
+    def _make_client(self) -> mqtt.Client:
         s = self.settings
         v5 = s.protocol == "5"
         kwargs: dict[str, Any] = {"protocol": mqtt.MQTTv5 if v5 else mqtt.MQTTv311}
@@ -268,9 +209,6 @@ class Ingester:
     def _connect(self) -> None:
         s = self.settings
         if s.protocol == "5":
-            from paho.mqtt.packettypes import PacketTypes
-            from paho.mqtt.properties import Properties
-
             props = Properties(PacketTypes.CONNECT)
             props.SessionExpiryInterval = s.session_expiry
             props.ReceiveMaximum = s.receive_maximum
@@ -292,8 +230,6 @@ class Ingester:
         log.info("MQTT connected to %s:%d as %s (session present: %s)", self.settings.host,
                  self.settings.port, self.settings.client_id, flags.session_present)
         if self.settings.protocol == "5":
-            from paho.mqtt.subscribeoptions import SubscribeOptions
-
             # retainHandling=1: retained messages only for a new subscription.
             options = SubscribeOptions(qos=1, retainHandling=1)
             client.subscribe([(t, options) for t in self._topics()])
@@ -351,70 +287,51 @@ class Ingester:
                               "for redelivery")
                 self._count("storage_errors")
 
-    def _validate(self, message: Any, received: datetime) -> tuple[Any, list[dict], dict | None]:
-        """(ValidatedMessage or None, dead-letter rows, dead-letter notice)."""
+    def _accept(self, message: mqtt.MQTTMessage, received: datetime) -> _Checked:
+        """(message, what to store, dead-letter notice or None), counted."""
         props = getattr(message, "properties", None)
         user = dict(getattr(props, "UserProperty", []) or [])
-        try:
-            result = validate_message(message.topic, message.payload, self.catalogues,
-                                      now=received, limits=self._limits,
-                                      prefix=self.settings.topic_prefix, properties=user)
-        except MessageRejected as rej:
-            self._count("messages_rejected")
-            self._count_reason(rej.reason.value)
-            return None, *self._dead_letter(message, received, rej.building,
-                                             [RejectedReading(None, rej.reason, rej.detail)])
-        if not result.rejected:
-            return result, [], None
-        self._count("readings_rejected", len(result.rejected))
-        for r in result.rejected:
-            self._count_reason(r.reason.value)
-        return result, *self._dead_letter(message, received, result.building,
-                                          list(result.rejected))
+        acc = accept(message.topic, message.payload, received, self.catalogues,
+                     limits=self._limits, prefix=self.settings.topic_prefix, properties=user)
+        if not acc.rejections:
+            return message, acc, None
+        with self._count_lock:
+            if acc.error is not None:
+                self._counts["messages_rejected"] += 1
+            else:
+                self._counts["readings_rejected"] += len(acc.rejections)
+            self._rejected.update(acc.reasons)
+        return message, acc, _notice(message, received, acc)
 
-    def _dead_letter(self, message: Any, received: datetime, building: str | None,
-                     rejections: list[RejectedReading]) -> tuple[list[dict], dict]:
-        rows = [{"topic": message.topic, "payload": message.payload, "building": building,
-                 "reason": f"{r.reason.value}: {r.detail}", "received_at": received}
-                for r in rejections]
-        notice = {
-            "topic": message.topic,
-            "building": building,
-            "received_at": received.isoformat(),
-            "rejections": [{"point": r.point, "reason": r.reason.value, "detail": r.detail}
-                           for r in rejections],
-            "payload": rows[0]["payload"][:1024].decode("utf-8", errors="replace"),
-        }
-        return rows, notice
-
-    def _process(self, batch: list[tuple[Any, datetime]]) -> None:
-        checked = [(message, *self._validate(message, received)) for message, received in batch]
+    def _process(self, batch: list[tuple[mqtt.MQTTMessage, datetime]]) -> None:
+        checked = [self._accept(message, received) for message, received in batch]
         try:
             results = self._commit(checked)
         except ValueError:
             # Storage refused some data validation let through: commit message
             # by message and dead-letter the culprit instead of stalling.
             results = []
-            for message, result, rows, notice in checked:
+            for message, acc, notice in checked:
                 try:
-                    results += self._commit([(message, result, rows, notice)])
+                    results += self._commit([(message, acc, notice)])
                 except ValueError as exc:
                     log.exception("storage rejected a validated message on %s", message.topic)
-                    building = result.building if result is not None else None
-                    rows, notice = self._dead_letter(message, batch[0][1], building, [
-                        RejectedReading(None, Reason.STORAGE_REJECTED, str(exc))])
+                    building = acc.building if acc.error is None else None
+                    received = batch[0][1]
+                    refused = refuse(message.topic, message.payload, received,
+                                     MessageRejected(Reason.STORAGE_REJECTED, str(exc), building))
                     self._count_reason(Reason.STORAGE_REJECTED.value)
-                    results += self._commit([(message, None, rows, notice)])
+                    results += self._commit([(message, refused,
+                                              _notice(message, received, refused))])
         client = self._client
         if self._aborted or client is None:
             return  # simulated crash: committed but never acknowledged
         letters = 0
-        for message, _, rows, notice in checked:
-            letters += len(rows)
+        for message, acc, notice in checked:
+            letters += len(acc.dead_letters)
             if notice is not None:
-                client.publish(dead_letter_topic(notice["building"],
-                                                       self.settings.topic_prefix),
-                                     json.dumps(notice), qos=1)
+                client.publish(dead_letter_topic(notice["building"], self.settings.topic_prefix),
+                               json.dumps(notice), qos=1)
         for message, _ in batch:
             if message.qos > 0:
                 client.ack(message.mid, message.qos)
@@ -424,11 +341,10 @@ class Ingester:
         self._count("readings_duplicate", sum(r.duplicates for r in results))
         self._count("readings_conflict", sum(r.conflicts for r in results))
 
-    def _commit(self, checked: list[tuple[Any, Any, list[dict], Any]]) -> list:
+    def _commit(self, checked: list[_Checked]) -> list[PutResult]:
         """One transaction; on storage outage retry (messages stay unacknowledged)."""
-        batches = [(result.building, result.readings) for _, result, _, _ in checked
-                   if result is not None and result.readings]
-        letters = [row for _, _, rows, _ in checked for row in rows]
+        batches = [(acc.building, acc.readings) for _, acc, _ in checked if acc.readings]
+        letters = [row for _, acc, _ in checked for row in acc.dead_letters]
         delay = 0.1
         while True:
             try:

@@ -10,14 +10,19 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 import time
 from collections.abc import Callable
+from datetime import datetime
 from pathlib import Path
-from typing import Any
 from urllib.parse import urlsplit
 
+import paho.mqtt.client as mqtt
 import pandas as pd
-from zonecast.service.mqtt import MqttSettings
+from paho.mqtt.enums import CallbackAPIVersion
+from zonecast.estimator.constants import STEP_S
+from zonecast.estimator.site import load_site
+from zonecast.service.settings import MqttSettings
 
 __all__ = ["ReplayResult", "connect_publisher", "parse_broker_url", "replay"]
 
@@ -35,14 +40,10 @@ def parse_broker_url(url: str) -> tuple[str, int, bool]:
     return parts.hostname, port, tls
 
 
-def connect_publisher(settings: MqttSettings, *, client_id: str, timeout: float | None = None):
+def connect_publisher(settings: MqttSettings, *, client_id: str,
+                      timeout: float | None = None) -> mqtt.Client:
     """A paho client (v2 callback API) connected in the background; with ``timeout`` wait
     for the connection [s] and raise ConnectionError if it does not come."""
-    import threading
-
-    import paho.mqtt.client as mqtt
-    from paho.mqtt.enums import CallbackAPIVersion
-
     v5 = settings.protocol == "5"
     client = mqtt.Client(callback_api_version=CallbackAPIVersion.VERSION2, client_id=client_id,
                          protocol=mqtt.MQTTv5 if v5 else mqtt.MQTTv311)
@@ -69,7 +70,8 @@ class ReplayResult(dict):
     """``messages``, ``readings``, ``first``, ``last`` (ISO times) and ``seconds``."""
 
 
-def _rows(data: Path, start: Any, end: Any) -> tuple[pd.DataFrame, list[str]]:
+def _rows(data: Path, start: str | datetime | None,
+          end: str | datetime | None) -> tuple[pd.DataFrame, list[str]]:
     path = data / "telemetry.csv" if data.is_dir() else data
     if not path.is_file():
         raise ValueError(f"no telemetry file {path}")
@@ -79,8 +81,6 @@ def _rows(data: Path, start: Any, end: Any) -> tuple[pd.DataFrame, list[str]]:
     points = [c for c in frame.columns if c != "time"]
     site = path.parent / "site.yaml"
     if site.is_file():
-        from zonecast.estimator.site import load_site
-
         mapped = set(load_site(site).point_units())
         points = [p for p in points if p in mapped]
     times = pd.to_datetime(frame["time"], format="ISO8601", utc=True)
@@ -93,7 +93,8 @@ def _rows(data: Path, start: Any, end: Any) -> tuple[pd.DataFrame, list[str]]:
 
 
 def replay(data: str | Path, settings: MqttSettings, building: str, *, speed: float = 0.0,
-           start: Any = None, end: Any = None, client_id: str = "zonecast-replay",
+           start: str | datetime | None = None, end: str | datetime | None = None,
+           client_id: str = "zonecast-replay",
            progress: Callable[[int, int], None] | None = None) -> ReplayResult:
     """Publish recorded telemetry like a BMS.
 
@@ -124,7 +125,7 @@ def replay(data: str | Path, settings: MqttSettings, building: str, *, speed: fl
             if not values:
                 continue
             if speed > 0 and i:
-                due = t0 + i * 900.0 / speed
+                due = t0 + i * STEP_S / speed
                 time.sleep(max(0.0, due - time.monotonic()))
             info = client.publish(topic, json.dumps({"time": row["time"], "readings": values}),
                                   qos=1)

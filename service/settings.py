@@ -11,8 +11,11 @@ Environment variables carry the prefix ``ZONECAST_`` and use ``__`` for nesting,
 from __future__ import annotations
 
 import contextvars
+import re
+from dataclasses import dataclass
+from datetime import timedelta
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, Field, SecretStr, field_validator
 from pydantic_settings import (
@@ -21,12 +24,120 @@ from pydantic_settings import (
     SettingsConfigDict,
     YamlConfigSettingsSource,
 )
-from zonecast.service.mqtt import MqttSettings
-from zonecast.service.storage import DEFAULT_URL
 
-__all__ = ["RunnerSettings", "ServiceSettings", "load_settings"]
+__all__ = [
+    "DEFAULT_PREFIX",
+    "DEFAULT_URL",
+    "IngestLimits",
+    "MqttSettings",
+    "RunnerSettings",
+    "ServiceSettings",
+    "TLSSettings",
+    "load_settings",
+]
+
+#: storage of ``zonecast serve`` unless ``storage_url`` says otherwise (docs/service.md, "Storage")
+DEFAULT_URL = "sqlite:///zonecast.db"
+#: first topic level of the MQTT topics
+DEFAULT_PREFIX = "zonecast"
 
 _YAML: contextvars.ContextVar[Path | None] = contextvars.ContextVar("zonecast_yaml", default=None)
+
+
+@dataclass(frozen=True)
+class IngestLimits:
+    """Limits that protect storage from broken or hostile publishers.
+
+    Parameters
+    ----------
+    max_payload_bytes : int
+        Largest accepted payload [bytes]; default 64 KiB.
+    max_readings : int
+        Most readings accepted in one message; default 5000.
+    max_future : timedelta
+        How far ahead of ``now`` a timestamp may lie (clock skew allowance);
+        default 10 minutes.
+    """
+
+    max_payload_bytes: int = 64 * 1024
+    max_readings: int = 5000
+    max_future: timedelta = timedelta(minutes=10)
+
+
+class TLSSettings(BaseModel):
+    """TLS towards the broker.
+
+    Parameters
+    ----------
+    ca_certs : str, optional
+        CA bundle file; default: the system's trusted CAs.
+    certfile, keyfile : str, optional
+        Client certificate and key for mutual TLS.
+    insecure : bool
+        Skip the broker hostname check (testing only).
+    """
+
+    ca_certs: str | None = None
+    certfile: str | None = None
+    keyfile: str | None = None
+    insecure: bool = False
+
+
+class MqttSettings(BaseModel):
+    """Connection, session and validation settings of the ingester.
+
+    Parameters
+    ----------
+    host, port : str, int
+        Broker address.
+    client_id : str
+        FIXED client id: the broker keys the persistent session on it, so a
+        restarted ingester receives what it missed. One id per ingester.
+    username, password : str, optional
+        Broker credentials.
+    tls : TLSSettings, optional
+        Enable TLS (use port 8883 on most brokers).
+    protocol : {"5", "3.1.1"}
+        MQTT version. "3.1.1" for brokers without v5 (e.g. amqtt); the bare
+        number point payload needs v5 (its time is a user property).
+    session_expiry : int
+        MQTT v5: how long the broker keeps the session while the ingester is
+        disconnected [s]; default 7 days. (3.1.1 sessions do not expire unless
+        the broker is configured so.)
+    keepalive : int
+        [s].
+    receive_maximum : int
+        MQTT v5: most unacknowledged messages the broker may send at once.
+    batch_max_messages : int
+        Most messages committed in one storage transaction.
+    topic_prefix : str
+        First topic level (``zonecast``).
+    max_payload_bytes, max_readings, max_future : int, int, float
+        Validation limits, see :class:`IngestLimits`
+        (``max_future`` in seconds).
+    """
+
+    host: str = "127.0.0.1"
+    port: int = Field(1883, ge=1, le=65535)
+    client_id: str = Field("zonecast-ingest", min_length=1)
+    username: str | None = None
+    password: SecretStr | None = None
+    tls: TLSSettings | None = None
+    protocol: Literal["5", "3.1.1"] = "5"
+    session_expiry: int = Field(7 * 24 * 3600, ge=1)
+    keepalive: int = Field(30, ge=5)
+    receive_maximum: int = Field(100, ge=1, le=65535)
+    batch_max_messages: int = Field(100, ge=1)
+    topic_prefix: str = DEFAULT_PREFIX
+    max_payload_bytes: int = Field(64 * 1024, ge=1)
+    max_readings: int = Field(5000, ge=1)
+    max_future: float = Field(600.0, ge=0)
+
+    @property
+    def limits(self) -> IngestLimits:
+        """The validation limits as :class:`IngestLimits`."""
+        return IngestLimits(self.max_payload_bytes, self.max_readings,
+                            timedelta(seconds=self.max_future))
 
 
 class RunnerSettings(BaseModel):
@@ -82,8 +193,6 @@ class ServiceSettings(BaseSettings):
     @field_validator("buildings")
     @classmethod
     def _ids(cls, v: dict[str, Path]) -> dict[str, Path]:
-        import re
-
         bad = [k for k in v if not re.fullmatch(r"[A-Za-z0-9_-]+", k)]
         if bad:
             raise ValueError(f"building ids {bad} may only use letters, digits, '-' and '_'")

@@ -33,13 +33,13 @@ from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Self
+from typing import Any, ClassVar, NamedTuple, Self
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
+import numpy as np
+import pandas as pd
 from zonecast.service.ingest import parse_time
-
-if TYPE_CHECKING:  # pandas is imported lazily (only readings() needs it)
-    import pandas as pd
+from zonecast.service.settings import DEFAULT_URL
 
 __all__ = [
     "DEFAULT_URL",
@@ -55,7 +55,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-DEFAULT_URL = "sqlite:///zonecast.db"
 _EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 #: Longest payload excerpt kept in a dead letter [characters].
 EXCERPT_CHARS = 1024
@@ -356,8 +355,6 @@ class Storage(ABC):
             Index ``time`` (tz-aware UTC, ascending), one float column per
             point, NaN where a point has no reading at that time.
         """
-        import pandas as pd
-
         lo, hi = _utc(start, "start"), _utc(end, "end")
         sql = "SELECT point, time, value FROM readings WHERE building = ? AND time >= ? AND time < ?"
         params: list[Any] = [building, self._to_db(lo), self._to_db(hi)]
@@ -386,7 +383,7 @@ class Storage(ABC):
         return ((delta.days * 86_400 + delta.seconds) * 1_000_000 + delta.microseconds) * 1000
 
     def readings_matrix(self, building: str, start: Any, end: Any,
-                        points: Sequence[str]) -> tuple[Any, Any]:
+                        points: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
         """Readings of ``points`` in ``[start, end)`` as plain arrays (no pandas): the
         online runner's read.
 
@@ -397,8 +394,6 @@ class Storage(ABC):
         values : numpy.ndarray, shape (N, len(points))
             One column per point in the order given; NaN where a point has no reading.
         """
-        import numpy as np
-
         points = list(points)
         if not points:
             raise ValueError("points is empty")
@@ -659,6 +654,8 @@ class PostgresStorage(Storage):
         super().__init__(url)
 
     def _connect(self) -> None:
+        # imported here, not at the top: psycopg loads libpq, which only postgresql:// URLs
+        # need; a SQLite deployment neither pays for it nor needs a working libpq
         import psycopg
 
         conn = psycopg.connect(self._conninfo, autocommit=True)

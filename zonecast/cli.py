@@ -354,8 +354,8 @@ def replay_cmd(data: Annotated[Path, typer.Option(help="Folder with telemetry.cs
                prefix: Annotated[str, typer.Option(help="Topic prefix.")] = "zonecast") -> None:
     """Publish recorded telemetry like a BMS: one QoS-1 message per row on
     <prefix>/<building>/telemetry."""
-    from zonecast.service.mqtt import MqttSettings, TLSSettings
     from zonecast.service.replay import parse_broker_url, replay
+    from zonecast.service.settings import MqttSettings, TLSSettings
     try:
         host, port, tls = parse_broker_url(broker)
         settings = MqttSettings(host=host, port=port, username=username, password=password,

@@ -15,6 +15,7 @@ from zonecast.service.ingest import (
     PointSpec,
     Reading,
     Reason,
+    accept,
     parse_time,
     parse_topic,
     validate_message,
@@ -205,3 +206,33 @@ def test_arbitrary_json_never_crashes(body):
         return
     for r in msg.readings:
         assert isinstance(r.value, float) and r.time.tzinfo is UTC
+
+
+def test_accept_says_what_to_store_and_why_for_both_transports():
+    """``accept`` (the one path of MQTT and REST): readings, one dead letter per rejection
+    with reason "<code>: <detail>", the counts by reason, and a whole-message rejection as
+    ``error`` instead of an exception."""
+    good = json.dumps({"time": "2015-04-11T17:00:00Z", "readings": {"T_Room_NW_1": 21.0}})
+    acc = accept(TEL, good, NOW, CATALOGUES)
+    assert acc.building == "office6" and acc.error is None
+    assert [r.point for r in acc.readings] == ["T_Room_NW_1"]
+    assert acc.rejections == () and acc.dead_letters == () and acc.reasons == {}
+
+    partly = json.dumps({"time": "2015-04-11T17:00:00Z",
+                         "readings": {"T_Room_NW_1": 21.0, "GHI": "sunny", "Nope": 1}})
+    acc = accept(TEL, partly, NOW, CATALOGUES)
+    assert acc.error is None and len(acc.readings) == 1
+    assert acc.reasons == {"wrong_type": 1, "unknown_point": 1}
+    assert [d["reason"] for d in acc.dead_letters] == [
+        f"{r.reason.value}: {r.detail}" for r in acc.rejections]
+    assert all(d["building"] == "office6" and d["topic"] == TEL and d["payload"] == partly
+               and d["received_at"] == NOW for d in acc.dead_letters)
+
+    acc = accept(TEL, b"{oops", NOW, CATALOGUES)
+    assert acc.error is not None and acc.error.reason is Reason.MALFORMED_JSON
+    assert acc.readings == () and acc.reasons == {"malformed_json": 1}
+    assert [(d["reason"], d["building"]) for d in acc.dead_letters] == [
+        (str(acc.error), "office6")]
+    assert acc.rejections[0].point is None
+    acc = accept("zonecast/elsewhere/telemetry", good, NOW, CATALOGUES)
+    assert acc.reasons == {"unknown_building": 1} and acc.dead_letters[0]["building"] == "elsewhere"

@@ -16,7 +16,8 @@ from paho.mqtt.enums import CallbackAPIVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from zonecast.service.ingest import PointSpec
-from zonecast.service.mqtt import Ingester, MqttSettings
+from zonecast.service.mqtt import Ingester
+from zonecast.service.settings import MqttSettings
 from zonecast.service.storage import open_storage
 
 pytestmark = pytest.mark.timeout(120)

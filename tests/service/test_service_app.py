@@ -102,7 +102,7 @@ def test_service_yaml_in_configs_is_valid(monkeypatch):
 
 
 def test_catalogue_converts_plausible_ranges_to_the_wire_unit():
-    from zonecast.service.app import catalogue_for_site
+    from zonecast.service.context import catalogue_for_site
 
     class Site:  # catalogue_for_site only needs the point -> unit map
         def point_units(self):
@@ -127,7 +127,7 @@ class FakeClock:
 
 def test_runner_waits_for_late_points_then_closes_by_watermark_or_idle(bundle, telemetry,
                                                                          tmp_path):
-    from zonecast.service.app import catalogue_for_site
+    from zonecast.service.context import catalogue_for_site
     from zonecast.service.ingest import validate_message
     from zonecast.service.runner import Runner
     from zonecast.service.settings import RunnerSettings
@@ -361,8 +361,8 @@ def test_replay_three_weeks_through_broker_with_restart_equals_offline(tmp_path,
     from typer.testing import CliRunner
     from zonecast.estimator.streaming import offline_forecasts
     from zonecast.service.app import create_app
-    from zonecast.service.mqtt import MqttSettings
     from zonecast.service.replay import replay
+    from zonecast.service.settings import MqttSettings
 
     from zonecast.cli import app as cli
 

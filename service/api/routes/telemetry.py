@@ -1,0 +1,60 @@
+"""``/api/v1/buildings/{building_id}/telemetry``: REST ingest, the same validation, dead
+letters and storage as MQTT."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+
+from fastapi import APIRouter, HTTPException, Request
+from starlette.concurrency import run_in_threadpool
+from zonecast.service import schemas as S
+from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, get_runner
+from zonecast.service.ingest import accept
+
+router = APIRouter(prefix="/buildings", tags=["telemetry"], dependencies=AUTH,
+                   responses={**ERRORS, 413: {"model": S.ErrorBody}})
+
+_telemetry_body = {"requestBody": {"required": True, "content": {"application/json": {"schema": {
+    "type": "object", "description": "map form {time, readings: {point: value}} or batch form "
+    "{readings: [{point, time, value}]}; times ISO-8601 with offset, values in the point's unit",
+    "properties": {"time": {"type": "string", "format": "date-time"},
+                   "readings": {"oneOf": [
+                       {"type": "object", "additionalProperties": {"type": "number"}},
+                       {"type": "array", "items": {"type": "object", "properties": {
+                           "point": {"type": "string"}, "time": {"type": "string"},
+                           "value": {"type": "number"}}}}]}},
+    "required": ["readings"]}}}}}
+
+
+@router.post("/{building_id}/telemetry", response_model=S.TelemetryResult,
+             summary="Ingest readings (same validation and storage as MQTT)",
+             openapi_extra=_telemetry_body)
+async def post_telemetry(ctx: Ctx, building_id: BuildingId, request: Request):
+    limit = ctx.settings.max_body_bytes
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.isdigit() and int(declared) > limit:
+        raise HTTPException(413, f"body is {declared} bytes, the limit is {limit}")
+    body = await request.body()
+    if len(body) > limit:
+        raise HTTPException(413, f"body is {len(body)} bytes, the limit is {limit}")
+    if building_id not in ctx.catalogues:
+        await get_runner(ctx, building_id)  # raises 404 with the reason
+    topic = f"{ctx.settings.mqtt.topic_prefix}/{building_id}/telemetry"
+    received = datetime.now(UTC)
+    ctx.rest["messages_in"] += 1
+    acc = accept(topic, body, received, ctx.catalogues, limits=ctx.settings.mqtt.limits,
+                 prefix=ctx.settings.mqtt.topic_prefix)
+    if acc.error is not None:
+        ctx.rest["messages_rejected"] += 1
+    ctx.rest_rejected.update(acc.reasons)
+    batches = [] if acc.error is not None else [(building_id, acc.readings)]
+    stored = await run_in_threadpool(ctx.storage.put_many, batches, acc.dead_letters,
+                                     received_at=received)
+    if acc.error is not None:
+        raise HTTPException(422, str(acc.error))
+    ctx.rest["readings_stored"] += stored[0].inserted
+    return S.TelemetryResult(
+        building=building_id, accepted=len(acc.readings), stored=stored[0].inserted,
+        duplicates=stored[0].duplicates,
+        rejected=[S.TelemetryRejection(point=r.point, reason=r.reason.value, detail=r.detail)
+                  for r in acc.rejections])

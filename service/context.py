@@ -1,0 +1,119 @@
+"""What the running service holds (``app.state.zc``): storage, models, runners, ingester,
+publisher and counters, with their start and stop.
+
+A module of its own, not part of ``app.py``: the route dependencies (``api/deps.py``) need
+the class at run time for their ``Annotated`` types, and ``app.py`` imports the routes.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections import Counter
+
+import numpy as np
+import paho.mqtt.client as mqtt
+from zonecast.estimator.artifact import ModelBundle
+from zonecast.estimator.constants import HORIZON
+from zonecast.estimator.pipeline import Pipeline
+from zonecast.estimator.site import Site
+from zonecast.estimator.units import _CONVERSIONS, to_si
+from zonecast.service.bodies import forecast_json, state_body
+from zonecast.service.ingest import PointSpec
+from zonecast.service.metrics import ServiceMetrics
+from zonecast.service.mqtt import Ingester
+from zonecast.service.replay import connect_publisher
+from zonecast.service.runner import Runner
+from zonecast.service.settings import ServiceSettings
+from zonecast.service.storage import Storage, open_storage
+
+__all__ = ["ServiceContext", "catalogue_for_site"]
+
+log = logging.getLogger(__name__)
+
+
+def catalogue_for_site(site: Site) -> dict[str, PointSpec]:
+    """Point catalogue of a site: every mapped point with its kind, wire unit and the
+    kind's plausible range converted to that unit."""
+    kinds = {"temperature": "temperature", "airflow": "airflow", "irradiance": "irradiance"}
+    out = {}
+    for point, unit in site.point_units().items():
+        quantity = _CONVERSIONS[unit][0]
+        spec = PointSpec(kinds[quantity])
+        if unit != spec.unit:  # affine unit: invert to_si for the range
+            a0, a1 = to_si(np.array([0.0, 1.0]), unit)
+            lo, hi = sorted(((spec.low - a0) / (a1 - a0), (spec.high - a0) / (a1 - a0)))
+            spec = PointSpec(kinds[quantity], unit=unit, low=lo, high=hi)
+        out[point] = spec
+    return out
+
+
+class ServiceContext:
+    """Everything the running service holds (``app.state.zc``)."""
+
+    def __init__(self, settings: ServiceSettings):
+        self.settings = settings
+        self.storage: Storage | None = None
+        self.bundles: dict[str, ModelBundle] = {}
+        self.runners: dict[str, Runner] = {}
+        self.load_errors: dict[str, str] = {}
+        self.catalogues: dict[str, dict[str, PointSpec]] = {}
+        self.ingester: Ingester | None = None
+        self.publisher: mqtt.Client | None = None
+        self.stop = threading.Event()
+        self.threads: list[threading.Thread] = []
+        self.rest: Counter[str] = Counter()  # REST telemetry counters
+        self.rest_rejected: Counter[str] = Counter()
+        self.metrics: ServiceMetrics | None = None
+
+    # lifecycle --------------------------------------------------------------------
+    def start(self) -> None:
+        s = self.settings
+        self.metrics = ServiceMetrics(self)
+        self.storage = open_storage(s.storage_url)
+        for bid, path in s.buildings.items():
+            try:
+                bundle = Pipeline.from_model_file(path).bundle
+                if bundle.building != bid:
+                    log.info("building %s: site names it %s; serving it as %s", bid,
+                             bundle.building, bid)
+                    bundle.building = bid
+                self.bundles[bid] = bundle
+                self.catalogues[bid] = catalogue_for_site(bundle.site)
+            except ValueError as exc:
+                self.load_errors[bid] = str(exc)
+                log.error("building %s: model not loaded: %s", bid, exc)
+        if s.mqtt_enabled:
+            self.ingester = Ingester(s.mqtt, self.storage, self.catalogues).start()
+            if s.runner.publish:
+                self.publisher = connect_publisher(s.mqtt, client_id=s.mqtt.client_id + "-pub")
+        for bid, bundle in self.bundles.items():
+            runner = Runner(bundle, self.storage, s.runner, publish=self._published)
+            self.runners[bid] = runner
+            th = threading.Thread(target=runner.run, args=(self.stop,), daemon=True,
+                                  name=f"zonecast-runner-{bid}")
+            th.start()
+            self.threads.append(th)
+
+    def close(self) -> None:
+        self.stop.set()
+        for th in self.threads:
+            th.join(60)
+        if self.ingester is not None:
+            self.ingester.stop()
+        if self.publisher is not None:
+            self.publisher.disconnect()
+            self.publisher.loop_stop()
+        if self.storage is not None:
+            self.storage.close()
+
+    def _published(self, kind: str, runner: Runner) -> None:
+        if kind == "state" and runner.latencies:
+            self.metrics.observe_step(runner.building, runner.latencies[-1])
+        if self.publisher is None:
+            return
+        prefix = self.settings.mqtt.topic_prefix
+        # the forecast body is the REST endpoint's cached 24 h body (built once per forecast)
+        body = (state_body(self, runner).model_dump_json() if kind == "state"
+                else forecast_json(runner, HORIZON))
+        self.publisher.publish(f"{prefix}/{runner.building}/{kind}", body, qos=1, retain=True)

@@ -41,6 +41,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 import pandas as pd
+from zonecast.estimator.constants import HORIZON, STEPS_PER_DAY
 from zonecast.estimator.pipeline import Pipeline
 
 TOKEN = "bench-token"
@@ -71,8 +72,8 @@ def bench_steps(data: Path, work: Path, days: int) -> dict:
 
     bundle = Pipeline.from_model_file(data / "model.json").bundle
     m = bundle.model
-    frame = telemetry_frame(data, bundle).iloc[: 96 * (days + 1)]
-    hist, live = frame.iloc[: 96 * days], frame.iloc[96 * days:]
+    frame = telemetry_frame(data, bundle).iloc[: STEPS_PER_DAY * (days + 1)]
+    hist, live = frame.iloc[: STEPS_PER_DAY * days], frame.iloc[STEPS_PER_DAY * days:]
     tt, u, v, y = rows_from_frame(bundle, hist)
     # reference: one exact propagator for a never-seen airflow vector
     ref = []
@@ -146,7 +147,7 @@ def bench_steps(data: Path, work: Path, days: int) -> dict:
         ckpt_synced.append(time.perf_counter() - t0)
         runner.__dict__.pop("_body_cache", None)
         t0 = time.perf_counter()
-        forecast_json(runner, 96)
+        forecast_json(runner, HORIZON)
         body.append(time.perf_counter() - t0)
     store.close()
     return {"states": m.n, "boxes": m.n_boxes, "zones": m.n_zones, "steps": len(tt),

@@ -19,7 +19,7 @@ well each parameter is determined).
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -39,6 +39,7 @@ from zonecast.estimator.kalman import (
     run_filter,
 )
 from zonecast.estimator.model import BilinearModel
+from zonecast.estimator.priors import Prior, prior_jacobian, prior_residuals
 from zonecast.estimator.rc.parameters import ParameterSet
 
 RESULTS_SCHEMA_VERSION = 1
@@ -163,6 +164,10 @@ class IdentificationResult:
         Numerical rank and condition number of the residuals' Jacobian at the optimum, its
         columns scaled by the parameters' typical sizes: how many parameter combinations
         the data determine (identifiability).
+    priors : dict or None
+        The priors of a MAP fit (:mod:`~zonecast.estimator.priors`); None: least squares.
+    sigma_e : float or None
+        Residual scale [K] of the MAP cost.
     """
 
     param_names: list[str]
@@ -183,6 +188,8 @@ class IdentificationResult:
     model: BilinearModel | None = field(default=None, repr=False)
     rank: int | None = None
     condition: float | None = None
+    priors: dict[str, Prior] | None = None
+    sigma_e: float | None = None
 
     @property
     def bse(self) -> np.ndarray:
@@ -229,6 +236,9 @@ class IdentificationResult:
         for name, v, s, u, (lo, hi) in zip(self.param_names, self.params, self.stderr,
                                            self.units, bounds):
             flag = "  AT BOUND" if name in pinned else ""
+            prior = self.priors.get(name) if self.priors else None
+            if prior is not None:
+                flag += f"  prior {prior.mean:.3g} +- {prior.sd:.3g}"
             lines.append(f"{name:<16}{v:>12.4g}{s:>12.3g}  {u:<10}[{lo:.4g}, {hi:.4g}]{flag}")
         lines.append("")
         for label, row in (("training RMS [K]", self.train_rms),
@@ -255,7 +265,11 @@ class IdentificationResult:
                 "validation_weekends": self.validation_weekends, "n_residuals": self.n_residuals,
                 "n_evaluations": self.n_evaluations, "seconds": round(self.seconds, 2),
                 "seed": self.seed, "at_bounds": self.at_bounds() if self.bounds else [],
-                "jacobian_rank": self.rank, "jacobian_condition": self.condition}
+                "jacobian_rank": self.rank, "jacobian_condition": self.condition,
+                "prior": None if self.priors is None else
+                {n: {"mean": p.mean, "sd": p.sd, "source": p.source}
+                 for n, p in self.priors.items()},
+                "map_sigma_e": self.sigma_e}
 
 
 class _Problem:
@@ -405,7 +419,8 @@ def _fit_rms(problem: _Problem, theta: np.ndarray, zones) -> dict:
 
 def identify(model: BilinearModel, data: ModelData, train: Sequence, validation: Sequence = (),
              n_starts: int = 3, seed: int = 0, max_nfev: int = 60,
-             progress=lambda msg: None) -> IdentificationResult:
+             progress=lambda msg: None, priors: Mapping[str, Prior] | None = None,
+             sigma_e: float = 0.3) -> IdentificationResult:
     """Identify the parameters of ``model`` (paper section 4-A).
 
     Parameters
@@ -416,6 +431,12 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     n_starts : number of starting points (the best fit is kept)
     seed : seeds the perturbed starts
     max_nfev : function evaluations per start and round
+    priors : mapping, optional
+        Parameter name -> :class:`~zonecast.estimator.priors.Prior` for a
+        maximum-a-posteriori fit (:mod:`zonecast.estimator.priors`); default none, the
+        paper's least squares.
+    sigma_e : float
+        Residual scale [K] the data are trusted to in the MAP cost.
     """
     t0 = time.perf_counter()
     rng = np.random.default_rng([seed, 11])
@@ -437,11 +458,22 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
             return list(pool.map(lambda sp: kalman_state(m, data, sp[0] - window, sp[0]),
                                  spans))
 
+    names = list(model.params.param_names)
+    if priors is not None:
+        prior_jac = prior_jacobian(priors, names, sigma_e)
+
     def fit(problem, theta):
-        return least_squares(problem.residuals, theta, bounds=(lo, hi), x_scale=scale,
-                             method="trf", max_nfev=max_nfev,
-                             jac=lambda t, p=problem: p.jacobian(t, lo, hi),
-                             ftol=1e-6, xtol=1e-6, gtol=1e-8)
+        if priors is None:
+            fun, jac = problem.residuals, (lambda t, p=problem: p.jacobian(t, lo, hi))
+        else:  # MAP: the prior's rows appended to the simulation residuals
+            def fun(t, p=problem):
+                return np.concatenate([p.residuals(t), prior_residuals(t, priors, names,
+                                                                       sigma_e)])
+
+            def jac(t, p=problem):
+                return np.vstack([p.jacobian(t, lo, hi), prior_jac])
+        return least_squares(fun, theta, bounds=(lo, hi), x_scale=scale, method="trf",
+                             max_nfev=max_nfev, jac=jac, ftol=1e-6, xtol=1e-6, gtol=1e-8)
 
     best = None
     starts_report = []
@@ -492,4 +524,5 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         [str(local[a].date()) for a, _ in val_spans], len(sol.fun),
         sum(s["nfev"] for s in starts_report) + int(sol.nfev), time.perf_counter() - t0, seed,
         bounds=[(float(lo_), float(hi_)) for lo_, hi_ in zip(lo, hi)], model=fitted, rank=rank,
-        condition=condition)
+        condition=condition, priors=dict(priors) if priors is not None else None,
+        sigma_e=sigma_e if priors is not None else None)

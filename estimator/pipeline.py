@@ -37,6 +37,7 @@ from zonecast.estimator.gains import WeeklyProfile
 from zonecast.estimator.identify import IdentificationResult, excitation_saturdays, identify
 from zonecast.estimator.idf import Building, read_building
 from zonecast.estimator.model import BilinearModel
+from zonecast.estimator.priors import Prior, building_priors
 from zonecast.estimator.rc.network import ModelOptions, RCStructure, build_structure
 from zonecast.estimator.rc.parameters import ParameterSet
 from zonecast.estimator.site import Site, load_site
@@ -134,6 +135,13 @@ class Pipeline:
             self._building = read_building(self.site.idf_path, self.energyplus_dir)
         return self._building
 
+    def _building_or_none(self) -> Building | None:
+        """The building if it can be read (a pipeline from a model file may have no
+        EnergyPlus)."""
+        if self._building is None and self._bundle is not None:
+            return None
+        return self.building()
+
     def structure(self) -> RCStructure:
         """The parameter-free RC structure (paper section 3; cached)."""
         if self._structure is None:
@@ -176,11 +184,15 @@ class Pipeline:
     # --- identification ----------------------------------------------------------------
     def identify(self, data: ModelData, train: Sequence[str] | None = None,
                  validation: Sequence[str] | None = None, *, n_starts: int = 3, seed: int = 0,
-                 progress: Progress = _quiet) -> IdentificationResult:
+                 progress: Progress = _quiet, priors: bool | Mapping[str, Prior] = False,
+                 sigma_e: float = 0.3) -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
         ``experiments``): training on the second and third, validation on the first.
+        ``priors``: True for a MAP fit with :func:`~.priors.building_priors` of this
+        building (window U and SHGC from its IDF), or a mapping of priors; ``sigma_e`` [K]
+        the MAP residual scale.
         """
         sats = [str(s.date()) for s in excitation_saturdays(data)]
         train = list(train) if train else sats[1:3]
@@ -188,8 +200,11 @@ class Pipeline:
         if not train:
             raise PipelineError("no excitation weekend found: give the training Saturdays "
                                 "(the site's experiments list marks excitation periods)")
-        res = identify(self.model(ParameterSet(list(self.site.zones))), data, train,
-                       validation, n_starts=n_starts, seed=seed, progress=progress)
+        start = ParameterSet(list(self.site.zones))
+        if priors is True:
+            priors = building_priors(start, self._building_or_none())
+        res = identify(self.model(start), data, train, validation, n_starts=n_starts,
+                       seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e)
         self.identification = res
         self.params = res.model.params
         self._bundle = None

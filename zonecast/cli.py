@@ -168,6 +168,12 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                      help="also estimate the fixed weekly internal-gains profile (paper "
                           "section 4-B) from every whole week of the data")] = True,
                  window_solar: WindowSolar = "surfaces",
+                 priors: Annotated[bool, typer.Option(
+                     help="maximum-a-posteriori fit with priors from the IDF (window U, SHGC) "
+                          "and handbook values (docs/identification.md); default: the paper's "
+                          "least squares")] = False,
+                 sigma_e: Annotated[float, typer.Option(
+                     min=1e-3, help="residual scale [K] of the MAP cost (with --priors)")] = 0.3,
                  seed: Seed = 0) -> None:
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the
@@ -177,7 +183,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
             task = prog.add_task("identification", total=None)
             done = identify_site(site, data, out, train=train, validate=validate, starts=starts,
                                  profile_weeks=profile_weeks, window_solar=window_solar,
-                                 seed=seed,
+                                 seed=seed, priors=priors, sigma_e=sigma_e,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)

@@ -133,3 +133,41 @@ def test_results_object_in_the_statsmodels_manner(truth_and_data):
     assert "gamma_IW" in text.split("at a bound")[-1] and "Jacobian rank" in text
     d = pinned.to_dict()
     assert d["at_bounds"] == pinned.at_bounds() and d["jacobian_rank"] == res.rank
+
+
+def test_map_identification_holds_parameters_to_their_priors(truth_and_data, five_zone):
+    """A tight prior at the truth pulls every estimate there; a prior far off the truth on a
+    well-determined parameter does not (the data win); the result reports the prior."""
+    from zonecast.estimator.priors import Prior, building_priors, prior_residuals
+
+    model, true, data = truth_and_data
+    names = model.params.param_names
+    tight = {n: Prior(float(v), 1e-3 * max(abs(v), 1.0), "test") for n, v in zip(names, true)}
+    res = identify(model, data, train=["2015-04-18"], n_starts=1, max_nfev=20, priors=tight,
+                   sigma_e=0.3)
+    np.testing.assert_allclose(res.params, true, rtol=2e-2, atol=2e-2)
+    assert res.priors == tight and res.to_dict()["prior"]["U_win"]["source"] == "test"
+    assert "prior" in res.summary()
+    # a weak prior far from the truth on gamma_IW (well excited): the data win
+    weak = building_priors(model.params, five_zone)
+    i = names.index("gamma_IW")
+    weak["gamma_IW"] = Prior(3.0 * true[i], 0.5 * true[i], "test, far off")
+    res = identify(model, data, train=["2015-04-18"], n_starts=1, max_nfev=40, priors=weak,
+                   sigma_e=0.05)
+    assert res.params[i] == pytest.approx(true[i], rel=0.2)
+    assert prior_residuals(true, weak, names, 0.3)[i] == pytest.approx(-0.3 * 4.0)
+
+
+def test_building_priors_take_window_u_and_shgc_from_the_idf(five_zone):
+    from zonecast.estimator.model import build_model
+    from zonecast.estimator.priors import building_priors
+
+    model = build_model(five_zone, {"South": ["SPACE1-1"]}, {"VAV-1": "SPACE1-1"})
+    pri = building_priors(model.params, five_zone)
+    assert list(pri) == model.params.param_names
+    assert all(p.sd > 0 for p in pri.values())
+    wins = [w for w in five_zone.windows.values() if w.u_value is not None]
+    if wins:  # simple glazing systems carry U and SHGC
+        assert "IDF" in pri["U_win"].source
+    else:
+        assert pri["U_win"].mean == 2.8

@@ -1,0 +1,130 @@
+"""Prior knowledge of the 13 parameters, for maximum-a-posteriori identification.
+
+A parameter the excitation data do not determine ends on a bound in a plain least-squares
+fit (the optimiser bends it to absorb structure the model lacks: U_win 0.001 W/m²K for real
+glazing of 2-6 W/m²K). A Gaussian prior on each parameter, centred on a nominal value from
+the building's EnergyPlus description where it holds one (window U-factor and SHGC) and on
+handbook values otherwise, keeps such parameters where physics puts them and leaves the
+well-determined ones to the data.
+
+MAP cost (paper section 4-A's simulation-error least squares plus the prior)::
+
+    sum_k ||y_sim(k) - y(k)||^2 / sigma_e^2 + sum_p ((theta_p - mu_p) / sigma_p)^2
+
+solved as least squares with the prior rows ``sigma_e (theta_p - mu_p) / sigma_p`` appended to
+the residuals (:func:`prior_residuals`). ``sigma_e`` [K] is the residual scale the data are
+trusted to; simulation residuals are autocorrelated, so it is a choice, made on the training
+members of a building family (docs/identification.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from zonecast.estimator.idf import Building
+from zonecast.estimator.rc.parameters import ParameterSet
+
+__all__ = ["Prior", "building_priors", "prior_jacobian", "prior_residuals"]
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A Gaussian prior on one parameter.
+
+    Attributes
+    ----------
+    mean : float
+        Nominal value [the parameter's unit].
+    sd : float
+        Standard deviation [the parameter's unit].
+    source : str
+        Where the nominal value comes from.
+    """
+
+    mean: float
+    sd: float
+    source: str
+
+    def __post_init__(self):
+        if not np.isfinite(self.mean) or not self.sd > 0:
+            raise ValueError(f"a prior needs a finite mean and a positive sd, got "
+                             f"{self.mean} +- {self.sd}")
+
+
+#: handbook priors of the shared parameters: (mean, sd, source); the means are the
+#: ParameterSet start values, the sds their plausible spread
+_HANDBOOK = {
+    "gamma_EW": (25.0, 12.0, "ASHRAE Fundamentals ch. 26 outside film 15-35 W/m2K"),
+    "gamma_IW": (8.3, 4.0, "ASHRAE Fundamentals ch. 26 vertical inside film"),
+    "gamma_floor": (6.1, 3.0, "ASHRAE Fundamentals ch. 26 horizontal, heat flow down"),
+    "gamma_ceil": (9.3, 4.5, "ASHRAE Fundamentals ch. 26 horizontal, heat flow up"),
+    "gamma_absorp": (0.6, 0.2, "solar absorptance of opaque facades 0.4-0.8"),
+    "gamma_winSolAbs": (0.4, 0.2, "SHGC of common glazing 0.25-0.7"),
+    "U_win": (2.8, 1.4, "double glazing in an aluminium frame (ASHRAE ch. 15)"),
+}
+#: c_IG: background gains, weakly held near idle equipment and lighting
+_C_IG = (5.0, 10.0, "idle equipment and lighting 2-10 W/m2, weak")
+
+
+def building_priors(params: ParameterSet, building: Building | None = None, *,
+                    window_sd: float = 0.25) -> dict[str, Prior]:
+    """Priors of every parameter of ``params``.
+
+    Parameters
+    ----------
+    params : ParameterSet
+        The parameters (names) to give priors.
+    building : Building, optional
+        When its windows carry a U-factor and SHGC (simple glazing systems), the
+        area-weighted means are the nominal U_win and gamma_winSolAbs.
+    window_sd : float
+        Relative standard deviation [-] of the window priors taken from the building.
+
+    Returns
+    -------
+    dict
+        Parameter name -> :class:`Prior`.
+    """
+    out = {}
+    for name, (mean, sd, source) in _HANDBOOK.items():
+        out[name] = Prior(mean, sd, source)
+    if building is not None:
+        wins = [w for w in building.windows.values() if w.area > 0]
+        with_u = [w for w in wins if w.u_value is not None]
+        if with_u:
+            area = sum(w.area for w in with_u)
+            u = sum(w.u_value * w.area for w in with_u) / area
+            out["U_win"] = Prior(u, window_sd * u, "area-weighted window U-factor of the IDF")
+        with_g = [w for w in wins if w.shgc is not None]
+        if with_g:
+            area = sum(w.area for w in with_g)
+            g = sum(w.shgc * w.area for w in with_g) / area
+            out["gamma_winSolAbs"] = Prior(g, max(window_sd * g, 0.05),
+                                           "area-weighted window SHGC of the IDF")
+    for name in params.param_names:
+        if name.startswith("c_IG"):
+            out[name] = Prior(*_C_IG)
+    return {n: out[n] for n in params.param_names}
+
+
+def _arrays(priors: Mapping[str, Prior], names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    missing = [n for n in names if n not in priors]
+    if missing:
+        raise ValueError(f"no prior for {missing}; give one per parameter "
+                         "(building_priors makes them)")
+    return (np.array([priors[n].mean for n in names]), np.array([priors[n].sd for n in names]))
+
+
+def prior_residuals(theta: np.ndarray, priors: Mapping[str, Prior], names: list[str],
+                    sigma_e: float) -> np.ndarray:
+    """Prior rows of the MAP least squares: ``sigma_e (theta - mu) / sd`` [K]."""
+    mu, sd = _arrays(priors, names)
+    return sigma_e * (np.asarray(theta, float) - mu) / sd
+
+
+def prior_jacobian(priors: Mapping[str, Prior], names: list[str], sigma_e: float) -> np.ndarray:
+    """Jacobian of :func:`prior_residuals` (diagonal)."""
+    _, sd = _arrays(priors, names)
+    return np.diag(sigma_e / sd)

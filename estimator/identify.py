@@ -69,6 +69,49 @@ def weekend_spans(data: ModelData, saturdays: Sequence) -> list[tuple[int, int]]
     return spans
 
 
+#: identification windows: whole weekends (the paper), or the site's declared experiments
+WINDOWS = ("weekend", "experiments")
+#: hours kept before and after the experiments of a weekend with ``window="experiments"``
+LEAD_IN = pd.Timedelta("2h")
+LEAD_OUT = pd.Timedelta("2h")
+
+
+def identification_spans(data: ModelData, saturdays: Sequence, window: str = "weekend", *,
+                         lead_in: pd.Timedelta = LEAD_IN,
+                         lead_out: pd.Timedelta = LEAD_OUT) -> list[tuple[int, int]]:
+    """Row ranges [start, stop) the identification fits, one per weekend.
+
+    Parameters
+    ----------
+    data : ModelData
+    saturdays : sequence of dates
+        Saturdays of the weekends.
+    window : {"weekend", "experiments"}
+        ``"weekend"``: Saturday 00:00 to Monday 00:00 local (the paper); ``"experiments"``:
+        from ``lead_in`` before the first to ``lead_out`` after the last row of the weekend
+        that the site's ``experiments`` mark (:attr:`ModelData.excitation`).
+    lead_in, lead_out : pandas.Timedelta
+        Context kept before and after the experiments.
+    """
+    if window not in WINDOWS:
+        raise IdentificationError(f"window must be one of {WINDOWS}, got {window!r}")
+    spans = weekend_spans(data, saturdays)
+    if window == "weekend":
+        return spans
+    step = data.times[1] - data.times[0]
+    before, after = int(lead_in / step), int(lead_out / step)
+    out = []
+    for sat, (a, b) in zip(saturdays, spans):
+        rows = a + np.flatnonzero(data.excitation[a:b])
+        if len(rows) == 0:
+            raise IdentificationError(
+                f"the weekend of {pd.Timestamp(sat).date()} has no declared experiment (the "
+                "site's experiments list): identify on whole weekends (window='weekend') or "
+                "declare the experiment periods")
+        out.append((max(a, int(rows[0]) - before), min(b, int(rows[-1]) + 1 + after)))
+    return out
+
+
 def measured_rows(data: ModelData, a: int, b: int) -> slice:
     """Rows of y a simulation of span [a, b) is scored against: x(k+1) is driven by row k,
     so the simulation meets rows a + 1 ... b, but never past the end of the contiguous
@@ -119,7 +162,8 @@ def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
     return res.x[-1]
 
 
-def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequence) -> list[dict]:
+def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequence,
+                        window: str = "weekend") -> list[dict]:
     """The identification's simulations (f_IG = 0, x(0) = x_KF(0) of ``model``) of the
     weekends starting on ``saturdays``, beside the measurements, for plots.
 
@@ -129,12 +173,13 @@ def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequen
     """
     out = []
     local = data.local_times()
-    for a, b in weekend_spans(data, saturdays):
+    for a, b in identification_spans(data, saturdays, window):
         x0 = kalman_state(model, data, a - X0_WINDOW, a)
         y = model.simulate(x0, data.u[a:b], data.v[a:b], np.zeros((b - a, model.n_zones))).y
         rows = measured_rows(data, a, b)
         meas = data.y[rows]
-        out.append({"saturday": str(local[a].date()), "times": data.times[rows],
+        sat = local[a] - pd.Timedelta(days=(local[a].day_of_week - 5) % 7)
+        out.append({"saturday": str(sat.date()), "times": data.times[rows],
                     "simulated": y[1:1 + len(meas)], "measured": meas})
     return out
 
@@ -168,6 +213,10 @@ class IdentificationResult:
         The priors of a MAP fit (:mod:`~zonecast.estimator.priors`); None: least squares.
     sigma_e : float or None
         Residual scale [K] of the MAP cost.
+    window : str
+        ``"weekend"`` or ``"experiments"`` (:func:`identification_spans`).
+    spans : list of dict
+        The hours fitted (training) and scored (validation): role, local start and end.
     """
 
     param_names: list[str]
@@ -190,6 +239,8 @@ class IdentificationResult:
     condition: float | None = None
     priors: dict[str, Prior] | None = None
     sigma_e: float | None = None
+    window: str = "weekend"
+    spans: list[dict] = field(default_factory=list)
 
     @property
     def bse(self) -> np.ndarray:
@@ -227,7 +278,9 @@ class IdentificationResult:
         bounds = self.bounds or [(float("nan"), float("nan"))] * len(self.params)
         pinned = set(self.at_bounds()) if self.bounds else set()
         weekends = (f"training weekends: {', '.join(self.train_weekends) or '-'}; "
-                    f"validation: {', '.join(self.validation_weekends) or '-'}")
+                    f"validation: {', '.join(self.validation_weekends) or '-'}; window "
+                    f"{self.window}: " + ", ".join(f"{s['start'][:16]} to {s['end'][:16]}"
+                                                   for s in self.spans))
         counts = (f"residuals {self.n_residuals}, evaluations {self.n_evaluations}, "
                   f"{self.seconds:.1f} s, seed {self.seed}")
         lines = ["Identification (paper section 4-A): simulation-error least squares",
@@ -269,7 +322,7 @@ class IdentificationResult:
                 "prior": None if self.priors is None else
                 {n: {"mean": p.mean, "sd": p.sd, "source": p.source}
                  for n, p in self.priors.items()},
-                "map_sigma_e": self.sigma_e}
+                "map_sigma_e": self.sigma_e, "window": self.window, "spans": self.spans}
 
 
 class _Problem:
@@ -420,7 +473,7 @@ def _fit_rms(problem: _Problem, theta: np.ndarray, zones) -> dict:
 def identify(model: BilinearModel, data: ModelData, train: Sequence, validation: Sequence = (),
              n_starts: int = 3, seed: int = 0, max_nfev: int = 60,
              progress=lambda msg: None, priors: Mapping[str, Prior] | None = None,
-             sigma_e: float = 0.3) -> IdentificationResult:
+             sigma_e: float = 0.3, window: str = "weekend") -> IdentificationResult:
     """Identify the parameters of ``model`` (paper section 4-A).
 
     Parameters
@@ -437,25 +490,28 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         paper's least squares.
     sigma_e : float
         Residual scale [K] the data are trusted to in the MAP cost.
+    window : {"weekend", "experiments"}
+        What of each weekend is fitted (:func:`identification_spans`); the result says
+        which hours (``spans``).
     """
     t0 = time.perf_counter()
     rng = np.random.default_rng([seed, 11])
-    train_spans = weekend_spans(data, train)
-    val_spans = weekend_spans(data, validation) if validation else []
-    window = X0_WINDOW
+    train_spans = identification_spans(data, train, window)
+    val_spans = identification_spans(data, validation, window) if validation else []
+    x0_window = X0_WINDOW
     for a, _ in train_spans + val_spans:
-        if not any(s <= a - window and a <= e for s, e in data.segments):
+        if not any(s <= a - x0_window and a <= e for s, e in data.segments):
             raise IdentificationError(
                 f"the weekend starting {data.local_times()[a].date()} needs the "
-                f"{window * 15 // 60} h before it in the same contiguous telemetry (the Kalman "
-                "filter estimates x(0) over them)")
+                f"{x0_window * 15 // 60} h before it in the same contiguous telemetry (the "
+                "Kalman filter estimates x(0) over them)")
     lo, hi = (np.array(b) for b in zip(*model.params.bounds))
     scale = np.maximum(np.abs(model.params.start_params), 1.0)
 
     def x0s(m, spans):
         # one Kalman filter per span, on two threads (the dense products release the GIL)
         with ThreadPoolExecutor(max_workers=2) as pool:
-            return list(pool.map(lambda sp: kalman_state(m, data, sp[0] - window, sp[0]),
+            return list(pool.map(lambda sp: kalman_state(m, data, sp[0] - x0_window, sp[0]),
                                  spans))
 
     names = list(model.params.param_names)
@@ -518,6 +574,10 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         vp = _Problem(model, data, val_spans, spans_x0[len(train_spans):])
         val_rms = _fit_rms(vp, theta, data.zones)
     local = data.local_times()
+    step = data.times[1] - data.times[0]
+    used = [{"role": role, "start": local[a].isoformat(), "end": (local[b - 1] + step).isoformat()}
+            for role, spans in (("training", train_spans), ("validation", val_spans))
+            for a, b in spans]
     return IdentificationResult(
         list(model.params.param_names), list(model.params.units), theta, se, corr, train_rms,
         val_rms, starts_report, [str(local[a].date()) for a, _ in train_spans],
@@ -525,4 +585,4 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         sum(s["nfev"] for s in starts_report) + int(sol.nfev), time.perf_counter() - t0, seed,
         bounds=[(float(lo_), float(hi_)) for lo_, hi_ in zip(lo, hi)], model=fitted, rank=rank,
         condition=condition, priors=dict(priors) if priors is not None else None,
-        sigma_e=sigma_e if priors is not None else None)
+        sigma_e=sigma_e if priors is not None else None, window=window, spans=used)

@@ -185,14 +185,15 @@ class Pipeline:
     def identify(self, data: ModelData, train: Sequence[str] | None = None,
                  validation: Sequence[str] | None = None, *, n_starts: int = 3, seed: int = 0,
                  progress: Progress = _quiet, priors: bool | Mapping[str, Prior] = False,
-                 sigma_e: float = 0.3) -> IdentificationResult:
+                 sigma_e: float = 0.3, window: str = "weekend") -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
         ``experiments``): training on the second and third, validation on the first.
         ``priors``: True for a MAP fit with :func:`~.priors.building_priors` of this
         building (window U and SHGC from its IDF), or a mapping of priors; ``sigma_e`` [K]
-        the MAP residual scale.
+        the MAP residual scale. ``window``: fit whole weekends (the paper) or the site's
+        declared ``experiments`` with a lead-in (:func:`~.identify.identification_spans`).
         """
         sats = [str(s.date()) for s in excitation_saturdays(data)]
         train = list(train) if train else sats[1:3]
@@ -204,7 +205,8 @@ class Pipeline:
         if priors is True:
             priors = building_priors(start, self._building_or_none())
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
-                       seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e)
+                       seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,
+                       window=window)
         self.identification = res
         self.params = res.model.params
         self._bundle = None

@@ -174,6 +174,10 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "least squares")] = False,
                  sigma_e: Annotated[float, typer.Option(
                      min=1e-3, help="residual scale [K] of the MAP cost (with --priors)")] = 0.3,
+                 window: Annotated[str, typer.Option(
+                     help="what of each weekend is fitted: 'weekend' (Saturday and Sunday, the "
+                          "paper) or 'experiments' (the site's declared experiment periods "
+                          "with 2 h before and after)")] = "weekend",
                  seed: Seed = 0) -> None:
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the
@@ -183,14 +187,16 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
             task = prog.add_task("identification", total=None)
             done = identify_site(site, data, out, train=train, validate=validate, starts=starts,
                                  profile_weeks=profile_weeks, window_solar=window_solar,
-                                 seed=seed, priors=priors, sigma_e=sigma_e,
+                                 seed=seed, priors=priors, sigma_e=sigma_e, window=window,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
     res, used = done.result, done.profile_weeks
     t2 = res.to_dict()["table2"]
     typer.echo(f"identified on {', '.join(res.train_weekends)} in {res.seconds:.1f} s "
-               f"({res.n_evaluations} evaluations, {starts} starts)")
+               f"({res.n_evaluations} evaluations, {starts} starts); hours fitted ({res.window}): "
+               + ", ".join(f"{s['start'][:16]} to {s['end'][:16]}" for s in res.spans
+                           if s["role"] == "training"))
     typer.echo("training RMS [degC]: " + ", ".join(f"{k} {v:.3f}" for k, v in t2["training"].items()))
     if t2["validation"]:
         typer.echo("validation RMS [degC]: "

@@ -171,3 +171,30 @@ def test_building_priors_take_window_u_and_shgc_from_the_idf(five_zone):
         assert "IDF" in pri["U_win"].source
     else:
         assert pri["U_win"].mean == 2.8
+
+
+def test_identification_on_declared_experiments_with_a_lead_in(truth_and_data):
+    """Issue 13 item 4: window='experiments' fits the site's declared experiment rows of each
+    weekend with 2 h before and after, and says which hours it used."""
+    from zonecast.estimator.identify import identification_spans, weekend_simulations
+
+    model, _, data = truth_and_data
+    local = data.local_times()
+    exc = (local.day_of_week == 5) & (local.hour >= 8) & (local.hour < 20)  # Sat 08-20
+    d = ModelData(data.times, data.u, data.v, data.y, data.zones, data.boxes, data.segments,
+                  np.asarray(exc), data.timezone)
+    (a, b), = identification_spans(d, ["2015-04-18"], "experiments")
+    assert local[a].hour == 6 and local[a].day_of_week == 5
+    assert local[b - 1].hour == 21 and local[b - 1].minute == 45  # 20:00 + 2 h, exclusive
+    assert identification_spans(d, ["2015-04-18"]) == weekend_spans(d, ["2015-04-18"])
+    with pytest.raises(IdentificationError, match="no declared experiment"):
+        identification_spans(data, ["2015-04-18"], "experiments")
+    with pytest.raises(IdentificationError, match="window must be one of"):
+        identification_spans(d, ["2015-04-18"], "night")
+    res = identify(model, d, train=["2015-04-18"], n_starts=1, max_nfev=5, window="experiments")
+    assert res.window == "experiments" and res.n_residuals == (b - a) * len(d.zones)
+    assert res.spans == [{"role": "training", "start": "2015-04-18T06:00:00-07:00",
+                          "end": "2015-04-18T22:00:00-07:00"}]
+    assert "window experiments: 2015-04-18T06:00 to 2015-04-18T22:00" in res.summary()
+    sims = weekend_simulations(res.model, d, ["2015-04-18"], window="experiments")
+    assert sims[0]["saturday"] == "2015-04-18" and len(sims[0]["measured"]) == b - a

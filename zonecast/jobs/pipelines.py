@@ -71,14 +71,15 @@ class IdentifyOutcome:
 def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None = None,
                   validate: list[str] | None = None, starts: int = 3,
                   profile_weeks: bool = True, window_solar: str = "surfaces", seed: int = 0,
-                  priors: bool = False, sigma_e: float = 0.3,
+                  priors: bool = False, sigma_e: float = 0.3, window: str = "weekend",
                   progress: Progress = _quiet) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file."""
     pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar))
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
-                        sigma_e=sigma_e, progress=lambda m: progress(f"identification: {m}"))
+                        sigma_e=sigma_e, window=window,
+                        progress=lambda m: progress(f"identification: {m}"))
     if profile_weeks:
         pipe.weekly_profile(d, progress=lambda m: progress(f"weekly internal-gains profile: {m}"))
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -113,7 +113,13 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                      f"{ident['jacobian_condition']:.3g}; strongly correlated pairs (|r| >= 0.9): "
                      + ("; ".join(f"{a}/{b} {r:+.2f}" for a, b, r in ident["strongly_correlated"])
                         or "none") + ".")
+    spans = (results.identification or {}).get("spans") or []
     lines += ["", "## Table 2: identification RMS [°C] (weekend data, f_IG = 0)", ""]
+    if spans:
+        lines += ["Hours fitted (training) and scored (validation), local time, window "
+                  f"`{results.identification.get('window', 'weekend')}`: "
+                  + "; ".join(f"{s['role']} {s['start'][:16]} to {s['end'][:16]}"
+                              for s in spans) + ".", ""]
     lines += _table(results.table2, zones, PAPER["table2"])
     if results.table2_window_solar_air:
         lines += ["", (f"Model options: {json.dumps(results.model_options)}. Sensitivity, the same "
@@ -332,7 +338,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
                   timings_s={k: round(v, 1) for k, v in timings.items()})
     (out / "results.json").write_text(res.model_dump_json(indent=2))
     figures = []
-    sims = weekend_simulations(fitted, data, ident.train_weekends + ident.validation_weekends)
+    sims = weekend_simulations(fitted, data, ident.train_weekends + ident.validation_weekends,
+                               window=ident.window)
     roles = {**{d: "training" for d in ident.train_weekends},
              **{d: "validation" for d in ident.validation_weekends}}
     plot_weekends(sims, roles, list(site.zones), out / "fig1_identification.png")

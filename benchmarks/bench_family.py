@@ -54,13 +54,14 @@ def members(family: Path | None, extra: list[Path]) -> list[dict]:
     return out
 
 
-def run_one(zc: str, m: dict, out: Path, starts: int, rerun: bool) -> dict:
+def run_one(zc: str, m: dict, out: Path, starts: int, rerun: bool,
+            extra_args: list[str]) -> dict:
     report = out / m["name"]
     res_file = report / "results.json"
     t = time.perf_counter()
     if rerun or not res_file.is_file():
         proc = subprocess.run([zc, "reproduce", "--out", str(report), "--campaign",
-                               str(m["campaign"]), "--starts", str(starts)],
+                               str(m["campaign"]), "--starts", str(starts), *extra_args],
                               capture_output=True, text=True, check=False)
         if proc.returncode != 0:
             return {**m, "error": proc.stderr.strip().splitlines()[-1:] or ["failed"],
@@ -149,6 +150,10 @@ def main() -> int:
     ap.add_argument("--starts", type=int, default=3)
     ap.add_argument("--only", nargs="*")
     ap.add_argument("--rerun", action="store_true")
+    ap.add_argument("--reproduce-args", default="--no-sensitivity",
+                    help="extra arguments of zonecast reproduce, e.g. '--priors --window "
+                         "experiments' (a variant to compare; default skips the paper-placement "
+                         "sensitivity)")
     args = ap.parse_args()
     if args.family is None and not args.extra:
         ap.error("give --family DIR and/or --extra CAMPAIGN ...")
@@ -157,12 +162,14 @@ def main() -> int:
     if args.only:
         todo = [m for m in todo if m["name"] in args.only]
     args.out.mkdir(parents=True, exist_ok=True)
-    print(f"{len(todo)} buildings, {args.jobs} at once, {args.starts} starts; reports in "
-          f"{args.out}", flush=True)
+    print(f"{len(todo)} buildings, {args.jobs} at once, {args.starts} starts, reproduce "
+          f"{args.reproduce_args!r}; reports in {args.out}", flush=True)
     t0 = time.perf_counter()
     rows: list[dict] = []
     with ThreadPoolExecutor(max_workers=args.jobs) as pool:
-        for r in pool.map(lambda m: run_one(zc, m, args.out, args.starts, args.rerun), todo):
+        extra = args.reproduce_args.split()
+        for r in pool.map(lambda m: run_one(zc, m, args.out, args.starts, args.rerun, extra),
+                          todo):
             rows.append(r)
             if "error" in r:
                 print(f"{r['name']:<24} {r['role']:<11} ERROR {r['error']}", flush=True)
@@ -173,7 +180,8 @@ def main() -> int:
                       f"({r['seconds']:.0f} s)", flush=True)
     summ = summary(rows)
     (args.out / "bench_family.json").write_text(json.dumps(
-        {"rows": rows, "summary": summ, "seconds": time.perf_counter() - t0}, indent=1))
+        {"rows": rows, "summary": summ, "seconds": time.perf_counter() - t0,
+         "reproduce_args": args.reproduce_args, "starts": args.starts}, indent=1))
     md = markdown(rows, summ)
     (args.out / "bench_family.md").write_text(md + "\n")
     print(md)

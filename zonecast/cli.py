@@ -243,14 +243,24 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   campaign: Annotated[Path | None, typer.Option(
                       help="campaign folder to reuse (default: run it into REPORT/campaign)")] = None,
                   seed: Seed = 0,
-                  starts: Annotated[int, typer.Option(min=1, help="identification starts")] = 3) -> None:
+                  starts: Annotated[int, typer.Option(min=1, help="identification starts")] = 3,
+                  priors: Annotated[bool, typer.Option(
+                      help="MAP identification with priors (as zonecast identify)")] = False,
+                  sigma_e: Annotated[float, typer.Option(
+                      min=1e-3, help="residual scale [K] of the MAP cost")] = 0.3,
+                  window: Annotated[str, typer.Option(
+                      help="'weekend' or 'experiments' (as zonecast identify)")] = "weekend",
+                  sensitivity: Annotated[bool, typer.Option(
+                      help="also identify the paper's window-solar placement")] = True) -> None:
     """The paper's tables and figures on the virtual building: campaign, identification,
     internal gains, forecasts; writes results.json, figures and report.md."""
     try:
         with _progress() as prog:
             task = prog.add_task("reproduce", total=None)
             res = reproduce.run(out, campaign, seed, starts,
-                      progress=lambda m: prog.update(task, description=f"reproduce: {m}"))
+                                progress=lambda m: prog.update(task, description=f"reproduce: {m}"),
+                                priors=priors, sigma_e=sigma_e, window=window,
+                                sensitivity=sensitivity)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

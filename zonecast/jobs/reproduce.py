@@ -270,8 +270,11 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int)
 
 
 def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
-        progress=lambda s: None) -> Results:
-    """The main job; see the module docstring."""
+        progress=lambda s: None, *, priors: bool = False, sigma_e: float = 0.3,
+        window: str = "weekend", sensitivity: bool = True) -> Results:
+    """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
+    :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
+    ``sensitivity``: also identify the paper's window-solar placement (one start)."""
     out.mkdir(parents=True, exist_ok=True)
     timings = {}
     t0 = time.perf_counter()
@@ -286,13 +289,14 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()
     progress("identification")
-    ident = pipe.identify(data, n_starts=starts, seed=seed,
-                          progress=lambda s: progress(f"identification: {s}"))
+    ident = pipe.identify(data, n_starts=starts, seed=seed, priors=priors, sigma_e=sigma_e,
+                          window=window, progress=lambda s: progress(f"identification: {s}"))
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
     progress("identification with window solar on the room air (paper's placement)")
     ident_air = pipe.with_options(ModelOptions(window_solar="air")).identify(
-        data, n_starts=1, seed=seed)
+        data, n_starts=1, seed=seed, priors=priors, sigma_e=sigma_e,
+        window=window) if sensitivity else None
     fitted = ident.model
     truth = None
     if (campaign / "truth.csv").is_file():
@@ -326,8 +330,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
                                                         ident.units, ident.stderr, ident.bounds)},
                   identification=ident.to_dict(),
                   table2={"training": ident.train_rms, "validation": ident.validation_rms},
-                  table2_window_solar_air={"training": ident_air.train_rms,
-                                           "validation": ident_air.validation_rms},
+                  table2_window_solar_air=None if ident_air is None else
+                  {"training": ident_air.train_rms, "validation": ident_air.validation_rms},
                   model_options=model_options_dict(fitted.structure.options),
                   table3=study["table3"], horizon_rms=study["horizon_rms"],
                   gains_truth=study.get("gains_truth") or {},

@@ -124,6 +124,22 @@ def _read_sql(sql: Path) -> pd.DataFrame:
     return wide
 
 
+def run_energyplus(model: Path, weather: Path, work: Path) -> float:
+    """Run EnergyPlus on ``model`` (IDF or epJSON) with the weather file ``weather`` in the
+    folder ``work``; return the wall time [s]. Raises EnergyPlusError with the severe errors
+    of ``eplusout.err`` if the run fails."""
+    epdir = energyplus_dir()
+    t0 = time.perf_counter()
+    r = subprocess.run([str(epdir / "energyplus"), "-w", str(weather), "-d", str(work), str(model)],
+                       capture_output=True, text=True, check=False)
+    t_ep = time.perf_counter() - t0
+    err = (work / "eplusout.err").read_text(errors="replace") if (work / "eplusout.err").exists() else ""
+    if r.returncode != 0 or "EnergyPlus Completed Successfully" not in err:
+        severe = "\n".join(l for l in err.splitlines() if "Severe" in l or "Fatal" in l or "~~~" in l)
+        raise EnergyPlusError(f"EnergyPlus failed (exit {r.returncode}):\n{severe[-4000:]}")
+    return t_ep
+
+
 def simulate(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], out: Path, seed: int,
              effects: Effects, excitation_days: list[dt.date],
              progress: Callable[[str], None] = lambda s: None) -> tuple[pd.DataFrame, list, float]:
@@ -152,15 +168,7 @@ def simulate(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], out: P
     expanded = _patch_expanded((work / "expanded.idf").read_text(), cfg)
     (out / "building.idf").write_text(expanded)
     progress("EnergyPlus")
-    t0 = time.perf_counter()
-    r = subprocess.run([str(epdir / "energyplus"), "-w", str(epdir / "WeatherData" / cfg.weather),
-                        "-d", str(work), str(out / "building.idf")], capture_output=True, text=True,
-                       check=False)
-    t_ep = time.perf_counter() - t0
-    err = (work / "eplusout.err").read_text(errors="replace") if (work / "eplusout.err").exists() else ""
-    if r.returncode != 0 or "EnergyPlus Completed Successfully" not in err:
-        severe = "\n".join(l for l in err.splitlines() if "Severe" in l or "Fatal" in l or "~~~" in l)
-        raise EnergyPlusError(f"EnergyPlus failed (exit {r.returncode}):\n{severe[-4000:]}")
+    t_ep = run_energyplus(out / "building.idf", epdir / "WeatherData" / cfg.weather, work)
     progress("reading results")
     wide = _read_sql(work / "eplusout.sql")
     shutil.copy(work / "eplusout.err", out / "eplusout.err")
@@ -206,24 +214,62 @@ def make_site(cfg: BuildingConfig, experiments: list[tuple[dt.datetime, dt.datet
                        "experiment_heating": cfg.hvac.experiment_heating}})
 
 
-def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Timestamp, pd.Timestamp]],
-               effects: Effects, seed: int) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Telemetry and truth on the step grid following the time convention of docs/data.md:
-    the row at t holds temperatures at t and interval quantities over [t, t + 15 min)."""
-    std = standard_offset(cfg)
-    ends = pd.DatetimeIndex(wide.index).tz_localize(std).tz_convert("UTC")
-    wide = wide.set_axis(ends)
-    # state quantities at t come from the interval ending at t; interval ones from the one after
-    state = wide
-    interval = wide.set_axis(ends - STEP)
-    rows = []
-    for start, end in keep:
-        rows.append(pd.date_range(start, end, freq=STEP, inclusive="left"))
+def align_rows(state: pd.DataFrame, interval: pd.DataFrame,
+               keep: list[tuple[pd.Timestamp, pd.Timestamp]], std: dt.timezone
+               ) -> tuple[pd.DatetimeIndex, pd.DataFrame, pd.DataFrame]:
+    """Put EnergyPlus tables on the contract's 15-min grid (docs/data.md).
+
+    Parameters
+    ----------
+    state, interval : DataFrame
+        EnergyPlus output on 15-min rows indexed by the interval end (naive local standard
+        time): ``state`` supplies quantities at an instant (temperatures), ``interval`` the
+        averages over the 15 min ending at the index.
+    keep : list of (start, end)
+        UTC spans [start, end) to keep.
+    std : timezone
+        The building's standard-time UTC offset (EnergyPlus reports standard time).
+
+    Returns
+    -------
+    index : DatetimeIndex
+        UTC row times t.
+    st, iv : DataFrame
+        ``st`` row t holds the state at t (the interval ending at t); ``iv`` row t the
+        averages over [t, t + 15 min) (the interval ending at t + 15 min).
+    """
+    def utc(df):
+        return df.set_axis(pd.DatetimeIndex(df.index).tz_localize(std).tz_convert("UTC"))
+    state = utc(state)
+    interval = utc(interval)
+    interval = interval.set_axis(interval.index - STEP)
+    rows = [pd.date_range(start, end, freq=STEP, inclusive="left") for start, end in keep]
     index = rows[0].append(rows[1:]) if len(rows) > 1 else rows[0]
     missing = index.difference(state.index).union(index.difference(interval.index))
     if len(missing):
         raise EnergyPlusError(f"EnergyPlus output lacks {len(missing)} steps, first {missing[0]}")
-    st, iv = state.loc[index], interval.loc[index]
+    return index, state.loc[index], interval.loc[index]
+
+
+def weather_columns(iv: pd.DataFrame) -> dict[str, np.ndarray]:
+    """Outdoor dry-bulb [degC] and irradiance [W/m2] from EnergyPlus's site variables.
+
+    Returns ``oat``, ``dni``, ``dhi`` and ``ghi`` = DHI + DNI sin(solar altitude), the
+    global horizontal irradiance consistent with EnergyPlus's own split.
+    """
+    oat = _col(iv, "Environment", "Site Outdoor Air Drybulb Temperature")
+    dni = _col(iv, "Environment", "Site Direct Solar Radiation Rate per Area")
+    dhi = _col(iv, "Environment", "Site Diffuse Solar Radiation Rate per Area")
+    alt = _col(iv, "Environment", "Site Solar Altitude Angle")
+    return {"oat": oat, "ghi": dhi + dni * np.clip(np.sin(np.radians(alt)), 0, None),
+            "dni": dni, "dhi": dhi}
+
+
+def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Timestamp, pd.Timestamp]],
+               effects: Effects, seed: int) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Telemetry and truth on the step grid following the time convention of docs/data.md:
+    the row at t holds temperatures at t and interval quantities over [t, t + 15 min)."""
+    index, st, iv = align_rows(wide, wide, keep, standard_offset(cfg))
     names = point_names(cfg)
     rng = rng_for(seed, "noise")
     tel, tru = {}, {}
@@ -256,12 +302,9 @@ def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Time
     # the AHU sensor reads the supply supply_offset low of what reaches the boxes
     tel[names["sat"]] = _col(iv, ahu_outlet_node(), "System Node Temperature") \
         - effects.supply_offset
-    tel[names["oat"]] = _col(iv, "Environment", "Site Outdoor Air Drybulb Temperature")
-    dni = _col(iv, "Environment", "Site Direct Solar Radiation Rate per Area")
-    dhi = _col(iv, "Environment", "Site Diffuse Solar Radiation Rate per Area")
-    alt = _col(iv, "Environment", "Site Solar Altitude Angle")
-    tel[names["ghi"]] = dhi + dni * np.clip(np.sin(np.radians(alt)), 0, None)
-    tel[names["dni"]], tel[names["dhi"]] = dni, dhi
+    w = weather_columns(iv)
+    tel[names["oat"]] = w["oat"]
+    tel[names["ghi"]], tel[names["dni"]], tel[names["dhi"]] = w["ghi"], w["dni"], w["dhi"]
     for z, rooms in cfg.zones.items():
         w = np.array([vol[r] for r in rooms])
         tru[f"air_temperature:zone:{z}"] = sum(w[i] * tru[f"air_temperature:{r}"]

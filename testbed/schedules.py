@@ -118,9 +118,30 @@ def excitation_plan(cfg: BuildingConfig, days: list[dt.date], neighbours: dict[s
     """Paper section 2-B: from 08:00, every 2 h one zone's boxes go to maximum airflow,
     its neighbours' to minimum and every other zone's to a random airflow; all zones in
     turn, in a random order per day (seeded)."""
+    return plan_blocks(list(cfg.zones), cfg.hvac.minimum_fraction, days, neighbours, seed,
+                       start_hour, block_hours)
+
+
+def plan_blocks(zones: list[str], lo: float, days: list[dt.date], neighbours: dict[str, set[str]],
+                seed: int, start_hour: int = 8, block_hours: int = 2) -> list[ExcitationBlock]:
+    """The excitation blocks of :func:`excitation_plan` for any list of model zones.
+
+    Parameters
+    ----------
+    zones : list of str
+        Model zones, in a fixed order (the seeded permutation indexes it).
+    lo : float
+        Box minimum fraction of maximum airflow [-] for the "min" mode and the lower end of
+        the "random" draws.
+    days : list of date
+        Excitation days; blocks start at ``start_hour`` local time [h] and last
+        ``block_hours`` [h] each.
+    neighbours : dict
+        Model zone -> model zones sharing an interior wall with it.
+    seed : int
+        Seed of the excitation generator (``rng_for(seed, "excitation")``).
+    """
     rng = rng_for(seed, "excitation")
-    zones = list(cfg.zones)
-    lo = cfg.hvac.minimum_fraction
     blocks = []
     for day in days:
         order = [zones[i] for i in rng.permutation(len(zones))]

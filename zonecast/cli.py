@@ -102,6 +102,29 @@ def testbed_run(out: Annotated[Path, typer.Option(help="Output folder.")],
                  disable=disable, set_=set_)
 
 
+@testbed_app.command("foreign")
+def testbed_foreign(idf: Annotated[Path, typer.Option(help="EnergyPlus input (IDF or epJSON) "
+                                                      "nobody on this project wrote.")],
+                    out: Annotated[Path, typer.Option(help="Output folder.")],
+                    weeks: Annotated[int, typer.Option(
+                        min=1, max=11, help="Campaign weeks to run (excitation weeks first).")] = 11,
+                    seed: Seed = 0) -> None:
+    """A third-party building through the campaign's weeks and excitation weekends (its own
+    HVAC; boxes scheduled and thermostat widened only during the experiment blocks)."""
+    from zonecast.testbed.foreign import campaign_weeks, run_foreign
+    try:
+        wk, weekends = campaign_weeks(weeks)
+        with _progress() as prog:
+            task = prog.add_task("third-party building", total=None)
+            res = run_foreign(idf, out, wk, weekends, seed=seed, progress=lambda s: prog.update(
+                task, description=f"third-party building: {s}"))
+    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+        _fail(exc)
+    typer.echo(f"wrote {res.out}/telemetry.csv, site.yaml, truth.csv, building.epJSON "
+               f"({len(res.telemetry)} steps; EnergyPlus {res.timings['energyplus_s']:.1f} s, "
+               f"total {res.timings['total_s']:.1f} s)")
+
+
 @app.command("check")
 def check(site: Annotated[Path, typer.Option(help="site.yaml")],
           data: Annotated[Path, typer.Option(help="telemetry file, or a folder holding telemetry.csv")]) -> None:

@@ -1,0 +1,178 @@
+"""Third-party EnergyPlus inputs (NREL's 5ZoneAirCooled and the DOE small office) driven by
+the excitation protocol: the patch, the schedules, and one real EnergyPlus week."""
+
+from __future__ import annotations
+
+import datetime as dt
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from zonecast.estimator.idf import load_epjson
+from zonecast.estimator.pipeline import Pipeline
+from zonecast.estimator.site import load_site
+from zonecast.estimator.telemetry import load_telemetry
+from zonecast.testbed.foreign import (
+    EXPERIMENT_SCHEDULE,
+    REPORTING,
+    ForeignBuildingError,
+    campaign_weeks,
+    describe,
+    fraction_schedule,
+    patch_epjson,
+    run_foreign,
+    schedule_table,
+)
+from zonecast.testbed.schedules import plan_blocks
+
+pytestmark = pytest.mark.energyplus
+
+NREL = Path(__file__).resolve().parents[2] / "configs" / "sites" / "nrel"
+FIVE_ZONE = NREL / "5ZoneAirCooled.idf"
+SMALL_OFFICE = NREL / "RefBldgSmallOfficeNew2004_Chicago.idf"
+WEEK = dt.date(2014, 10, 6)        # a campaign week (Monday)
+SATURDAY = dt.date(2014, 10, 11)   # its excitation Saturday
+PERIODS = [(WEEK - dt.timedelta(days=1), WEEK + dt.timedelta(days=6))]
+# object types the patch may replace, change or add; every other object must be untouched
+RUN_CONTROL = {"RunPeriod", "SimulationControl", "Timestep", "Version", *REPORTING}
+REPORTING_ADDED = {"Output:Variable", "Output:SQLite"}
+ADDED = {"Schedule:File", "ScheduleTypeLimits", "EnergyManagementSystem:Sensor",
+         "EnergyManagementSystem:Actuator", "EnergyManagementSystem:InternalVariable",
+         "EnergyManagementSystem:Program", "EnergyManagementSystem:ProgramCallingManager"}
+VAV_KEYS = {"zone_minimum_air_flow_input_method", "minimum_air_flow_fraction_schedule_name"}
+
+
+@pytest.fixture(scope="module")
+def five_zone():
+    data, _ = load_epjson(FIVE_ZONE)
+    return data
+
+
+@pytest.fixture(scope="module")
+def small_office():
+    data, _ = load_epjson(SMALL_OFFICE)
+    return data
+
+
+@pytest.fixture(scope="module")
+def week(tmp_path_factory):
+    return run_foreign(FIVE_ZONE, tmp_path_factory.mktemp("nrel5"), weeks=[WEEK],
+                       excitation_days=[SATURDAY], seed=5)
+
+
+def _diff(before: dict, after: dict) -> dict[str, set[str]]:
+    """Object type -> changed field names, for every object present before."""
+    out: dict[str, set[str]] = {}
+    for kind, objs in before.items():
+        for name, fields in objs.items():
+            new = after.get(kind, {}).get(name)
+            if new is None:
+                out.setdefault(kind, set()).add("<removed>")
+                continue
+            keys = {k for k in set(fields) | set(new) if fields.get(k) != new.get(k)}
+            if keys:
+                out.setdefault(kind, set()).update(keys)
+    return out
+
+
+def test_patch_changes_only_the_listed_fields(five_zone):
+    layout = describe(five_zone)
+    patched, changes = patch_epjson(five_zone, layout, PERIODS)
+    diff = _diff(five_zone, patched)
+    assert diff.pop("AirTerminal:SingleDuct:VAV:Reheat") == VAV_KEYS
+    assert set(diff) <= RUN_CONTROL, diff
+    assert "Timestep" not in diff                 # already 4 per hour
+    assert next(iter(patched["Version"].values()))["version_identifier"] == "25.2"
+    # additions are only the experiment schedules and the EMS program
+    assert set(patched) - set(five_zone) <= ADDED | REPORTING_ADDED
+    assert all(name.startswith("zonecast") for name in patched["Schedule:File"])
+    assert any(c.startswith("AirTerminal:SingleDuct:VAV:Reheat SPACE1-1") for c in changes)
+    # the original file is not modified in memory
+    t = five_zone["AirTerminal:SingleDuct:VAV:Reheat"]["SPACE1-1 VAV Reheat"]
+    assert t["zone_minimum_air_flow_input_method"] == "Constant"
+
+
+def test_layout_of_the_two_nrel_files(five_zone, small_office):
+    five = describe(five_zone)
+    assert five.zones == ["SPACE1-1", "SPACE2-1", "SPACE3-1", "SPACE4-1", "SPACE5-1"]
+    assert {t.kind for t in five.terminals} == {"AirTerminal:SingleDuct:VAV:Reheat"}
+    assert all(t.minimum_fraction == 0.3 and t.air_loop == "VAV Sys 1" for t in five.terminals)
+    assert five.neighbours["SPACE5-1"] == {"SPACE1-1", "SPACE2-1", "SPACE3-1", "SPACE4-1"}
+    assert five.neighbours["SPACE1-1"] == {"SPACE2-1", "SPACE4-1", "SPACE5-1"}
+    assert {"FanAvailSched", "ReheatCoilAvailSched", "CoolingCoilAvailSched"} \
+        <= set(five.override_schedules)
+    small = describe(small_office)
+    assert "Attic" not in small.zones and len(small.zones) == 5
+    assert {t.kind for t in small.terminals} == {"AirTerminal:SingleDuct:ConstantVolume:NoReheat"}
+    assert len(set(small.loops)) == 5 and len({t.air_loop for t in small.terminals}) == 5
+    assert "HVACOperationSchd" in small.override_schedules
+    assert "ALWAYS_ON" not in small.override_schedules   # also used by lights and infiltration
+    patched, _ = patch_epjson(small_office, small, PERIODS)
+    diff = _diff(small_office, patched)
+    assert set(diff) <= RUN_CONTROL, diff
+    assert patched["Timestep"]["Timestep 1"]["number_of_timesteps_per_hour"] == 12
+    flows = [a for a in patched["EnergyManagementSystem:Actuator"].values()
+             if a["actuated_component_control_type"] == "Mass Flow Rate"]
+    assert len(flows) == 5
+
+
+def test_schedule_sets_the_plan_fraction_during_a_block(five_zone):
+    layout = describe(five_zone)
+    blocks = plan_blocks(layout.zones, 0.3, [SATURDAY], layout.neighbours, seed=1)
+    assert len(blocks) == 5 and blocks[0].start == dt.datetime(2014, 10, 11, 8)
+    table = schedule_table(layout, PERIODS[0][0], blocks)
+    assert len(table) == 365 * 96
+    for b in blocks:
+        rows = table[(table.index >= b.start) & (table.index < b.end)]
+        assert len(rows) == 8 and (rows[EXPERIMENT_SCHEDULE] == 1).all()
+        for t in layout.terminals:
+            assert (rows[fraction_schedule(t)] == b.fractions[t.zone]).all()
+            assert b.fractions[b.target] == 1.0
+    t = table.index
+    outside = table[(t >= "2014-10-11 06:00") & (t < "2014-10-11 08:00")]
+    assert len(outside) == 8
+    assert (outside[EXPERIMENT_SCHEDULE] == 0).all()
+    assert (outside[[fraction_schedule(t) for t in layout.terminals]] == 0.3).all().all()
+
+
+def test_campaign_weeks_keep_excitation_weeks_first():
+    weeks, weekends = campaign_weeks()
+    assert len(weeks) == 11 and len(weekends) == 3
+    weeks, weekends = campaign_weeks(2)
+    assert weeks == [dt.date(2014, 10, 6), dt.date(2015, 4, 13)]
+    assert weekends == [dt.date(2014, 10, 11), dt.date(2015, 4, 18)]
+    with pytest.raises(ForeignBuildingError, match="between 1 and 11"):
+        campaign_weeks(12)
+
+
+def test_one_week_runs_and_fills_the_data_contract(week):
+    site = load_site(week.out / "site.yaml")
+    tel = load_telemetry(week.out / "telemetry.csv", site)
+    assert len(tel.frame) == 7 * 96 and not tel.frame.isna().any().any()
+    assert site.timezone == "Etc/GMT+6"          # the file keeps standard time (no DST object)
+    assert len(site.boxes) == 5 and list(site.zones) == [f"SPACE{i}-1" for i in range(1, 6)]
+    assert [(e.start.hour, e.end.hour) for e in site.experiments] == [(8, 18)]
+    assert site.thermostat is not None and site.thermostat.heating_occupied == pytest.approx(22.2)
+    model = Pipeline.from_site(week.out / "site.yaml").model()
+    assert model is not None
+    truth = pd.read_csv(week.out / "truth.csv", index_col=0)
+    assert truth["people:zone:SPACE1-1"].max() > 0 and truth["window_solar:zone:SPACE1-1"].max() > 0
+    assert (week.out / "building.idf").is_file() and (week.out / "building.epJSON").is_file()
+
+
+def test_max_block_raises_the_target_airflow(week):
+    blocks = pd.read_csv(week.out / "experiments.csv")
+    tel = week.telemetry
+    local = tel.index.tz_convert("Etc/GMT+6")
+    exp = np.zeros(len(tel), bool)
+    for _, b in blocks.iterrows():
+        exp |= (local >= pd.Timestamp(b.start)) & (local < pd.Timestamp(b.end))
+    for _, b in blocks.iterrows():
+        col = f"{b.target}_VAV_Reheat_flow"
+        sel = (local >= pd.Timestamp(b.start)) & (local < pd.Timestamp(b.end))
+        inside = tel.loc[sel, col].mean()
+        outside = tel.loc[~exp & (local.day_of_week >= 5), col].median()
+        assert inside > 2.5 * outside, (b.target, inside, outside)
+        # the 08:00 row already shows the commanded step (docs/data.md time convention)
+        assert tel.loc[sel, col].iloc[0] == pytest.approx(inside, rel=0.02)

@@ -316,7 +316,7 @@ def load_epjson(
     notes : list of str
         How the file was read (conversion, transitions, version caveats).
     """
-    path = Path(path)
+    path = Path(path).resolve()  # the converter runs in a temporary folder
     if not path.is_file():
         raise FileNotFoundError(f"EnergyPlus input {path} does not exist")
     notes: list[str] = []

@@ -245,3 +245,15 @@ def test_pre96_file_reads_like_its_current_version(tmp_path, five_zone_path, fiv
     assert {w.name: round(w.area, 6) for w in b.windows.values()} == \
         {w.name: round(w.area, 6) for w in five_zone.windows.values()}
     assert b.internal_masses == five_zone.internal_masses
+
+
+def test_a_relative_idf_path_is_read(five_zone_path, tmp_path, monkeypatch):
+    """The converter runs in a temporary folder: a relative path must still be found."""
+    import shutil
+
+    from zonecast.estimator.idf import read_building
+
+    shutil.copy(five_zone_path, tmp_path / "rel.idf")
+    monkeypatch.chdir(tmp_path)
+    b = read_building("rel.idf")
+    assert len(b.zones) >= 5

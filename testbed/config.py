@@ -146,6 +146,9 @@ class BuildingConfig(_Strict):
     weekend_occupancy: float = Field(0.0, ge=0, le=1, description="[-] chance that a person "
                                      "works a full day on a weekend day, as a fraction of the "
                                      "weekday chance (0: only short weekend visits)")
+    floor_position: Literal["middle", "top"] = Field(
+        "middle", description="middle: floor and ceiling adiabatic (conditioned floors above "
+                              "and below); top: the ceilings are a roof (construction 'roof')")
 
     @model_validator(mode="after")
     def _refs(self):
@@ -153,6 +156,8 @@ class BuildingConfig(_Strict):
             if room.kind not in self.kinds:
                 raise ValueError(f"room {name}: kind {room.kind!r} is not in kinds {sorted(self.kinds)}")
         need = {"exterior_wall", "interior_wall", "floor", "ceiling", "furniture"}
+        if self.floor_position == "top":
+            need.add("roof")
         if missing := need - set(self.constructions):
             raise ValueError(f"constructions lacks {sorted(missing)}")
         return self

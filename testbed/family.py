@@ -35,6 +35,8 @@ FACADES = ("N", "E", "S", "W")
 CORE = "C"
 #: Shortest room along the facade (or along the core's long side) [m].
 MIN_ROOM_LENGTH = 3.0
+#: Share of generated floors that are a top floor under a roof [-].
+TOP_FLOOR_SHARE = 0.2
 #: Largest design airflow of a perimeter box [m3/s per m2 floor].
 MAX_AIRFLOW = 0.012
 #: Inside + outside surface resistances of an exterior wall [m2 K/W] (for the wall U only).
@@ -80,6 +82,8 @@ CLIMATES: dict[str, Climate] = {
 
 _METAL = ("MetalCladding", 0.0015, 45.0, 7800.0, 500.0)
 _MINERAL_WOOL = ("MineralWool", 0.10, 0.04, 30.0, 840.0)
+_MEMBRANE = ("RoofMembrane", 0.01, 0.16, 1120.0, 1460.0)
+_ROOF_INSULATION = ("RoofInsulation", 0.12, 0.035, 40.0, 1200.0)
 #: AHU supply air reset variants: outdoor low, set point there, outdoor high, set point
 #: there [degC]; ``office6`` is the shipped building's.
 RESETS: dict[str, tuple[float, float, float, float]] = {
@@ -110,6 +114,12 @@ def wall_variants(base: BuildingConfig) -> dict[str, list[Layer]]:
         "light_insulated": [_METAL, _MINERAL_WOOL, gypsum],
         "light_uninsulated": [_METAL, air, gypsum],
     }
+
+
+def roof_layers(base: BuildingConfig) -> list[Layer]:
+    """A flat roof, outside -> inside: bitumen membrane, 120 mm insulation board, then
+    ``base``'s ceiling (slab, air space, acoustic tile in office6)."""
+    return [_MEMBRANE, _ROOF_INSULATION, *base.constructions["ceiling"]]
 
 
 def wall_u(layers: list[Layer]) -> float:
@@ -218,7 +228,7 @@ def describe(cfg: BuildingConfig) -> dict:
     ``furniture`` [m2/m2], ``infiltration`` [m3/s per m2 facade], ``minimum_fraction`` [-],
     ``airflow_perimeter``, ``airflow_core`` [m3/s per m2 floor], ``supply_reset`` (a
     :data:`RESETS` key or ``custom``) and ``supply_reset_values`` [degC],
-    ``excitation_days``, ``weekend_occupancy`` [-].
+    ``excitation_days``, ``weekend_occupancy`` [-], ``floor_position`` (middle, top).
     """
     rects = np.array([r.rect for r in cfg.rooms.values()])
     walls = plan_walls({n: r.rect for n, r in cfg.rooms.items()})
@@ -249,6 +259,7 @@ def describe(cfg: BuildingConfig) -> dict:
         "supply_reset_values": list(reset),
         "excitation_days": cfg.campaign.excitation_days,
         "weekend_occupancy": cfg.weekend_occupancy,
+        "floor_position": cfg.floor_position,
     }
 
 
@@ -339,6 +350,8 @@ def draw_member(seed: int, index: int, base: BuildingConfig | None = None) -> Fa
     # experiments and weekend use
     excitation_days = "saturday" if rng.random() < 0.5 else "weekend"
     weekend = 0.0 if rng.random() < 0.5 else float(np.round(rng.uniform(0.05, 0.3), 2))
+    # storey (drawn last, so adding it left every other draw as it was)
+    top = bool(rng.random() < TOP_FLOOR_SHARE)
 
     data = base.model_dump(mode="json")
     name = f"f{seed}-{index:02d}-{climate_key}"
@@ -354,7 +367,10 @@ def draw_member(seed: int, index: int, base: BuildingConfig | None = None) -> Fa
         "furniture_area_per_floor_area": furniture,
         "infiltration_m3s_per_m2_facade": infiltration,
         "weekend_occupancy": weekend,
+        "floor_position": "top" if top else "middle",
     })
+    if top:
+        data["constructions"]["roof"] = [list(x) for x in roof_layers(base)]
     data["hvac"].update({"design_airflow_perimeter": perim_flow, "design_airflow_core": core_flow,
                          "minimum_fraction": minimum, "supply_reset": list(reset),
                          "supply_setpoint": min(reset[1], reset[3])})

@@ -120,9 +120,14 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
         add(obj("BuildingSurface:Detailed", f"{rname}_Floor", "Floor", "floor", rname, "",
                 "Adiabatic", "", "NoSun", "NoWind", "", 4,
                 x0, y1, 0.0, x1, y1, 0.0, x1, y0, 0.0, x0, y0, 0.0))
-        add(obj("BuildingSurface:Detailed", f"{rname}_Ceiling", "Ceiling", "ceiling", rname, "",
-                "Adiabatic", "", "NoSun", "NoWind", "", 4,
-                x0, y0, H, x1, y0, H, x1, y1, H, x0, y1, H))
+        if cfg.floor_position == "top":
+            add(obj("BuildingSurface:Detailed", f"{rname}_Roof", "Roof", "roof", rname, "",
+                    "Outdoors", "", "SunExposed", "WindExposed", "", 4,
+                    x0, y0, H, x1, y0, H, x1, y1, H, x0, y1, H))
+        else:
+            add(obj("BuildingSurface:Detailed", f"{rname}_Ceiling", "Ceiling", "ceiling", rname,
+                    "", "Adiabatic", "", "NoSun", "NoWind", "", 4,
+                    x0, y0, H, x1, y0, H, x1, y1, H, x0, y1, H))
         for w in walls[rname].walls:
             ext = w.neighbour is None
             v = [c for p in wall_vertices(w, 0.0, H) for c in p]
@@ -151,8 +156,9 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
         if mass_area > 0:  # EnergyPlus rejects an internal mass of zero area
             add(obj("InternalMass", f"{rname} Furniture", "furniture", rname, "", mass_area))
         if any(w.neighbour is None for w in walls[rname].walls) and effects.infiltration > 0:
+            # per m2 of exterior wall: a roof does not add to it (same as ExteriorArea below it)
             add(obj("ZoneInfiltration:DesignFlowRate", f"{rname} Infiltration", rname, "AlwaysOn",
-                    "Flow/ExteriorArea", "", "", cfg.infiltration_m3s_per_m2_facade
+                    "Flow/ExteriorWallArea" if cfg.floor_position == "top" else "Flow/ExteriorArea", "", "", cfg.infiltration_m3s_per_m2_facade
                     * effects.infiltration, "", 1.0, 0.0, 0.0, 0.0))
         perimeter = any(w.neighbour is None for w in walls[rname].walls)
         flow = area * (cfg.hvac.design_airflow_perimeter if perimeter

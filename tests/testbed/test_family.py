@@ -119,6 +119,7 @@ def test_drawn_parameters_stay_in_their_ranges_and_vary(family):
     assert 0.0 in seen("weekend_occupancy") and len(seen("weekend_occupancy")) > 3
     assert 0.0 in seen("north_axis") and max(seen("north_axis")) > 30
     assert any(m.params["windowless_rooms"] for m in gen)
+    assert seen("floor_position") == {"middle", "top"}
     # SHGC follows U (clear single glass lets more sun in than low-e double glass)
     u = np.array([m.config.glazing.u_factor for m in gen])
     shgc = np.array([m.config.glazing.shgc for m in gen])
@@ -186,6 +187,12 @@ def test_idf_of_a_rotated_member_uses_relative_coordinates_and_its_time_zone(fam
     assert f"{rotated.location.longitude:.6g},\n    -6,\n" in idf        # CST
     office6 = build_idf(OFFICE6, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))], Effects(), [])
     assert "Counterclockwise,\n    World;" in office6 and "Building,\n    office6,\n    0," in office6
+    top = next(m.config for m in family if m.config.floor_position == "top")
+    idf = build_idf(top, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))], Effects(), [])
+    assert idf.count("    Roof,\n    roof,") == len(top.rooms) and "_Ceiling" not in idf
+    assert "Flow/ExteriorWallArea" in idf and "Flow/ExteriorArea," not in idf
+    with pytest.raises(ValueError, match="roof"):
+        BuildingConfig.model_validate({**OFFICE6.model_dump(), "floor_position": "top"})
     bare = next(m.config for m in family if m.config.furniture_area_per_floor_area == 0)
     assert "InternalMass" not in build_idf(bare, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))],
                                            Effects(), [])
@@ -265,3 +272,22 @@ def test_a_rotated_member_in_another_climate_runs_and_the_estimator_reads_it(tmp
             assert eplus[w.name.upper()] == pytest.approx(want, abs=0.01)
             checked += 1
     assert checked >= 4
+
+
+@pytest.mark.energyplus
+@pytest.mark.slow
+def test_a_top_floor_member_has_a_roof_the_estimator_models(tmp_path, family):
+    from zonecast.estimator.pipeline import Pipeline
+    from zonecast.testbed.run import run_weeks
+
+    m = min((m for m in family if m.config.floor_position == "top"),
+            key=lambda m: len(m.config.rooms))
+    res = run_weeks([dt.date(2015, 1, 12)], tmp_path, seed=m.run_seed, config=m.config)
+    temps = res.truth[[f"air_temperature:{r}" for r in m.config.rooms]].to_numpy()
+    assert 5 < temps.min() and temps.max() < 35
+    pipe = Pipeline.from_site(tmp_path / "site.yaml")
+    roofs = [s for s in pipe.building().surfaces.values() if s.surface_type == "Roof"]
+    assert len(roofs) == len(m.config.rooms)
+    assert all(s.boundary == "Outdoors" and s.tilt == pytest.approx(0.0) for s in roofs)
+    counts = pipe.model().structure.state_counts()
+    assert counts.get("roof", 0) > 0 and counts["room_air"] == len(m.config.rooms)

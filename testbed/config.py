@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 from pathlib import Path
 from typing import Literal
+from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -23,6 +24,22 @@ class Location(_Strict):
     longitude: float = Field(ge=-180, le=180)
     elevation: float = 0.0
     timezone: str
+
+    @field_validator("timezone")
+    @classmethod
+    def _known_zone(cls, v):
+        try:
+            ZoneInfo(v)
+        except (ZoneInfoNotFoundError, ValueError):
+            raise ValueError(f"timezone {v!r} is not an IANA time zone; write e.g. "
+                             "America/Los_Angeles") from None
+        return v
+
+    @property
+    def standard_offset_hours(self) -> float:
+        """UTC offset of the local standard (winter) time [h], e.g. -8 for Los Angeles."""
+        jan = dt.datetime(2015, 1, 15, tzinfo=ZoneInfo(self.timezone))
+        return jan.utcoffset().total_seconds() / 3600.0
 
 
 class Glazing(_Strict):
@@ -78,8 +95,24 @@ class Hvac(_Strict):
 
 
 class Campaign(_Strict):
+    """Simulated weeks and excitation experiments.
+
+    Attributes
+    ----------
+    weeks : Mondays of the simulated weeks.
+    excitation_weekends : Saturdays whose weekend runs the excitation experiment.
+    excitation_days : ``"weekend"`` excites Saturday and Sunday (the paper's campaign),
+        ``"saturday"`` Saturday only.
+    """
+
     weeks: list[dt.date]
     excitation_weekends: list[dt.date]
+    excitation_days: Literal["weekend", "saturday"] = "weekend"
+
+    @property
+    def excitation_offsets(self) -> tuple[int, ...]:
+        """Days after each excitation Saturday that are excited (0 = Saturday)."""
+        return (0, 1) if self.excitation_days == "weekend" else (0,)
 
     @model_validator(mode="after")
     def _check(self):
@@ -108,6 +141,14 @@ class BuildingConfig(_Strict):
     hvac: Hvac
     infiltration_m3s_per_m2_facade: float = Field(ge=0)
     campaign: Campaign
+    north_axis: float = Field(0.0, ge=0, lt=360, description="[deg] clockwise rotation of the "
+                              "plan's y axis from true north (EnergyPlus Building North Axis)")
+    weekend_occupancy: float = Field(0.0, ge=0, le=1, description="[-] chance that a person "
+                                     "works a full day on a weekend day, as a fraction of the "
+                                     "weekday chance (0: only short weekend visits)")
+    floor_position: Literal["middle", "top"] = Field(
+        "middle", description="middle: floor and ceiling adiabatic (conditioned floors above "
+                              "and below); top: the ceilings are a roof (construction 'roof')")
 
     @model_validator(mode="after")
     def _refs(self):
@@ -115,6 +156,8 @@ class BuildingConfig(_Strict):
             if room.kind not in self.kinds:
                 raise ValueError(f"room {name}: kind {room.kind!r} is not in kinds {sorted(self.kinds)}")
         need = {"exterior_wall", "interior_wall", "floor", "ceiling", "furniture"}
+        if self.floor_position == "top":
+            need.add("roof")
         if missing := need - set(self.constructions):
             raise ValueError(f"constructions lacks {sorted(missing)}")
         return self

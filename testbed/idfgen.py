@@ -69,17 +69,21 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
     add = out.append
     add(obj("Version", "25.2"))
     add(obj("SimulationControl", "Yes", "Yes", "Yes", "No", "Yes", "No", 1))
-    add(obj("Building", cfg.name, 0.0, "City", 0.04, 0.4, "FullExterior", 25, 6))
+    add(obj("Building", cfg.name, float(cfg.north_axis), "City", 0.04, 0.4, "FullExterior", 25, 6))
     add(obj("Timestep", 4))
     add(obj("Site:Location", cfg.name + " site", cfg.location.latitude, cfg.location.longitude,
-            -8.0, cfg.location.elevation))
+            cfg.location.standard_offset_hours, cfg.location.elevation))
     add(obj("SizingPeriod:WeatherFileDays", "Summer sizing", 9, 1, 9, 14, "Monday", "No", "No"))
     add(obj("SizingPeriod:WeatherFileDays", "Winter sizing", 1, 5, 1, 18, "Monday", "No", "No"))
     for i, (first, last) in enumerate(periods):
         add(obj("RunPeriod", f"Period {i}", first.month, first.day, first.year, last.month,
                 last.day, last.year, "", "No", "No", "No", "Yes", "Yes", "No", "Hour24"))
     add(obj("RunPeriodControl:DaylightSavingTime", "2nd Sunday in March", "1st Sunday in November"))
-    add(obj("GlobalGeometryRules", "UpperLeftCorner", "Counterclockwise", "World"))
+    # EnergyPlus ignores the Building North Axis under World coordinates (it warns "any
+    # non-zero Building/Zone North Axes ... are ignored"); a rotated plan therefore uses
+    # Relative coordinates, which equal World ones here (every zone origin is 0, 0, 0).
+    add(obj("GlobalGeometryRules", "UpperLeftCorner", "Counterclockwise",
+            "World" if cfg.north_axis == 0 else "Relative"))
     # materials and constructions
     seen = set()
     for cname, layers in cfg.constructions.items():
@@ -116,9 +120,14 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
         add(obj("BuildingSurface:Detailed", f"{rname}_Floor", "Floor", "floor", rname, "",
                 "Adiabatic", "", "NoSun", "NoWind", "", 4,
                 x0, y1, 0.0, x1, y1, 0.0, x1, y0, 0.0, x0, y0, 0.0))
-        add(obj("BuildingSurface:Detailed", f"{rname}_Ceiling", "Ceiling", "ceiling", rname, "",
-                "Adiabatic", "", "NoSun", "NoWind", "", 4,
-                x0, y0, H, x1, y0, H, x1, y1, H, x0, y1, H))
+        if cfg.floor_position == "top":
+            add(obj("BuildingSurface:Detailed", f"{rname}_Roof", "Roof", "roof", rname, "",
+                    "Outdoors", "", "SunExposed", "WindExposed", "", 4,
+                    x0, y0, H, x1, y0, H, x1, y1, H, x0, y1, H))
+        else:
+            add(obj("BuildingSurface:Detailed", f"{rname}_Ceiling", "Ceiling", "ceiling", rname,
+                    "", "Adiabatic", "", "NoSun", "NoWind", "", 4,
+                    x0, y0, H, x1, y0, H, x1, y1, H, x0, y1, H))
         for w in walls[rname].walls:
             ext = w.neighbour is None
             v = [c for p in wall_vertices(w, 0.0, H) for c in p]
@@ -143,11 +152,13 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
                 kind.lights_w_m2 * scale, "", 0.0, 0.42, 0.18, 1.0))
         add(obj("ElectricEquipment", f"{rname} Equipment", rname, f"sch:equip:{rname}",
                 "Watts/Area", "", kind.equipment_w_m2 * scale, "", 0.0, 0.3, 0.0))
-        add(obj("InternalMass", f"{rname} Furniture", "furniture", rname, "",
-                cfg.furniture_area_per_floor_area * area * effects.mass_scale(room.zone)))
+        mass_area = cfg.furniture_area_per_floor_area * area * effects.mass_scale(room.zone)
+        if mass_area > 0:  # EnergyPlus rejects an internal mass of zero area
+            add(obj("InternalMass", f"{rname} Furniture", "furniture", rname, "", mass_area))
         if any(w.neighbour is None for w in walls[rname].walls) and effects.infiltration > 0:
+            # per m2 of exterior wall: a roof does not add to it (same as ExteriorArea below it)
             add(obj("ZoneInfiltration:DesignFlowRate", f"{rname} Infiltration", rname, "AlwaysOn",
-                    "Flow/ExteriorArea", "", "", cfg.infiltration_m3s_per_m2_facade
+                    "Flow/ExteriorWallArea" if cfg.floor_position == "top" else "Flow/ExteriorArea", "", "", cfg.infiltration_m3s_per_m2_facade
                     * effects.infiltration, "", 1.0, 0.0, 0.0, 0.0))
         perimeter = any(w.neighbour is None for w in walls[rname].walls)
         flow = area * (cfg.hvac.design_airflow_perimeter if perimeter

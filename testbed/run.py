@@ -346,7 +346,9 @@ def run_weeks(weeks: list[dt.date], out: Path, seed: int = 0, effects: Effects |
               config: BuildingConfig | str = "office6",
               progress: Callable[[str], None] = lambda s: None) -> RunResult:
     """Simulate the given weeks (each from Monday 00:00 local time, 7 days) and write the
-    run folder. Consecutive weeks are simulated as one EnergyPlus run period."""
+    run folder. Consecutive weeks are simulated as one EnergyPlus run period. Each of
+    ``excitation_weekends`` (Saturdays) runs the experiment on the days the config's
+    ``campaign.excitation_days`` names (both weekend days, or Saturday only)."""
     cfg = config if isinstance(config, BuildingConfig) else load_config(config)
     effects = effects or Effects()
     weeks = sorted(weeks)
@@ -357,7 +359,8 @@ def run_weeks(weeks: list[dt.date], out: Path, seed: int = 0, effects: Effects |
         raise ValueError("the weeks of one run must lie within 50 weeks of the first "
                          "(the schedule file covers one year)")
     excitation_weekends = excitation_weekends or []
-    exc_days = [d + dt.timedelta(days=i) for d in excitation_weekends for i in (0, 1)]
+    exc_days = [d + dt.timedelta(days=i) for d in excitation_weekends
+                for i in cfg.campaign.excitation_offsets]
     for d in exc_days:
         if not any(w <= d < w + dt.timedelta(days=7) for w in weeks):
             raise ValueError(f"excitation day {d} lies in none of the simulated weeks")

@@ -30,12 +30,22 @@ def _hours(n_days: int) -> np.ndarray:
     return (np.arange(STEPS_PER_DAY) + 0.5) * 0.25  # interval mid-points [h]
 
 
-def office_occupancy(days: pd.DatetimeIndex, n_people: int, rng: np.random.Generator) -> np.ndarray:
+def office_occupancy(days: pd.DatetimeIndex, n_people: int, rng: np.random.Generator,
+                     weekend_work: float = 0.0) -> np.ndarray:
     """Fraction of a room's people present, (n_days, 96).
 
     Working days: each person is present with probability 0.85, arrives ~N(8.75 h, 0.75 h),
     leaves ~N(17.5 h, 1 h) and is out for lunch (12-13 h) half of the time. Weekends:
-    each person comes in with probability 0.12 for 2-6 hours from ~N(11 h, 1.5 h).
+    each person comes in with probability 0.12 for 2-6 hours from ~N(11 h, 1.5 h); with
+    ``weekend_work`` > 0 each person also works a full day with probability
+    ``weekend_work`` * 0.85, arriving ~N(9.5 h, 1 h) and leaving ~N(16.5 h, 1 h).
+
+    Parameters
+    ----------
+    days : the local dates of the rows.
+    n_people : people of the room (at least one is simulated).
+    rng : the occupancy generator; ``weekend_work`` = 0 draws exactly what it always drew.
+    weekend_work : [-] weekend chance of a full working day as a fraction of the weekday's.
     """
     n_days = len(days)
     n = max(n_people, 1)
@@ -49,6 +59,11 @@ def office_occupancy(days: pd.DatetimeIndex, n_people: int, rng: np.random.Gener
     leave = arrive + np.clip(stay, 1.0, 13.0)
     lunch_out = (rng.random((n_days, n, 1)) < 0.5) & ~weekend
     inside = present & (h >= arrive) & (h < leave) & ~(lunch_out & (h >= 12.0) & (h < 13.0))
+    if weekend_work > 0:  # drawn after the rest, so weekend_work = 0 leaves the stream as it was
+        works = weekend & (rng.random((n_days, n, 1)) < 0.85 * weekend_work)
+        w_arrive = rng.normal(9.5, 1.0, (n_days, n, 1))
+        w_leave = w_arrive + np.clip(rng.normal(16.5, 1.0, (n_days, n, 1)) - w_arrive, 1.0, 12.0)
+        inside |= works & (h >= w_arrive) & (h < w_leave)
     return inside.mean(axis=1)
 
 
@@ -64,7 +79,7 @@ def occupancy_profiles(cfg: BuildingConfig, days: pd.DatetimeIndex, seed: int) -
         kind = cfg.kinds[room.kind]
         if kind.occupancy == "office":
             n = round(kind.people_per_m2 * room.floor_area)
-            office[name] = office_occupancy(days, n, rng)
+            office[name] = office_occupancy(days, n, rng, cfg.weekend_occupancy)
     mean_office = np.mean(list(office.values()), axis=0) if office else np.zeros((len(days), 96))
     n_days = len(days)
     for name, room in cfg.rooms.items():

@@ -125,6 +125,33 @@ def testbed_foreign(idf: Annotated[Path, typer.Option(help="EnergyPlus input (ID
                f"total {res.timings['total_s']:.1f} s)")
 
 
+@testbed_app.command("family")
+def testbed_family(out: Annotated[Path, typer.Option(help="Output folder: one campaign folder "
+                                                          "per building and index.json.")],
+                   n: Annotated[int, typer.Option(min=1, help="Buildings, office6 first.")] = 20,
+                   seed: Annotated[int, typer.Option(min=0, help="Family seed (buildings, "
+                                                             "train/held-out split).")] = 0,
+                   jobs: Annotated[int, typer.Option(min=1, help="Buildings simulated at "
+                                                             "once.")] = 2,
+                   weeks: Annotated[int | None, typer.Option(
+                       min=1, help="Keep this many campaign weeks (excitation weeks first); "
+                                   "default all 11.")] = None) -> None:
+    """A family of virtual office floors (docs/testbed.md): office6 and n - 1 seeded
+    variants, each with its campaign, and index.json with their parameters and roles."""
+    from zonecast.testbed.family import run_family
+    try:
+        index = run_family(out, n, seed, jobs=jobs, weeks=weeks, progress=typer.echo)
+    except ValueError as exc:
+        _fail(exc)
+    failed = [m["name"] for m in index["members"] if m["status"] != "ok"]
+    roles = [m["role"] for m in index["members"]]
+    typer.echo(f"wrote {out}/index.json: {roles.count('train')} train, "
+               f"{roles.count('heldout')} held out; {index['seconds']:.0f} s")
+    if failed:
+        _fail(RuntimeError(f"{len(failed)} building(s) failed: {', '.join(failed)} "
+                           f"(see index.json)"))
+
+
 @app.command("check")
 def check(site: Annotated[Path, typer.Option(help="site.yaml")],
           data: Annotated[Path, typer.Option(help="telemetry file, or a folder holding telemetry.csv")]) -> None:

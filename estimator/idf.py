@@ -840,14 +840,18 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
     north = _num(bfields.get("north_axis"), 0.0)
     rules = next(iter(data.get("GlobalGeometryRules", {"": {}}).values()))
     coord = str(rules.get("coordinate_system", "Relative")).lower()
+    relative = coord == "relative"
     geo = _Geometry(
-        relative=coord == "relative",
+        relative=relative,
         clockwise=str(rules.get("vertex_entry_direction", "Counterclockwise")).lower()
         == "clockwise",
-        north_axis=north,
+        # EnergyPlus ignores the building's north axis with World coordinates (and warns):
+        # the vertices are already true-north coordinates
+        north_axis=north if relative else 0.0,
     )
     if not geo.relative:
-        notes.append("World coordinates: zone origins and zone north ignored, building north applied")
+        notes.append("World coordinates: zone origins, zone north and building north axis "
+                     "ignored, as EnergyPlus does")
 
     for typ, reason in _UNSUPPORTED_TYPES.items():
         for name in data.get(typ, {}):

@@ -147,8 +147,12 @@ def test_geometry_rules(coord, order, north):
     assert z.floor_area == pytest.approx(20.0)
     assert z.volume == pytest.approx(60.0)
     s = b.surfaces
-    assert s["South"].azimuth == pytest.approx((180 + north) % 360)
-    assert s["East"].azimuth == pytest.approx((90 + north) % 360)
+    # EnergyPlus rotates by the building's north axis only with Relative coordinates; with
+    # World coordinates it ignores it (and warns): the vertices are true-north coordinates
+    # (checked against EnergyPlus's own azimuths in tests/testbed/test_family.py)
+    turn = north if coord == "Relative" else 0.0
+    assert s["South"].azimuth == pytest.approx((180 + turn) % 360)
+    assert s["East"].azimuth == pytest.approx((90 + turn) % 360)
     assert s["Roof"].tilt == pytest.approx(0.0)
     assert s["Floor"].tilt == pytest.approx(180.0)
     assert s["South"].tilt == pytest.approx(90.0)
@@ -257,3 +261,21 @@ def test_a_relative_idf_path_is_read(five_zone_path, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     b = read_building("rel.idf")
     assert len(b.zones) >= 5
+
+
+def test_world_coordinates_ignore_the_building_north_axis(five_zone_path):
+    """EnergyPlus ignores Building North Axis with World coordinates (it warns); so does the
+    reader. With Relative coordinates (5ZoneAirCooled: north axis 30 deg) it is applied."""
+    from zonecast.estimator.idf import building_from_epjson, load_epjson
+
+    data, _ = load_epjson(five_zone_path)
+    rel = building_from_epjson(data)
+    walls = {n: s for n, s in rel.surfaces.items() if s.surface_type == "Wall"}
+    world = dict(data)
+    world["GlobalGeometryRules"] = {k: {**v, "coordinate_system": "World"}
+                                    for k, v in data["GlobalGeometryRules"].items()}
+    w = building_from_epjson(world)
+    assert rel.north_axis == 30.0
+    for name, s in walls.items():
+        # zone origins are 0 in this file, so only the 30 deg rotation differs
+        assert (s.azimuth - w.surfaces[name].azimuth) % 360.0 == pytest.approx(30.0, abs=1e-6)

@@ -43,6 +43,7 @@ from zonecast.estimator.constants import (
     SIGMA_MEAS,
     SIGMA_WALL_FORECAST,
     STEP,
+    STEPS_PER_WEEK,
 )
 from zonecast.estimator.gains import WeeklyProfile
 from zonecast.estimator.idf import read_building
@@ -178,7 +179,7 @@ def _parameters(doc: dict, zones: list[str], path: Path, notes: list[str]):
 
 
 def _profile(doc: dict, zones: list[str], timezone: str, path: Path, notes: list[str]):
-    n_bins = 672
+    n_bins = STEPS_PER_WEEK
     wp = doc.get("weekly_profile")
     if wp is None:
         notes.append("no weekly internal-gains profile: zeros")

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from zonecast.estimator.constants import STEP
 from zonecast.estimator.rc.network import DISTURBANCES
 from zonecast.estimator.site import Site
 from zonecast.estimator.solar import facade_irradiance
@@ -56,7 +57,7 @@ class ModelData:
         """A sub-span by boolean mask or slice; segments are recomputed."""
         idx = np.arange(len(self))[sel]
         times = self.times[idx]
-        step = (self.times[1] - self.times[0]) if len(self.times) > 1 else pd.Timedelta("15min")
+        step = (self.times[1] - self.times[0]) if len(self.times) > 1 else STEP
         return ModelData(times, self.u[idx], self.v[idx], self.y[idx], self.zones, self.boxes,
                          segments_of(times, step.to_pytimedelta()), self.excitation[idx],
                          self.timezone)

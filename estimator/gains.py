@@ -28,6 +28,7 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 import numpy as np
 import pandas as pd
+from zonecast.estimator.constants import HORIZON, STEP
 
 __all__ = [
     "DayAheadGains",
@@ -318,7 +319,7 @@ class WeeklyProfile:
     values: np.ndarray
     counts: np.ndarray
     timezone: str
-    step: pd.Timedelta = field(default=pd.Timedelta("15min"))
+    step: pd.Timedelta = field(default=STEP)
 
     @property
     def n_bins(self) -> int:
@@ -514,7 +515,7 @@ class DayAheadGains:
     profile: WeeklyProfile
     tau: pd.Timedelta = field(default=pd.Timedelta("3h"))
     window: pd.Timedelta = field(default=pd.Timedelta("1h"))
-    horizon: int = 96
+    horizon: int = HORIZON
 
     def __post_init__(self):
         object.__setattr__(self, "tau", pd.Timedelta(self.tau))

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 import scipy.linalg as sla
+from zonecast.estimator.constants import STEP_S
 from zonecast.estimator.idf import Building
 from zonecast.estimator.integrate import simulate_exact
 from zonecast.estimator.rc.network import DISTURBANCES, ModelOptions, RCStructure, build_structure
@@ -43,8 +44,8 @@ from zonecast.estimator.rc.parameters import ParameterSet
 
 __all__ = ["BilinearModel", "DiscreteBilinear", "SimulationResult", "write_model_summary"]
 
-#: Model step of the paper [s] (eq:model_dt).
-STEP = 900.0
+#: Model step of the paper [s] (eq:model_dt); :data:`zonecast.estimator.constants.STEP_S`.
+STEP = STEP_S
 #: ways to step the model, see the module docstring
 METHODS = ("exact", "eig", "bilinear")
 

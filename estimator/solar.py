@@ -209,8 +209,8 @@ def _check_options(albedo: float, sky_model: str) -> None:
         raise SolarInputError(f"albedo must be in [0, 1], got {albedo}")
 
 
-def transpose(geometry: np.ndarray, ghi, dni, dhi, surfaces: Sequence[tuple[float, float]], *,
-              albedo: float = 0.2, sky_model: str = "perez") -> dict[str, np.ndarray]:
+def transpose(geometry: np.ndarray, ghi, dni, dhi, surfaces, *, albedo: float = 0.2,
+              sky_model: str = "perez", total: bool = False) -> dict[str, np.ndarray]:
     """Station irradiance onto planes, with the module's rules for night, negative and
     missing readings. The one implementation behind every function of this module and
     the online runner's per-row conversion.
@@ -221,60 +221,69 @@ def transpose(geometry: np.ndarray, ghi, dni, dhi, surfaces: Sequence[tuple[floa
         From :func:`sun_geometry` (or :class:`SolarGeometryCache`).
     ghi, dni, dhi : ndarray, shape (N,)
         Station irradiance averaged over each interval [W/m²]; NaN = missing.
-    surfaces : sequence of (tilt, azimuth)
+    surfaces : sequence of (tilt, azimuth), or ndarray (k, 2)
         Planes [deg; tilt from horizontal, azimuth clockwise from north].
     albedo : float
         Ground reflectance [-].
     sky_model : str
         One of :data:`SKY_MODELS`.
+    total : bool
+        Return only ``poa_global``, the sum of the three components (cheaper).
 
     Returns
     -------
     dict
-        ``poa_direct``, ``poa_sky_diffuse``, ``poa_ground_diffuse`` [W/m²], each of shape
-        (N, len(surfaces)): >= 0, exactly 0 for a night interval, NaN where GHI, DNI or
-        DHI is missing.
+        ``poa_direct``, ``poa_sky_diffuse``, ``poa_ground_diffuse`` (or only
+        ``poa_global`` with ``total``) [W/m²], each of shape (N, len(surfaces)): >= 0,
+        exactly 0 for a night interval, NaN where GHI, DNI or DHI is missing.
     """
     _check_options(albedo, sky_model)
-    tilts = np.array([float(s[0]) for s in surfaces])
-    azimuths = np.array([float(s[1]) for s in surfaces])
-    if np.any((tilts < 0.0) | (tilts > 180.0)):
-        raise SolarInputError(f"surface_tilt must be in [0, 180] deg, got {tilts.tolist()}")
+    planes = np.asarray(surfaces, dtype=float).reshape(-1, 2)
+    if np.any((planes[:, 0] < 0.0) | (planes[:, 0] > 180.0)):
+        raise SolarInputError(f"surface_tilt must be in [0, 180] deg, got "
+                              f"{planes[:, 0].tolist()}")
     zen_start, zenith, zen_end, azimuth, dni_extra = geometry
-    sun = np.column_stack([ghi, dni, dhi]).astype(float)
-    n, k = len(sun), len(surfaces)
-    missing = ~np.isfinite(sun).all(axis=1)
-    clean = np.clip(np.nan_to_num(sun), 0.0, None)
+    ghi, dni, dhi = (np.asarray(a, dtype=float) for a in (ghi, dni, dhi))
+    n, k = len(ghi), len(planes)
+    missing = ~(np.isfinite(ghi) & np.isfinite(dni) & np.isfinite(dhi))
     sun_down = zenith >= 90.0
-    night = (zen_start >= 90.0) & sun_down & (zen_end >= 90.0)
-    out = {c: np.zeros((n, k)) for c in ("poa_direct", "poa_sky_diffuse", "poa_ground_diffuse")}
-    day = ~night & ~missing
+    day = ~((zen_start >= 90.0) & sun_down & (zen_end >= 90.0)) & ~missing
+    names = ("poa_global",) if total else ("poa_direct", "poa_sky_diffuse",
+                                           "poa_ground_diffuse")
+    out = {c: np.zeros((n, k)) for c in names}  # a night interval is exactly 0
     if day.any():
+        m = int(day.sum())
+
         def rep(a):  # one entry per (row, plane), planes fastest
             return np.repeat(a[day], k)
 
-        m = int(day.sum())
         down = rep(sun_down)
-        args = (np.tile(tilts, m), np.tile(azimuths, m), rep(zenith), rep(azimuth),
-                np.where(down, 0.0, rep(clean[:, 1])),  # no beam from below the horizon
-                rep(clean[:, 0]), rep(clean[:, 2]))
+        g, b, d = (rep(np.maximum(a, 0.0)) for a in (ghi, dni, dhi))  # negative readings: 0
+        args = (np.tile(planes[:, 0], m), np.tile(planes[:, 1], m), rep(zenith), rep(azimuth),
+                np.where(down, 0.0, b), g, d)  # no beam from below the horizon
 
-        def total(model):
+        def poa(model):
             return pvlib.irradiance.get_total_irradiance(
                 *args, dni_extra=rep(dni_extra), albedo=albedo, model=model)
 
-        poa = total(sky_model)
-        sky = np.asarray(poa["poa_sky_diffuse"], dtype=float)
+        res = poa(sky_model)
+        sky = np.asarray(res["poa_sky_diffuse"], dtype=float)
         if sky_model != "isotropic" and down.any():
-            iso = np.asarray(total("isotropic")["poa_sky_diffuse"], dtype=float)
-            sky = np.where(down, iso, sky)
+            sky = np.where(down, np.asarray(poa("isotropic")["poa_sky_diffuse"], dtype=float),
+                           sky)
         # no diffuse light -> no sky diffuse on any plane (Perez divides 0 by 0 there)
-        sky = np.where(rep(clean[:, 2]) <= 0.0, 0.0, sky)
-        for name, comp in (("poa_direct", poa["poa_direct"]), ("poa_sky_diffuse", sky),
-                           ("poa_ground_diffuse", poa["poa_ground_diffuse"])):
-            out[name][day] = np.clip(np.asarray(comp, dtype=float), 0.0, None).reshape(m, k)
-    for comp in out.values():
-        comp[missing] = np.nan
+        parts = {"poa_direct": np.clip(np.asarray(res["poa_direct"], dtype=float), 0.0, None),
+                 "poa_sky_diffuse": np.clip(np.where(d <= 0.0, 0.0, sky), 0.0, None),
+                 "poa_ground_diffuse": np.clip(np.asarray(res["poa_ground_diffuse"],
+                                                          dtype=float), 0.0, None)}
+        if total:
+            parts = {"poa_global": parts["poa_direct"] + parts["poa_sky_diffuse"]
+                     + parts["poa_ground_diffuse"]}
+        for name, comp in parts.items():
+            out[name][day] = comp.reshape(m, k)
+    if missing.any():
+        for comp in out.values():
+            comp[missing] = np.nan
     return out
 
 
@@ -400,8 +409,8 @@ def surface_irradiance(
         raise SolarInputError("surfaces must list at least one (tilt, azimuth) pair")
     _check_options(albedo, sky_model)
     _, cols, geom = _inputs(times, ghi, dni, dhi, latitude, longitude, elevation, interval, label)
-    comp = transpose(geom, *cols, surfaces, albedo=albedo, sky_model=sky_model)
-    return comp["poa_direct"] + comp["poa_sky_diffuse"] + comp["poa_ground_diffuse"]
+    return transpose(geom, *cols, surfaces, albedo=albedo, sky_model=sky_model,
+                     total=True)["poa_global"]
 
 
 def facade_irradiance(

@@ -552,7 +552,7 @@ class RowConverter:
             self._zones.append((idx, w))
         loc = site.location
         self.solar = SolarGeometryCache(loc.latitude, loc.longitude, loc.elevation, site.step)
-        self._facades = [(90.0, az) for az in FACADE_AZIMUTHS]
+        self._facades = np.array([(90.0, az) for az in FACADE_AZIMUTHS])
         self.albedo, self.sky_model = float(albedo), sky_model
 
     def convert(self, times_ns, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -582,9 +582,9 @@ class RowConverter:
         ok = np.isfinite(sun).all(axis=1)
         if ok.any():
             geom = self.solar.geometry(np.asarray(times_ns, dtype=np.int64)[ok])
-            comp = transpose(geom, sun[ok, 0], sun[ok, 1], sun[ok, 2], self._facades,
-                             albedo=self.albedo, sky_model=self.sky_model)
-            sol[ok] = comp["poa_direct"] + comp["poa_sky_diffuse"] + comp["poa_ground_diffuse"]
+            sol[ok] = transpose(geom, sun[ok, 0], sun[ok, 1], sun[ok, 2], self._facades,
+                                albedo=self.albedo, sky_model=self.sky_model,
+                                total=True)["poa_global"]
         v = np.column_stack([si[:, self._ta], si[:, self._ts], sol])
         y = np.full((n, len(self._zones)), np.nan)
         for j, (idx, w) in enumerate(self._zones):

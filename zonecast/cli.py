@@ -318,13 +318,19 @@ def serve(config: Annotated[Path | None, typer.Option(
                    "overrides it.")] = None,
           host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
           port: Annotated[int, typer.Option(help="TCP port.")] = 8000,
-          log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info") -> None:
+          log_level: Annotated[str, typer.Option(help="Log level: debug, info, warning, "
+                                                 "error.")] = "info",
+          log_format: Annotated[str, typer.Option(
+              help="text (time, level, logger, message, key=value fields) or json (one "
+                   "object per line).")] = "text") -> None:
     """Run the online service: MQTT ingest, one runner per building, REST API."""
     import uvicorn
 
     from zonecast.service.app import create_app
+    from zonecast.service.logs import configure_logging
     from zonecast.service.settings import load_settings
     try:
+        configure_logging(log_format, log_level)
         settings = load_settings(config)
         # one BLAS thread unless OPENBLAS_NUM_THREADS says otherwise: the runners' products
         # are small, and threads of several buildings only contend (docs/service.md)
@@ -332,7 +338,9 @@ def serve(config: Annotated[Path | None, typer.Option(
             threadpool_limits(1, user_api="blas")
     except ValueError as exc:
         _fail(exc)
-    uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level)
+    # log_config=None: uvicorn keeps the handlers configure_logging installed
+    uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level.lower(),
+                log_config=None)
 
 
 @app.command("replay")

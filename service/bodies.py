@@ -50,7 +50,7 @@ def state_body(ctx: ServiceContext, runner: Runner) -> S.StateBody:
             flags += [f"held_input:{n}" for n in rep.held_inputs]
         if est.resets:
             flags.append("filter_restarted")
-        if est.started:
+        if not runner.unseen.all():  # once any point was processed: those never seen
             flags += [f"never_received:{p}" for p, u in zip(runner.points, runner.unseen) if u]
         last = est.time
         late, last_late = runner.late_readings, runner.last_late

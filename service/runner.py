@@ -126,6 +126,7 @@ class Runner:
         self.unseen = np.ones(len(self.points), dtype=bool)
         self._received_seen: datetime | None = None  # arrivals checked for late readings
         self._forecast_ok = False
+        self._undefined_from: pd.Timestamp | None = None
         self._resume()
 
     # --- checkpoint ------------------------------------------------------------------
@@ -158,7 +159,9 @@ class Runner:
 
     def _set_forecast(self, fc: Forecast) -> None:
         self.forecast = fc
-        self._forecast_ok = bool(np.isfinite(fc.mean).all())
+        bad = ~np.isfinite(fc.mean).all(axis=1)
+        self._forecast_ok = not bad.any()
+        self._undefined_from = None if self._forecast_ok else fc.times[int(np.argmax(bad))]
 
     def forecast_problem(self) -> str | None:
         """Why the current forecast cannot be served (None if it can): no forecast yet
@@ -173,9 +176,12 @@ class Runner:
             return f"no forecast for building {self.building!r} yet"
         if not self._forecast_ok:
             rep = self.last_report
-            held = f"; inputs without a value: {rep.held_inputs}" if rep is not None else ""
-            return (f"the forecast of building {self.building!r} is undefined: an input has "
-                    f"never had a value{held}{named}")
+            held = (f"; inputs without a value in the last row: {rep.held_inputs}"
+                    if rep is not None and rep.held_inputs else "")
+            return (f"the forecast of building {self.building!r} issued at "
+                    f"{self.forecast.issued.isoformat()} is undefined from "
+                    f"{self._undefined_from.isoformat()} on: an input had no value in the row "
+                    f"it persists (inputs of the last 24 h) or has never had one{held}{named}")
         return None
 
     def _checkpoint(self) -> None:

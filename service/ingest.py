@@ -335,7 +335,7 @@ def parse_time(value: Any, *, now: datetime | None = None,
         ``past_time`` or ``future_time``, never an ``OverflowError``.
     """
     try:
-        return _parse_time(value, now, max_future, earliest, grid)
+        return _parse_time(value, now, max_future, earliest, _micros(grid))
     except _Bad as bad:
         err = ValueError(f"{bad.reason.value}: {bad.detail}")
         err.reason = bad.reason  # type: ignore[attr-defined]
@@ -343,7 +343,7 @@ def parse_time(value: Any, *, now: datetime | None = None,
 
 
 def _parse_time(value: Any, now: datetime | None, max_future: timedelta | None,
-                earliest: datetime | None = None, grid: timedelta | None = None) -> datetime:
+                earliest: datetime | None = None, grid_us: int | None = None) -> datetime:
     if value is None:
         raise _Bad(Reason.MISSING_TIME, 'no "time": add an ISO-8601 time with UTC offset')
     if isinstance(value, datetime):
@@ -376,16 +376,32 @@ def _parse_time(value: Any, now: datetime | None, max_future: timedelta | None,
                    f"time {parsed.isoformat()} is before {earliest.astimezone(UTC).isoformat()}, "
                    "the earliest plausible time of this building: check the publisher's clock "
                    "(or the setting mqtt.earliest_time)")
-    if grid is not None and (parsed - EPOCH) % grid:
+    if grid_us is not None and _off_grid(parsed, grid_us):
         raise _Bad(Reason.OFF_GRID,
-                   f"time {parsed.isoformat()} is not on the {_span(grid)} grid: stamp "
-                   f"readings with the start of their {_span(grid)} interval (docs/data.md)")
+                   f"time {parsed.isoformat()} is not on the {_span(grid_us)} grid: stamp "
+                   f"readings with the start of their {_span(grid_us)} interval (docs/data.md)")
     return parsed
 
 
-def _span(step: timedelta) -> str:
-    seconds = int(step.total_seconds())
-    return f"{seconds // 60}-min" if seconds % 60 == 0 else f"{step.total_seconds():g}-s"
+_DAY_US = 86_400_000_000
+
+
+def _off_grid(t: datetime, grid_us: int) -> bool:
+    """``t`` (UTC) is not a multiple of ``grid_us`` microseconds since the epoch; for a grid
+    that divides a day (every site step does) by the time of day alone."""
+    if _DAY_US % grid_us:
+        return bool((t - EPOCH) // timedelta(microseconds=1) % grid_us)
+    return bool(((t.hour * 3600 + t.minute * 60 + t.second) * 1_000_000 + t.microsecond)
+                % grid_us)
+
+
+def _micros(grid: timedelta | None) -> int | None:
+    return None if grid is None else grid // timedelta(microseconds=1)
+
+
+def _span(grid_us: int) -> str:
+    seconds = grid_us / 1e6
+    return f"{int(seconds) // 60}-min" if seconds % 60 == 0 else f"{seconds:g}-s"
 
 
 def _check_value(point: str, value: Any, spec: PointSpec) -> float:
@@ -507,9 +523,17 @@ def validate_message(
         return MessageRejected(reason, detail, building)
 
     earliest, grid = _time_rules(catalogue, limits)
+    grid_us = _micros(grid)
+
+    parsed: dict[str, datetime] = {}  # batch items mostly share a few time strings
 
     def parse(raw: Any) -> datetime:
-        return _parse_time(raw, now, limits.max_future, earliest, grid)
+        if isinstance(raw, str):
+            hit = parsed.get(raw)
+            if hit is None:
+                hit = parsed[raw] = _parse_time(raw, now, limits.max_future, earliest, grid_us)
+            return hit
+        return _parse_time(raw, now, limits.max_future, earliest, grid_us)
 
     def message_time(raw: Any) -> datetime:
         try:

@@ -23,7 +23,7 @@ from zonecast.service.bodies import forecast_json, state_body
 from zonecast.service.ingest import Catalogue, PointSpec
 from zonecast.service.metrics import ServiceMetrics
 from zonecast.service.mqtt import Ingester
-from zonecast.service.replay import connect_publisher
+from zonecast.service.replay import connect_publisher, unique_client_id
 from zonecast.service.runner import Runner
 from zonecast.service.settings import ServiceSettings
 from zonecast.service.storage import Storage, open_storage
@@ -100,7 +100,7 @@ class ServiceContext:
         if s.mqtt_enabled:
             self.ingester = Ingester(s.mqtt, self.storage, self.catalogues).start()
             if s.runner.publish:
-                self.publisher = connect_publisher(s.mqtt, client_id=s.mqtt.client_id + "-pub")
+                self.publisher = connect_publisher(s.mqtt, client_id=unique_client_id("pub"))
         for bid, bundle in self.bundles.items():
             runner = Runner(bundle, self.storage, s.runner, publish=self._published)
             self.runners[bid] = runner

@@ -359,9 +359,13 @@ def replay_cmd(data: Annotated[Path, typer.Option(help="Folder with telemetry.cs
                    envvar="ZONECAST_REPLAY_PASSWORD", help="Broker password (or the "
                    "environment variable ZONECAST_REPLAY_PASSWORD).")] = None,
                protocol: Annotated[str, typer.Option(help="MQTT version: 5 or 3.1.1.")] = "5",
-               prefix: Annotated[str, typer.Option(help="Topic prefix.")] = "zonecast") -> None:
+               prefix: Annotated[str, typer.Option(help="Topic prefix.")] = "zonecast",
+               client_id: Annotated[str | None, typer.Option(
+                   help="MQTT client id (default: zonecast-replay-<host>-<random>).")] = None
+               ) -> None:
     """Publish recorded telemetry like a BMS: one QoS-1 message per row on
-    <prefix>/<building>/telemetry."""
+    <prefix>/<building>/telemetry, each waiting for its PUBACK (exit status 2 if one is
+    missing or refused)."""
     from zonecast.service.replay import parse_broker_url, replay
     from zonecast.service.settings import MqttSettings, TLSSettings
     try:
@@ -369,7 +373,8 @@ def replay_cmd(data: Annotated[Path, typer.Option(help="Folder with telemetry.cs
         settings = MqttSettings(host=host, port=port, username=username, password=password,
                                 tls=TLSSettings() if tls else None, protocol=protocol,
                                 topic_prefix=prefix)
-        res = replay(data, settings, building, speed=speed, start=start, end=end)
+        res = replay(data, settings, building, speed=speed, start=start, end=end,
+                     client_id=client_id)
     except (ValueError, ConnectionError) as exc:
         _fail(exc)
     typer.echo(f"published {res['messages']} messages ({res['readings']} readings) from "

@@ -511,3 +511,75 @@ def test_configure_logging_and_the_serve_option(capsys):
                                                  "message": "shown 1", "building": "b"}
     out = CliRunner().invoke(cli, ["serve", "--help"], terminal_width=200)
     assert "--log-format" in out.output
+
+
+# --------------------------------------------------------------------------- replay
+def test_replay_client_ids_are_unique_and_two_replays_run_side_by_side(broker, vb, telemetry):
+    import threading
+
+    from zonecast.service.replay import replay, unique_client_id
+    from zonecast.service.settings import MqttSettings
+
+    a, b = unique_client_id("replay"), unique_client_id("replay")
+    assert a != b and a.startswith("zonecast-replay-") and len(a) <= 64
+    pub = MqttSettings(host=broker.host, port=broker.port, username=broker.username,
+                       protocol="5" if broker.mqtt5 else "3.1.1",
+                       topic_prefix=f"zc{uuid.uuid4().hex[:8]}")
+    end = telemetry["time"].iloc[40]
+    results: list = []
+
+    def run():
+        results.append(replay(vb, pub, "office6", end=end))
+
+    threads = [threading.Thread(target=run) for _ in range(2)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(60)
+    assert [r["messages"] for r in results] == [40, 40]
+
+
+def test_replay_exits_non_zero_when_the_broker_refuses_a_message(vb, monkeypatch):
+    from typer.testing import CliRunner
+    from zonecast.service import replay as replay_module
+
+    from zonecast.cli import app as cli
+
+    class Refused:
+        is_failure = True
+
+        def __str__(self):
+            return "Not authorized"
+
+    class Info:
+        def __init__(self, mid):
+            self.mid = mid
+
+        def wait_for_publish(self, timeout):
+            pass
+
+        def is_published(self):
+            return True
+
+    class FakeClient:  # acknowledges the first two messages, refuses the third
+        on_publish = None
+        mids = 0
+
+        def publish(self, topic, payload, qos):
+            self.mids += 1
+            ok = self.mids < 3
+            self.on_publish(self, None, self.mids, Refused() if not ok else None, None)
+            return Info(self.mids)
+
+        def disconnect(self):
+            pass
+
+        def loop_stop(self):
+            pass
+
+    monkeypatch.setattr(replay_module, "connect_publisher", lambda *a, **k: FakeClient())
+    out = CliRunner().invoke(cli, ["replay", "--data", str(vb), "--building", "office6",
+                                   "--broker", "mqtt://127.0.0.1:1"])
+    assert out.exit_code == 2
+    assert "refused by the broker: Not authorized" in out.output
+    assert "2 messages were acknowledged" in out.output

@@ -127,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     pub.loop_start()
 
     payloads = [json.dumps({
-        "time": (T0 + timedelta(minutes=i)).isoformat(),
+        "time": (T0 + timedelta(minutes=15 * i)).isoformat(),  # on the 15-min grid
         "readings": {p: round(20 + (i % 97) / 10 + k / 1000, 3) for k, p in enumerate(points)},
     }) for i in range(args.messages)]
 
@@ -147,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     pub.disconnect()
     pub.loop_stop()
 
-    df = store.readings(building, T0, T0 + timedelta(minutes=args.messages))
+    df = store.readings(building, T0, T0 + timedelta(minutes=15 * args.messages))
     stored = int(df.notna().sum().sum())
     store.close()
     if broker is not None:

@@ -50,7 +50,10 @@ def state_body(ctx: ServiceContext, runner: Runner) -> S.StateBody:
             flags += [f"held_input:{n}" for n in rep.held_inputs]
         if est.resets:
             flags.append("filter_restarted")
+        if not runner.unseen.all():  # once any point was processed: those never seen
+            flags += [f"never_received:{p}" for p, u in zip(runner.points, runner.unseen) if u]
         last = est.time
+        late, last_late = runner.late_readings, runner.last_late
         steps, nis = est.steps, (est.nis_sum / est.dof_sum if est.dof_sum else None)
     wm = runner.watermark
     fresh = (now - wm).total_seconds() if wm is not None else None
@@ -58,18 +61,24 @@ def state_body(ctx: ServiceContext, runner: Runner) -> S.StateBody:
     limit = 2 * STEP_S + ctx.settings.runner.grace
     if age is not None and age > limit:
         flags.append("stale")
+    if late:
+        flags.append("late_readings")
     return S.StateBody(building=runner.building, last_update=as_utc(last),
                        data_freshness_s=fresh, update_age_s=age, zones=zones, steps=steps,
-                       nis_per_dof=nis, quality=flags)
+                       nis_per_dof=nis, quality=flags, late_readings=late,
+                       late_reading_times=None if last_late is None
+                       else [as_utc(last_late[0]), as_utc(last_late[1])])
 
 
 def forecast_body(runner: Runner, steps: int, fc: Forecast | None = None) -> S.ForecastBody:
-    """The first ``steps`` steps of ``fc`` (default: the runner's current forecast); 404 if
-    the runner has issued none yet."""
-    fc = runner.forecast if fc is None else fc
+    """The first ``steps`` steps of ``fc`` (default: the runner's current forecast); 409 with
+    :meth:`Runner.forecast_problem` if there is none or it is undefined (an input never
+    had a value): never a body of nulls."""
     if fc is None:
-        raise HTTPException(404, f"no forecast for building {runner.building!r} yet: the runner "
-                                 "has not processed a step with a measurement")
+        problem = runner.forecast_problem()
+        if problem is not None:
+            raise HTTPException(409, problem)
+        fc = runner.forecast
     sl = slice(0, steps)
     zones = [S.ZoneForecast(zone=z, mean=fc.mean[sl, i].tolist(), lower=fc.lower[sl, i].tolist(),
                             upper=fc.upper[sl, i].tolist(), std=fc.std[sl, i].tolist(),
@@ -82,7 +91,11 @@ def forecast_body(runner: Runner, steps: int, fc: Forecast | None = None) -> S.F
 
 def forecast_json(runner: Runner, steps: int) -> bytes:
     """JSON of :func:`forecast_body` for the runner's current forecast, built once per
-    forecast and horizon (the REST endpoint and the MQTT publisher serve these bytes)."""
+    forecast and horizon (the REST endpoint and the MQTT publisher serve these bytes);
+    409 as :func:`forecast_body` when it cannot be served."""
+    problem = runner.forecast_problem()
+    if problem is not None:
+        raise HTTPException(409, problem)
     fc = runner.forecast
     cached = runner.__dict__.get("_body_cache")
     if cached is None or cached[0] is not fc:  # a new forecast: start a new cache

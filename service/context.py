@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections import Counter
+from datetime import timedelta
 
 import numpy as np
 import paho.mqtt.client as mqtt
@@ -19,10 +20,10 @@ from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.site import Site
 from zonecast.estimator.units import _CONVERSIONS, to_si
 from zonecast.service.bodies import forecast_json, state_body
-from zonecast.service.ingest import PointSpec
+from zonecast.service.ingest import Catalogue, PointSpec
 from zonecast.service.metrics import ServiceMetrics
 from zonecast.service.mqtt import Ingester
-from zonecast.service.replay import connect_publisher
+from zonecast.service.replay import connect_publisher, unique_client_id
 from zonecast.service.runner import Runner
 from zonecast.service.settings import ServiceSettings
 from zonecast.service.storage import Storage, open_storage
@@ -32,11 +33,19 @@ __all__ = ["ServiceContext", "catalogue_for_site"]
 log = logging.getLogger(__name__)
 
 
-def catalogue_for_site(site: Site) -> dict[str, PointSpec]:
+#: how long before a site's first experiment readings are still plausible
+PLAUSIBLE_BEFORE = timedelta(days=365)
+
+
+def catalogue_for_site(site: Site) -> Catalogue:
     """Point catalogue of a site: every mapped point with its kind, wire unit and the
-    kind's plausible range converted to that unit."""
+    kind's plausible range converted to that unit; the site's step as the time grid and,
+    if the site lists experiments, one year before the first as the earliest plausible
+    reading time (else the ingest default, 1970)."""
     kinds = {"temperature": "temperature", "airflow": "airflow", "irradiance": "irradiance"}
-    out = {}
+    starts = [e.start for e in getattr(site, "experiments", None) or ()]
+    earliest = min(starts) - PLAUSIBLE_BEFORE if starts else None
+    out = Catalogue(earliest=earliest, step=getattr(site, "step", None))
     for point, unit in site.point_units().items():
         quantity = _CONVERSIONS[unit][0]
         spec = PointSpec(kinds[quantity])
@@ -79,14 +88,19 @@ class ServiceContext:
                              bundle.building, bid)
                     bundle.building = bid
                 self.bundles[bid] = bundle
-                self.catalogues[bid] = catalogue_for_site(bundle.site)
+                self.catalogues[bid] = cat = catalogue_for_site(bundle.site)
+                log.info("building %s: model %s loaded (%d points; readings accepted from %s)",
+                         bid, bundle.version, len(cat),
+                         (s.mqtt.earliest_time or cat.earliest or "1970-01-01"),
+                         extra={"building": bid, "model_version": bundle.version})
             except ValueError as exc:
                 self.load_errors[bid] = str(exc)
-                log.error("building %s: model not loaded: %s", bid, exc)
+                log.error("building %s: model not loaded: %s", bid, exc,
+                          extra={"building": bid})
         if s.mqtt_enabled:
             self.ingester = Ingester(s.mqtt, self.storage, self.catalogues).start()
             if s.runner.publish:
-                self.publisher = connect_publisher(s.mqtt, client_id=s.mqtt.client_id + "-pub")
+                self.publisher = connect_publisher(s.mqtt, client_id=unique_client_id("pub"))
         for bid, bundle in self.bundles.items():
             runner = Runner(bundle, self.storage, s.runner, publish=self._published)
             self.runners[bid] = runner

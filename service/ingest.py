@@ -20,11 +20,22 @@ bad, or it holds no readings or too many. Otherwise each reading is judged on it
 own: good readings are kept and every bad one is returned in
 :attr:`ValidatedMessage.rejected` with its reason, so one broken sensor does not
 discard a whole floor's readings and nothing is dropped silently.
+
+Nothing a publisher sends makes :func:`accept` raise: an exception inside validation that
+no rule anticipated becomes a whole-message rejection ``internal_error`` carrying the
+exception's text, so the message is dead-lettered and acknowledged like any other bad one
+instead of stalling the stream behind it.
+
+Time rules (docs/service.md, "Validation"): a time must lie in the plausibility window
+[earliest, received + ``max_future``] and on the building's step grid (a multiple of the
+step since the Unix epoch, docs/data.md); ``past_time``, ``future_time`` and ``off_grid``
+otherwise.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import math
 from collections import Counter
 from collections.abc import Mapping
@@ -37,7 +48,9 @@ from zonecast.service.settings import DEFAULT_PREFIX, IngestLimits
 
 __all__ = [
     "DEFAULT_PREFIX",
+    "EPOCH",
     "Accepted",
+    "Catalogue",
     "IngestLimits",
     "MessageRejected",
     "PointCatalogue",
@@ -49,6 +62,7 @@ __all__ = [
     "ValidatedMessage",
     "accept",
     "dead_letters",
+    "log_rejections",
     "parse_time",
     "parse_topic",
     "refuse",
@@ -56,6 +70,10 @@ __all__ = [
 ]
 
 _DEFAULT_LIMITS = IngestLimits()
+#: earliest plausible time when neither the settings nor the building's catalogue say more
+EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+
+log = logging.getLogger(__name__)
 
 
 class Reason(str, Enum):
@@ -77,6 +95,13 @@ class Reason(str, Enum):
     UNPARSABLE_TIME = "unparsable_time"
     TIME_WITHOUT_OFFSET = "time_without_offset"
     FUTURE_TIME = "future_time"
+    #: before the earliest plausible time (settings, the site, or 1970)
+    PAST_TIME = "past_time"
+    #: not a multiple of the building's step since the Unix epoch (docs/data.md)
+    OFF_GRID = "off_grid"
+    #: validation raised an exception no rule anticipated (the text says which): a bug,
+    #: but the message is dead-lettered and acknowledged instead of stalling ingest
+    INTERNAL_ERROR = "internal_error"
     #: Passed validation but storage refused it (a bug: please report it).
     STORAGE_REJECTED = "storage_rejected"
 
@@ -147,6 +172,43 @@ class PointSpec:
 
 #: A building's points: BMS point name -> its spec.
 PointCatalogue = Mapping[str, PointSpec]
+
+
+class Catalogue(dict[str, PointSpec]):
+    """A building's point catalogue with the building's own time rules.
+
+    A plain ``{point: PointSpec}`` dict works everywhere a catalogue is expected; this
+    subclass adds what depends on the site (``zonecast.service.context.catalogue_for_site``
+    builds one per building).
+
+    Parameters
+    ----------
+    points : mapping of str to PointSpec
+    earliest : datetime, optional
+        Earliest plausible reading time of this building (tz-aware); used unless the
+        settings fix one for all buildings (``IngestLimits.earliest``). Default: 1970.
+    step : timedelta, optional
+        The building's step grid; default ``IngestLimits.grid``.
+    """
+
+    def __init__(self, points: Mapping[str, PointSpec] = (), *,
+                 earliest: datetime | None = None, step: timedelta | None = None):
+        super().__init__(points)
+        if earliest is not None and (earliest.tzinfo is None or earliest.utcoffset() is None):
+            raise ValueError(f"earliest {earliest.isoformat()} must carry a UTC offset")
+        if step is not None and step <= timedelta(0):
+            raise ValueError(f"step {step} must be positive")
+        self.earliest = earliest
+        self.step = step
+
+
+def _time_rules(catalogue: PointCatalogue, limits: IngestLimits
+                ) -> tuple[datetime, timedelta | None]:
+    """(earliest plausible time, step grid or None) for a building."""
+    earliest = limits.earliest
+    if earliest is None:
+        earliest = getattr(catalogue, "earliest", None) or EPOCH
+    return earliest, getattr(catalogue, "step", None) or limits.grid
 
 
 class Reading(NamedTuple):
@@ -242,7 +304,8 @@ def parse_topic(topic: str, prefix: str = DEFAULT_PREFIX) -> tuple[str, str | No
 
 
 def parse_time(value: Any, *, now: datetime | None = None,
-               max_future: timedelta | None = None) -> datetime:
+               max_future: timedelta | None = None, earliest: datetime | None = None,
+               grid: timedelta | None = None) -> datetime:
     """Parse an ISO-8601 timestamp that carries a UTC offset, to UTC.
 
     Parameters
@@ -253,6 +316,10 @@ def parse_time(value: Any, *, now: datetime | None = None,
         Reference time for the future check (tz-aware).
     max_future : timedelta, optional
         With ``now``: the latest accepted time is ``now + max_future``.
+    earliest : datetime, optional
+        The earliest accepted time (tz-aware).
+    grid : timedelta, optional
+        The time must be a multiple of ``grid`` since the Unix epoch.
 
     Returns
     -------
@@ -263,17 +330,20 @@ def parse_time(value: Any, *, now: datetime | None = None,
     ------
     ValueError
         With ``reason`` attribute ``missing_time``, ``unparsable_time``,
-        ``time_without_offset`` or ``future_time``.
+        ``time_without_offset``, ``future_time``, ``past_time`` or ``off_grid``. A time
+        that cannot be converted to UTC at all (year 1 or 9999 with an offset) is
+        ``past_time`` or ``future_time``, never an ``OverflowError``.
     """
     try:
-        return _parse_time(value, now, max_future)
+        return _parse_time(value, now, max_future, earliest, _micros(grid))
     except _Bad as bad:
         err = ValueError(f"{bad.reason.value}: {bad.detail}")
         err.reason = bad.reason  # type: ignore[attr-defined]
         raise err from None
 
 
-def _parse_time(value: Any, now: datetime | None, max_future: timedelta | None) -> datetime:
+def _parse_time(value: Any, now: datetime | None, max_future: timedelta | None,
+                earliest: datetime | None = None, grid_us: int | None = None) -> datetime:
     if value is None:
         raise _Bad(Reason.MISSING_TIME, 'no "time": add an ISO-8601 time with UTC offset')
     if isinstance(value, datetime):
@@ -290,28 +360,80 @@ def _parse_time(value: Any, now: datetime | None, max_future: timedelta | None) 
     if parsed.tzinfo is None or parsed.utcoffset() is None:
         raise _Bad(Reason.TIME_WITHOUT_OFFSET,
                    f"time {str(value)!r} has no UTC offset: append Z or +HH:MM")
-    parsed = parsed.astimezone(UTC)
+    try:
+        parsed = parsed.astimezone(UTC)
+    except OverflowError:  # year 1 or 9999 shifted by its offset leaves datetime's range
+        late = parsed.year > 1
+        raise _Bad(Reason.FUTURE_TIME if late else Reason.PAST_TIME,
+                   f"time {str(value)!r} is outside the representable range; send a "
+                   "plausible measurement time") from None
     if now is not None and max_future is not None and parsed > now + max_future:
         raise _Bad(Reason.FUTURE_TIME,
                    f"time {parsed.isoformat()} is more than {max_future} ahead of "
                    f"{now.astimezone(UTC).isoformat()}: check the publisher's clock")
+    if earliest is not None and parsed < earliest:
+        raise _Bad(Reason.PAST_TIME,
+                   f"time {parsed.isoformat()} is before {earliest.astimezone(UTC).isoformat()}, "
+                   "the earliest plausible time of this building: check the publisher's clock "
+                   "(or the setting mqtt.earliest_time)")
+    if grid_us is not None and _off_grid(parsed, grid_us):
+        raise _Bad(Reason.OFF_GRID,
+                   f"time {parsed.isoformat()} is not on the {_span(grid_us)} grid: stamp "
+                   f"readings with the start of their {_span(grid_us)} interval (docs/data.md)")
     return parsed
+
+
+_DAY_US = 86_400_000_000
+
+
+def _off_grid(t: datetime, grid_us: int) -> bool:
+    """``t`` (UTC) is not a multiple of ``grid_us`` microseconds since the epoch; for a grid
+    that divides a day (every site step does) by the time of day alone."""
+    if _DAY_US % grid_us:
+        return bool((t - EPOCH) // timedelta(microseconds=1) % grid_us)
+    return bool(((t.hour * 3600 + t.minute * 60 + t.second) * 1_000_000 + t.microsecond)
+                % grid_us)
+
+
+def _micros(grid: timedelta | None) -> int | None:
+    return None if grid is None else grid // timedelta(microseconds=1)
+
+
+def _span(grid_us: int) -> str:
+    seconds = grid_us / 1e6
+    return f"{int(seconds) // 60}-min" if seconds % 60 == 0 else f"{seconds:g}-s"
 
 
 def _check_value(point: str, value: Any, spec: PointSpec) -> float:
     # bool is an int subclass in Python but never a measurement.
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise _Bad(Reason.WRONG_TYPE,
-                   f"point {point!r}: value {value!r} is a {type(value).__name__}, expected a number")
-    number = float(value)
+                   f"point {point!r}: value {_short(value)} is a {type(value).__name__}, "
+                   "expected a number")
+    if isinstance(value, int) and not spec.low <= value <= spec.high:
+        # exact comparison: a 400-digit integer is absurd, and float() of it would raise
+        raise _Bad(Reason.ABSURD_VALUE,
+                   f"point {point!r}: {_short(value)} {spec.unit} is outside the plausible "
+                   f"range [{spec.low:g}, {spec.high:g}] for a {spec.kind.value} point")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
     if not math.isfinite(number):
-        raise _Bad(Reason.NOT_FINITE, f"point {point!r}: value {value!r} is not finite; "
+        raise _Bad(Reason.NOT_FINITE, f"point {point!r}: value {_short(value)} is not finite; "
                    "omit the reading when there is no measurement")
     if not spec.low <= number <= spec.high:
         raise _Bad(Reason.ABSURD_VALUE,
                    f"point {point!r}: {number:g} {spec.unit} is outside the plausible range "
                    f"[{spec.low:g}, {spec.high:g}] for a {spec.kind.value} point")
     return number
+
+
+def _short(value: Any, limit: int = 40) -> str:
+    """``repr`` of a value, cut to ``limit`` characters (a dead letter's detail stays short)."""
+    text = repr(value) if not isinstance(value, int) or value.bit_length() < 128 \
+        else f"<integer of {len(str(abs(value)))} digits>"
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def _loads(payload: bytes | str, building: str) -> Any:
@@ -323,6 +445,10 @@ def _loads(payload: bytes | str, building: str) -> Any:
     except ValueError as exc:  # UnicodeDecodeError and JSONDecodeError
         raise MessageRejected(Reason.MALFORMED_JSON,
                               f"payload is not valid UTF-8 JSON ({exc})", building) from None
+    except RecursionError:  # e.g. 40 kB of "[": deeper than the parser's stack
+        raise MessageRejected(Reason.MALFORMED_JSON,
+                              "payload is nested too deeply to parse: send the map or batch "
+                              "form", building) from None
 
 
 def validate_message(
@@ -396,9 +522,22 @@ def validate_message(
     def reject(reason: Reason, detail: str) -> MessageRejected:
         return MessageRejected(reason, detail, building)
 
+    earliest, grid = _time_rules(catalogue, limits)
+    grid_us = _micros(grid)
+
+    parsed: dict[str, datetime] = {}  # batch items mostly share a few time strings
+
+    def parse(raw: Any) -> datetime:
+        if isinstance(raw, str):
+            hit = parsed.get(raw)
+            if hit is None:
+                hit = parsed[raw] = _parse_time(raw, now, limits.max_future, earliest, grid_us)
+            return hit
+        return _parse_time(raw, now, limits.max_future, earliest, grid_us)
+
     def message_time(raw: Any) -> datetime:
         try:
-            return _parse_time(raw, now, limits.max_future)
+            return parse(raw)
         except _Bad as bad:
             raise reject(bad.reason, bad.detail) from None
 
@@ -438,7 +577,14 @@ def validate_message(
             when = message_time(body.get("time"))
             items.extend((str(point), when, value) for point, value in raw.items())
         else:
-            shared = message_time(body["time"]) if body.get("time") is not None else None
+            # the top-level time only concerns the items without their own: a bad one
+            # rejects those items, not the items that carry a good time
+            shared: datetime | _Bad | None = None
+            if body.get("time") is not None:
+                try:
+                    shared = parse(body["time"])
+                except _Bad as bad:
+                    shared = bad
             for i, item in enumerate(raw):
                 if not isinstance(item, dict) or not isinstance(item.get("point"), str) \
                         or "value" not in item:
@@ -458,8 +604,10 @@ def validate_message(
                            f"point {point!r} is not in the catalogue of building {building!r}: "
                            "add it or fix the point name")
             number = _check_value(point, value, spec)
+            if isinstance(when, _Bad):
+                raise when
             if not isinstance(when, datetime):
-                when = _parse_time(when, now, limits.max_future)
+                when = parse(when)
             accepted.append(Reading(point, when, number))
         except _Bad as bad:
             rejected.append(RejectedReading(point, bad.reason, bad.detail))
@@ -537,7 +685,37 @@ def accept(
                                   prefix=prefix, properties=properties)
     except MessageRejected as rej:
         return refuse(topic, payload, received, rej)
+    except Exception as exc:  # a bug must cost one message, never the stream
+        try:
+            building = parse_topic(topic, prefix)[0]
+        except MessageRejected as rej:
+            building = rej.building
+        text = str(exc)[:300] or "no message"
+        log.error("validation raised %s on %s: %s", type(exc).__name__, topic, text,
+                  exc_info=exc, extra={"building": building, "reason": "internal_error"})
+        return refuse(topic, payload, received, MessageRejected(
+            Reason.INTERNAL_ERROR, f"validation raised {type(exc).__name__}: {text} (a bug; "
+            "please report it with this payload)", building))
     if not result.rejected:
         return Accepted(result.building, result.readings)
     return Accepted(result.building, result.readings, result.rejected,
                     dead_letters(topic, payload, received, result.building, result.rejected))
+
+
+def log_rejections(acc: Accepted, topic: str, transport: str) -> None:
+    """Log the rejections of one message: one WARNING line per reason, with the fields
+    ``building``, ``reason``, ``transport``, ``topic``, ``count``, ``points`` (up to 10) and
+    ``detail`` (the first rejection's) for structured logs (``zonecast.service.logs``)."""
+    if not acc.rejections:
+        return
+    groups: dict[str, list[RejectedReading]] = {}
+    for r in acc.rejections:
+        groups.setdefault(r.reason.value, []).append(r)
+    what = "message" if acc.error is not None else "readings"
+    for reason, rejections in groups.items():
+        points = [r.point for r in rejections if r.point is not None][:10]
+        log.warning("%s rejected (%s, %d) on %s: %s", what, reason, len(rejections), topic,
+                    rejections[0].detail,
+                    extra={"building": acc.building, "reason": reason, "transport": transport,
+                           "topic": topic, "count": len(rejections), "points": points,
+                           "detail": rejections[0].detail})

@@ -46,6 +46,12 @@ class _Collector:
         for reason, n in sorted(ctx.rest_rejected.items()):
             rej.add_metric(["rest", reason], n)
         yield rej
+        ingest = CounterMetricFamily("zonecast_ingest_errors", "MQTT ingest: failed storage "
+                                     "writes (retried) and unexpected worker errors",
+                                     labels=["kind"])
+        ingest.add_metric(["storage"], mqtt.get("storage_errors", 0))
+        ingest.add_metric(["worker"], mqtt.get("worker_errors", 0))
+        yield ingest
         now = datetime.now(UTC)
         steps = CounterMetricFamily("zonecast_steps", "steps processed by the runner",
                                     labels=["building"])
@@ -57,17 +63,20 @@ class _Collector:
                                 "last processed step [s]", labels=["building"])
         errors = CounterMetricFamily("zonecast_runner_errors", "failed runner polls",
                                      labels=["building"])
+        late = CounterMetricFamily("zonecast_late_readings", "readings that arrived for steps "
+                                   "already processed (stored, not used)", labels=["building"])
         for bid, r in sorted(ctx.runners.items()):
             est = r.est
             steps.add_metric([bid], est.steps)
             errors.add_metric([bid], r.errors)
+            late.add_metric([bid], r.late_readings)
             if est.dof_sum:
                 nis.add_metric([bid], est.nis_sum / est.dof_sum)
             if r.last_report is not None and r.last_report.dof:
                 last.add_metric([bid], r.last_report.nis)
             if est.time is not None:
                 age.add_metric([bid], (now - est.time).total_seconds())
-        yield from (steps, nis, last, age, errors)
+        yield from (steps, nis, last, age, errors, late)
 
 
 class ServiceMetrics:

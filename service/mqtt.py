@@ -11,7 +11,11 @@ Delivery contract (see ``docs/service.md``):
   the broker delivers it again on reconnection; storage is idempotent, so a
   redelivery after the commit but before the PUBACK adds nothing.
 - Rejected messages and readings go to the ``dead_letters`` table and to the
-  topic ``<prefix>/<building>/deadletter``; a bad message never stops ingest.
+  topic ``<prefix>/<building>/deadletter``; a bad message never stops ingest: every
+  message ends acknowledged, stored or dead-lettered with its reason. Validation runs per
+  message and cannot raise (``accept``: an unexpected exception is the reason
+  ``internal_error``); a message that storage refuses as data is dead-lettered
+  (``storage_rejected``); only an unavailable storage holds acknowledgements back.
 
 Threads: paho's network thread only queues incoming messages; one worker
 thread validates, commits a group of queued messages in one transaction (one
@@ -24,8 +28,10 @@ from __future__ import annotations
 import json
 import logging
 import queue
+import sqlite3
 import threading
-from collections import Counter
+import time
+from collections import Counter, deque
 from collections.abc import Mapping
 from datetime import UTC, datetime
 from typing import Any, Self
@@ -41,6 +47,7 @@ from zonecast.service.ingest import (
     PointCatalogue,
     Reason,
     accept,
+    log_rejections,
     refuse,
 )
 from zonecast.service.settings import DEFAULT_PREFIX, MqttSettings
@@ -74,6 +81,21 @@ _Checked = tuple[mqtt.MQTTMessage, Accepted, dict[str, Any] | None]
 
 class _Stopped(Exception):
     """Internal: the ingester is stopping while storage is unavailable."""
+
+
+class _DataError(Exception):
+    """Internal: storage refused the data of a commit (the cause is chained)."""
+
+
+def _is_data_error(exc: BaseException) -> bool:
+    """True if storage refused the data itself (retrying cannot help), False for an
+    outage (retry): Python's value/type/arithmetic errors, SQLite's data and integrity
+    errors, and PostgreSQL's SQLSTATE classes 22 (data exception) and 23 (integrity)."""
+    if isinstance(exc, (ValueError, TypeError, ArithmeticError, sqlite3.DataError,
+                        sqlite3.IntegrityError)):
+        return True
+    state = getattr(exc, "sqlstate", None)
+    return isinstance(state, str) and state[:2] in ("22", "23")
 
 
 class Ingester:
@@ -111,6 +133,8 @@ class Ingester:
         self._count_lock = threading.Lock()
         self._counts: Counter[str] = Counter()
         self._rejected: Counter[str] = Counter()
+        # monotonic receive times of the messages not yet acknowledged, oldest first
+        self._pending: deque[float] = deque()
 
     # --- public API --------------------------------------------------------------
     def start(self) -> Self:
@@ -159,6 +183,16 @@ class Ingester:
         if sock is not None:
             sock.close()
 
+    def unacknowledged_for(self) -> float:
+        """Seconds since the oldest message still waiting for its acknowledgement arrived
+        (0 when none waits). Grows while storage is unavailable; ``/readyz`` reports the
+        ingester not ready when it exceeds ``MqttSettings.stall_after``."""
+        try:
+            oldest = self._pending[0]
+        except IndexError:
+            return 0.0
+        return time.monotonic() - oldest
+
     def counters(self) -> dict[str, int | dict[str, int]]:
         """Snapshot of the counters (plain data for /metrics).
 
@@ -166,12 +200,13 @@ class Ingester:
         with or without readings), ``messages_rejected`` (whole message),
         ``readings_stored``, ``readings_duplicate``, ``readings_conflict``,
         ``readings_rejected``, ``dead_letters``, ``storage_errors``,
-        ``connects`` and ``rejected`` (reason code -> count of messages or
-        readings rejected for it).
+        ``worker_errors`` (unexpected errors of the worker; that batch stays
+        unacknowledged), ``connects`` and ``rejected`` (reason code -> count of
+        messages or readings rejected for it).
         """
         keys = ("messages_in", "messages_stored", "messages_rejected", "readings_stored",
                 "readings_duplicate", "readings_conflict", "readings_rejected",
-                "dead_letters", "storage_errors", "connects")
+                "dead_letters", "storage_errors", "worker_errors", "connects")
         with self._count_lock:
             out: dict[str, int | dict[str, int]] = {k: self._counts[k] for k in keys}
             out["rejected"] = dict(self._rejected)
@@ -228,7 +263,10 @@ class Ingester:
             return
         self._count("connects")
         log.info("MQTT connected to %s:%d as %s (session present: %s)", self.settings.host,
-                 self.settings.port, self.settings.client_id, flags.session_present)
+                 self.settings.port, self.settings.client_id, flags.session_present,
+                 extra={"broker": f"{self.settings.host}:{self.settings.port}",
+                        "client_id": self.settings.client_id,
+                        "session_present": bool(flags.session_present)})
         if self.settings.protocol == "5":
             # retainHandling=1: retained messages only for a new subscription.
             options = SubscribeOptions(qos=1, retainHandling=1)
@@ -253,6 +291,7 @@ class Ingester:
     def _on_message(self, client, userdata, message) -> None:
         # Network thread: only count and queue; the worker does the rest.
         self._count("messages_in")
+        self._pending.append(time.monotonic())
         self._queue.put((message, datetime.now(UTC)))
 
     # --- worker -----------------------------------------------------------------
@@ -282,47 +321,62 @@ class Ingester:
                 self._process(batch)
             except _Stopped:
                 return
-            except Exception:  # never let one batch kill ingest
-                log.exception("ingest worker: unexpected error; messages left unacknowledged "
-                              "for redelivery")
-                self._count("storage_errors")
+            except Exception:  # never let one batch kill the worker
+                log.exception("ingest worker: unexpected error; %d messages left "
+                              "unacknowledged (the broker redelivers them on the next "
+                              "connection)", len(batch))
+                self._count("worker_errors")
 
     def _accept(self, message: mqtt.MQTTMessage, received: datetime) -> _Checked:
-        """(message, what to store, dead-letter notice or None), counted."""
-        props = getattr(message, "properties", None)
-        user = dict(getattr(props, "UserProperty", []) or [])
-        acc = accept(message.topic, message.payload, received, self.catalogues,
-                     limits=self._limits, prefix=self.settings.topic_prefix, properties=user)
+        """(message, what to store, dead-letter notice or None), counted. Never raises:
+        whatever goes wrong with one message is that message's dead letter."""
+        try:
+            props = getattr(message, "properties", None)
+            user = dict(getattr(props, "UserProperty", []) or [])
+            acc = accept(message.topic, message.payload, received, self.catalogues,
+                         limits=self._limits, prefix=self.settings.topic_prefix,
+                         properties=user)
+        except Exception as exc:  # noqa: BLE001 - e.g. a malformed user property
+            acc = refuse(message.topic, message.payload, received, MessageRejected(
+                Reason.INTERNAL_ERROR, f"{type(exc).__name__}: {str(exc)[:300]}"))
         if not acc.rejections:
             return message, acc, None
+        self._count_rejections(acc)
+        log_rejections(acc, message.topic, "mqtt")
+        return message, acc, _notice(message, received, acc)
+
+    def _count_rejections(self, acc: Accepted) -> None:
         with self._count_lock:
             if acc.error is not None:
                 self._counts["messages_rejected"] += 1
             else:
                 self._counts["readings_rejected"] += len(acc.rejections)
             self._rejected.update(acc.reasons)
-        return message, acc, _notice(message, received, acc)
 
     def _process(self, batch: list[tuple[mqtt.MQTTMessage, datetime]]) -> None:
         checked = [self._accept(message, received) for message, received in batch]
         try:
             results = self._commit(checked)
-        except ValueError:
+        except _DataError:
             # Storage refused some data validation let through: commit message
             # by message and dead-letter the culprit instead of stalling.
             results = []
-            for message, acc, notice in checked:
+            for i, (message, acc, notice) in enumerate(checked):
                 try:
                     results += self._commit([(message, acc, notice)])
-                except ValueError as exc:
-                    log.exception("storage rejected a validated message on %s", message.topic)
+                except _DataError as exc:
+                    cause = exc.__cause__ or exc
+                    log.error("storage rejected a validated message on %s: %s", message.topic,
+                              cause, exc_info=cause,
+                              extra={"building": acc.building, "reason": "storage_rejected"})
                     building = acc.building if acc.error is None else None
-                    received = batch[0][1]
-                    refused = refuse(message.topic, message.payload, received,
-                                     MessageRejected(Reason.STORAGE_REJECTED, str(exc), building))
+                    received = batch[i][1]
+                    refused = refuse(message.topic, message.payload, received, MessageRejected(
+                        Reason.STORAGE_REJECTED, f"{type(cause).__name__}: {str(cause)[:300]}",
+                        building))
                     self._count_reason(Reason.STORAGE_REJECTED.value)
-                    results += self._commit([(message, refused,
-                                              _notice(message, received, refused))])
+                    checked[i] = (message, refused, _notice(message, received, refused))
+                    results += self._commit([checked[i]])
         client = self._client
         if self._aborted or client is None:
             return  # simulated crash: committed but never acknowledged
@@ -330,11 +384,19 @@ class Ingester:
         for message, acc, notice in checked:
             letters += len(acc.dead_letters)
             if notice is not None:
-                client.publish(dead_letter_topic(notice["building"], self.settings.topic_prefix),
-                               json.dumps(notice), qos=1)
+                try:  # live monitoring only: the table holds the durable record
+                    client.publish(dead_letter_topic(notice["building"],
+                                                     self.settings.topic_prefix),
+                                   json.dumps(notice), qos=1)
+                except Exception:  # never hold back the acknowledgement
+                    log.exception("publishing a dead-letter notice failed")
         for message, _ in batch:
             if message.qos > 0:
                 client.ack(message.mid, message.qos)
+            try:
+                self._pending.popleft()
+            except IndexError:
+                pass
         self._count("messages_stored", len(batch))
         self._count("dead_letters", letters)
         self._count("readings_stored", sum(r.inserted for r in results))
@@ -349,9 +411,9 @@ class Ingester:
         while True:
             try:
                 return self.storage.put_many(batches, letters)
-            except ValueError:
-                raise  # a data problem: retrying cannot help
             except Exception as exc:
+                if _is_data_error(exc):  # a data problem: retrying cannot help
+                    raise _DataError(str(exc)) from exc
                 self._count("storage_errors")
                 log.error("storage write failed (%s); retrying in %.1f s", exc, delay)
                 if self._stopping.wait(delay):

@@ -3,15 +3,20 @@
 ``zonecast replay --data DIR --broker mqtt://HOST:PORT --building ID [--speed X]``
 publishes one message per telemetry row on ``<prefix>/<ID>/telemetry`` (QoS 1), map
 form ``{"time": T, "readings": {point: value}}`` with the values as recorded (the
-site's units; empty cells are left out), and waits for each PUBACK.
+site's units; empty cells are left out), and waits for each PUBACK: a message without one
+within 30 s, or with a failure reason code (MQTT v5), raises ConnectionError (the CLI exits
+with status 2). Its client id is unique per run (``zonecast-replay-<host>-<random>``), so
+two replays never disconnect each other.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import socket
 import threading
 import time
+import uuid
 from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
@@ -24,7 +29,15 @@ from zonecast.estimator.constants import STEP_S
 from zonecast.estimator.site import load_site
 from zonecast.service.settings import MqttSettings
 
-__all__ = ["ReplayResult", "connect_publisher", "parse_broker_url", "replay"]
+__all__ = ["ReplayResult", "connect_publisher", "parse_broker_url", "replay", "unique_client_id"]
+
+
+def unique_client_id(role: str) -> str:
+    """``zonecast-<role>-<host>-<6 hex>``: a client id no other process uses, for clients
+    without a persistent session (replay, the service's publisher). The ingester's id stays
+    fixed (``MqttSettings.client_id``): the broker keys its queued messages on it."""
+    host = "".join(c for c in socket.gethostname() if c.isalnum() or c in "-_")[:32] or "host"
+    return f"zonecast-{role}-{host}-{uuid.uuid4().hex[:6]}"
 
 
 def parse_broker_url(url: str) -> tuple[str, int, bool]:
@@ -94,7 +107,7 @@ def _rows(data: Path, start: str | datetime | None,
 
 def replay(data: str | Path, settings: MqttSettings, building: str, *, speed: float = 0.0,
            start: str | datetime | None = None, end: str | datetime | None = None,
-           client_id: str = "zonecast-replay",
+           client_id: str | None = None,
            progress: Callable[[int, int], None] | None = None) -> ReplayResult:
     """Publish recorded telemetry like a BMS.
 
@@ -112,9 +125,25 @@ def replay(data: str | Path, settings: MqttSettings, building: str, *, speed: fl
         0 = as fast as the broker acknowledges.
     start, end : tz-aware time, optional
         Replay only rows with start <= time < end.
+    client_id : str, optional
+        Default: :func:`unique_client_id` (``zonecast-replay-<host>-<random>``).
+
+    Raises
+    ------
+    ConnectionError
+        No connection, or a message not acknowledged (no PUBACK within 30 s, or a PUBACK
+        with a failure reason code): the replay stops there.
     """
     frame, points = _rows(Path(data), start, end)
-    client = connect_publisher(settings, client_id=client_id, timeout=10)
+    client = connect_publisher(settings, client_id=client_id or unique_client_id("replay"),
+                               timeout=10)
+    refused: dict[int, str] = {}
+
+    def on_publish(c, userdata, mid, reason_code, properties) -> None:
+        if getattr(reason_code, "is_failure", False):
+            refused[mid] = str(reason_code)
+
+    client.on_publish = on_publish
     topic = f"{settings.topic_prefix}/{building}/telemetry"
     t0 = time.monotonic()
     sent = readings = 0
@@ -131,7 +160,12 @@ def replay(data: str | Path, settings: MqttSettings, building: str, *, speed: fl
                                   qos=1)
             info.wait_for_publish(30)
             if not info.is_published():
-                raise ConnectionError(f"message {i} ({row['time']}) was not acknowledged")
+                raise ConnectionError(f"message {i} ({row['time']}) was not acknowledged "
+                                      f"within 30 s; {sent} messages were")
+            if info.mid in refused:
+                raise ConnectionError(f"message {i} ({row['time']}) was refused by the broker: "
+                                      f"{refused[info.mid]} (check the user's ACL for {topic}); "
+                                      f"{sent} messages were acknowledged")
             sent += 1
             readings += len(values)
             if progress is not None:

@@ -8,16 +8,25 @@ expected on the grid; the REST/MQTT contract says so).
 A row t is *closed* (processed, and never again) when the first of these holds:
 
 - every point the site maps has a reading at t (complete), and all earlier rows are closed;
-- the watermark (newest reading time stored for the building) has reached
-  t + step + grace: later data is flowing, so stragglers of t had ``grace`` to arrive;
+- the watermark has reached t + step + grace: later data is flowing, so stragglers of t
+  had ``grace`` to arrive. The watermark is the newest time at which at least
+  ``watermark_support`` (default 2) points have readings: one reading stamped far ahead of
+  the stream (a publisher with a wrong clock) does not move it;
 - no reading has arrived for ``idle_timeout`` of wall-clock time and the wall clock is
   past t + step + grace (the feed stopped; the last, incomplete row is used as it is).
 
 A closed row with at least one reading goes to the :class:`OnlineEstimator`; a closed
-row without any is skipped (the estimator bridges it by prediction). Readings that
-arrive for a closed row stay in storage but do not change the past state. The
-estimator state and the next row are checkpointed after every processed row, so a
-restarted runner resumes exactly there and processes what arrived meanwhile.
+row without any is skipped (the estimator bridges it by prediction). The runner starts at
+the oldest stored reading, and after a day without data jumps to the next reading, only
+when the watermark has reached that reading (or the feed is idle): a lone reading ahead of
+the stream can neither start the runner nor pull it over the data in between.
+
+Readings outside [1970, wall clock + 1 day) never reach the runner (ingest already refuses
+them; this guards what was stored before). Readings that arrive for a closed row stay in
+storage but do not change the past state; they are counted (:attr:`Runner.late_readings`,
+``/state``, ``/metrics``) and logged, never ignored silently. The estimator state and the
+next row are checkpointed after every processed row, so a restarted runner resumes
+exactly there and processes what arrived meanwhile.
 """
 
 from __future__ import annotations
@@ -50,6 +59,11 @@ log = logging.getLogger(__name__)
 #: envelope of the checkpoints written before the estimator's header carried the runner's
 #: next row (read, never written)
 _LEGACY_MAGIC = b"ZCR1"
+#: readings before this never reach the runner (pandas' nanosecond times end in 1677 and
+#: 2262; ingest refuses such times, this guards data stored before that rule)
+EARLIEST = pd.Timestamp("1970-01-01", tz="UTC")
+#: nor readings further ahead of the wall clock than this
+FUTURE_GUARD = pd.Timedelta(days=1)
 
 
 def read_checkpoint(data: bytes) -> tuple[dict, bytes]:
@@ -102,28 +116,77 @@ class Runner:
         self.errors = 0
         self.last_error: str | None = None
         self.watermark: datetime | None = None
+        #: readings that arrived for rows already processed (not used), and the span of
+        #: their times, since the runner started
+        self.late_readings = 0
+        self.last_late: tuple[datetime, datetime] | None = None
         self._grace = pd.Timedelta(seconds=settings.grace)
+        self._support = min(settings.watermark_support, len(self.points))
+        # points without any reading in a processed row yet (named by /forecast's 409)
+        self.unseen = np.ones(len(self.points), dtype=bool)
+        self._received_seen: datetime | None = None  # arrivals checked for late readings
+        self._forecast_ok = False
+        self._undefined_from: pd.Timestamp | None = None
         self._resume()
 
     # --- checkpoint ------------------------------------------------------------------
     def _resume(self) -> None:
         cp = self.storage.load_checkpoint(self.building)
         if cp is None:
+            log.info("building %s: runner started without a checkpoint (first step at the "
+                     "oldest stored reading)", self.building,
+                     extra={"building": self.building, "model_version": self.bundle.version})
             return
         meta, blob = read_checkpoint(cp.state)
         if meta.get("version") != self.bundle.version:
             log.warning("building %s: checkpoint of model %s, now %s: starting the filter "
                         "afresh from the checkpoint's next row", self.building,
-                        meta.get("version"), self.bundle.version)
+                        meta.get("version"), self.bundle.version,
+                        extra={"building": self.building})
         else:
             self.est.load_bytes(blob)
             if self.est.started:
-                self.forecast = self.est.forecast()
+                self._set_forecast(self.est.forecast())
         self.next_time = pd.Timestamp(meta["next_time"]) if meta.get("next_time") else None
-        log.info("building %s: resumed at %s", self.building, self.next_time)
+        # checkpoints before "unseen" was kept say nothing: take every point as seen
+        unseen = set(meta.get("unseen", ()))
+        self.unseen = np.array([p in unseen for p in self.points], dtype=bool)
+        # readings that arrive after this checkpoint for rows before next_time are late
+        self._received_seen = cp.saved_at
+        log.info("building %s: resumed at %s", self.building, self.next_time,
+                 extra={"building": self.building, "next_row": str(self.next_time),
+                        "model_version": self.bundle.version})
+
+    def _set_forecast(self, fc: Forecast) -> None:
+        self.forecast = fc
+        bad = ~np.isfinite(fc.mean).all(axis=1)
+        self._forecast_ok = not bad.any()
+        self._undefined_from = None if self._forecast_ok else fc.times[int(np.argmax(bad))]
+
+    def forecast_problem(self) -> str | None:
+        """Why the current forecast cannot be served (None if it can): no forecast yet
+        (the filter has not started), or one with undefined values because an input has
+        never had a value; the text names the points without any reading so far."""
+        never = [p for p, u in zip(self.points, self.unseen) if u]
+        named = f"; points never received: {never}" if never else ""
+        if self.forecast is None:
+            if not self.est.started:
+                return (f"no forecast for building {self.building!r}: the filter has not "
+                        f"started (no zone temperature processed yet){named}")
+            return f"no forecast for building {self.building!r} yet"
+        if not self._forecast_ok:
+            rep = self.last_report
+            held = (f"; inputs without a value in the last row: {rep.held_inputs}"
+                    if rep is not None and rep.held_inputs else "")
+            return (f"the forecast of building {self.building!r} issued at "
+                    f"{self.forecast.issued.isoformat()} is undefined from "
+                    f"{self._undefined_from.isoformat()} on: an input had no value in the row "
+                    f"it persists (inputs of the last 24 h) or has never had one{held}{named}")
+        return None
 
     def _checkpoint(self) -> None:
-        extra = {"next_time": None if self.next_time is None else self.next_time.isoformat()}
+        extra = {"next_time": None if self.next_time is None else self.next_time.isoformat(),
+                 "unseen": [p for p, u in zip(self.points, self.unseen) if u]}
         # not synced to disk per step: if a power cut loses it, the rows after the
         # previous one are recomputed from readings committed (synced) before them
         self.storage.save_checkpoint(self.building, self.est.time or self.next_time,
@@ -134,41 +197,74 @@ class Runner:
         """Process every row that can be closed now; returns how many were processed."""
         done = 0
         while True:
-            first, last, received = self.storage.reading_bounds(self.building, self.next_time)
+            now = pd.Timestamp(self.clock())
+            until = now + FUTURE_GUARD
+            since = EARLIEST if self.next_time is None else max(self.next_time, EARLIEST)
+            first, last, received = self.storage.reading_bounds(self.building, since, until)
             self.watermark = last
+            if received is not None:
+                self._count_late(received)
             if first is None or last is None:
                 return done
             first = pd.Timestamp(first).floor(STEP)
+            support = self.storage.supported_watermark(self.building, since, until,
+                                                       self._support)
+            support = None if support is None else pd.Timestamp(support)
+            idle = (now - pd.Timestamp(received)).total_seconds() >= self.settings.idle_timeout
             if self.next_time is None or first > self.next_time + STEPS_PER_DAY * STEP:
-                self.next_time = first  # start, or a day without any data: jump
-            n, more = self._poll_chunk(pd.Timestamp(last), pd.Timestamp(received))
+                # start, or a day without any data: jump to the next reading, but only to
+                # one the watermark has reached (or once the feed is idle)
+                if (support is not None and first <= support) \
+                        or (idle and now >= first + STEP + self._grace):
+                    self.next_time = first
+                elif self.next_time is None:
+                    return done
+            n, more = self._poll_chunk(support, pd.Timestamp(last), now, idle)
             done += n
             if not more:
                 return done
 
-    def _poll_chunk(self, watermark: pd.Timestamp, received: pd.Timestamp) -> tuple[int, bool]:
+    def _count_late(self, received: datetime) -> None:
+        """Count the readings that arrived since the last look for rows already closed."""
+        seen = self._received_seen
+        if seen is not None and received > seen and self.next_time is not None:
+            n, lo, hi = self.storage.late_readings(self.building, seen, received,
+                                                   self.next_time)
+            if n:
+                self.late_readings += n
+                self.last_late = (lo, hi)
+                log.warning("building %s: %d readings arrived for rows already processed "
+                            "(times %s to %s); they are stored but not used", self.building,
+                            n, lo.isoformat(), hi.isoformat(),
+                            extra={"building": self.building, "reason": "late_reading",
+                                   "count": n, "first": lo.isoformat(),
+                                   "last": hi.isoformat()})
+        if seen is None or received > seen:
+            self._received_seen = received
+
+    def _poll_chunk(self, support: pd.Timestamp | None, last: pd.Timestamp,
+                    now: pd.Timestamp, idle: bool) -> tuple[int, bool]:
         start = self.next_time
-        end = min(start + STEPS_PER_DAY * STEP, watermark.floor(STEP) + STEP)
+        end = min(start + STEPS_PER_DAY * STEP, last.floor(STEP) + STEP)
         times, values = self.storage.readings_matrix(self.building, start, end, self.points)
         rows = dict(zip(times.tolist(), values))
-        now = pd.Timestamp(self.clock())
-        idle = (now - received).total_seconds() >= self.settings.idle_timeout
         done = 0
         t = start
         while t < end:
             row = rows.get(t.value)
             present = None if row is None else np.isfinite(row)
             complete = present is not None and bool(present.all())
-            closable = (complete or watermark >= t + STEP + self._grace
+            closable = (complete or (support is not None and support >= t + STEP + self._grace)
                         or (idle and now >= t + STEP + self._grace))
             if not closable:
                 return done, False
             self.next_time = t + STEP
             if present is not None and present.any():
+                self.unseen &= ~present
                 self._process(t, row)
                 done += 1
             t += STEP
-        return done, end <= watermark
+        return done, end <= last
 
     def _process(self, t: pd.Timestamp, row: np.ndarray) -> None:
         """One row: ``row`` holds the readings of :attr:`points` at ``t`` in their wire
@@ -182,14 +278,14 @@ class Runner:
                 self.last_report = report
             issue = self.est.started and (t.value // STEP.value) % every == 0
             if issue:
-                self.forecast = self.est.forecast()
+                self._set_forecast(self.est.forecast())
                 self.history.append(self.forecast)
             self._checkpoint()
         self.latencies.append(_time.perf_counter() - t0)
         if self.publish is not None:
             try:
                 self.publish("state", self)
-                if issue:
+                if issue and self._forecast_ok:  # an undefined forecast is not published
                     self.publish("forecast", self)
             except Exception:  # publishing is best effort; the state is stored
                 log.exception("building %s: publishing failed", self.building)

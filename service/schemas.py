@@ -11,7 +11,8 @@ from pydantic import AwareDatetime, BaseModel, Field
 
 __all__ = [
     "BuildingDetail", "BuildingSummary", "ErrorBody", "ForecastBody", "Health", "InternalGains",
-    "Readiness", "StateBody", "TelemetryResult", "ZoneForecast", "ZoneGains", "ZoneState",
+    "Readiness", "StateBody", "TelemetryRefused", "TelemetryResult", "ZoneForecast", "ZoneGains",
+    "ZoneState",
 ]
 
 
@@ -63,7 +64,12 @@ class StateBody(BaseModel):
                     "about 1 for a consistent filter")
     quality: list[str] = Field(
         description="flags: not_started, stale, missing_sensor:<zone>, held_input:<input>, "
-                    "filter_restarted")
+                    "filter_restarted, never_received:<point> (no reading of the point in "
+                    "any processed step), late_readings")
+    late_readings: int = Field(0, description="readings that arrived for steps already "
+                               "processed since the runner started; stored, not used [-]")
+    late_reading_times: list[AwareDatetime] | None = Field(
+        None, description="earliest and latest time of the last late readings found (UTC)")
 
 
 class ZoneGains(BaseModel):
@@ -116,6 +122,13 @@ class TelemetryResult(BaseModel):
     stored: int = Field(description="readings newly stored [-]")
     duplicates: int = Field(description="readings already stored with the same key [-]")
     rejected: list[TelemetryRejection] = Field(description="readings rejected one by one")
+
+
+class TelemetryRefused(BaseModel):
+    detail: str = Field(description="why nothing was accepted: the message's reason, or the "
+                                    "first readings' reasons")
+    rejected: list[TelemetryRejection] = Field(
+        description="the whole message (point null) or every reading, with reasons")
 
 
 class Health(BaseModel):

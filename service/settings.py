@@ -13,11 +13,11 @@ from __future__ import annotations
 import contextvars
 import re
 from dataclasses import dataclass
-from datetime import timedelta
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field, SecretStr, field_validator
+from pydantic import AwareDatetime, BaseModel, Field, SecretStr, field_validator
 from pydantic_settings import (
     BaseSettings,
     PydanticBaseSettingsSource,
@@ -57,11 +57,21 @@ class IngestLimits:
     max_future : timedelta
         How far ahead of ``now`` a timestamp may lie (clock skew allowance);
         default 10 minutes.
+    earliest : datetime, optional
+        Earliest plausible reading time for every building (tz-aware). Default None: each
+        building's own (``zonecast.service.ingest.Catalogue.earliest``: one year before the
+        site's first experiment), else 1970-01-01.
+    grid : timedelta, optional
+        Readings must be stamped on this grid (a multiple of it since the Unix epoch,
+        docs/data.md) unless the building's catalogue names its own step; default 15 min,
+        the model step. None: any time.
     """
 
     max_payload_bytes: int = 64 * 1024
     max_readings: int = 5000
     max_future: timedelta = timedelta(minutes=10)
+    earliest: datetime | None = None
+    grid: timedelta | None = timedelta(minutes=15)
 
 
 class TLSSettings(BaseModel):
@@ -115,6 +125,13 @@ class MqttSettings(BaseModel):
     max_payload_bytes, max_readings, max_future : int, int, float
         Validation limits, see :class:`IngestLimits`
         (``max_future`` in seconds).
+    earliest_time : datetime, optional
+        Earliest plausible reading time for all buildings (ISO-8601 with offset); readings
+        before it are dead-lettered as ``past_time``. Default: per building, one year before
+        the site's first experiment, else 1970-01-01.
+    stall_after : float
+        ``/readyz`` reports ingest not ready when a received message has waited longer
+        than this for its acknowledgement [s] (storage unavailable, worker stuck).
     """
 
     host: str = "127.0.0.1"
@@ -132,12 +149,14 @@ class MqttSettings(BaseModel):
     max_payload_bytes: int = Field(64 * 1024, ge=1)
     max_readings: int = Field(5000, ge=1)
     max_future: float = Field(600.0, ge=0)
+    earliest_time: AwareDatetime | None = None
+    stall_after: float = Field(60.0, gt=0)
 
     @property
     def limits(self) -> IngestLimits:
         """The validation limits as :class:`IngestLimits`."""
         return IngestLimits(self.max_payload_bytes, self.max_readings,
-                            timedelta(seconds=self.max_future))
+                            timedelta(seconds=self.max_future), earliest=self.earliest_time)
 
 
 class RunnerSettings(BaseModel):
@@ -155,6 +174,9 @@ class RunnerSettings(BaseModel):
                            "prediction; longer gaps restart the filter [s]")
     publish: bool = Field(True, description="publish state and forecast (retained) on "
                           "<prefix>/<building>/state and .../forecast")
+    watermark_support: int = Field(2, ge=1, description="readings of this many points at one "
+                                   "time make it a watermark that closes earlier rows (a lone "
+                                   "reading ahead of the stream does not)")
 
 
 class ServiceSettings(BaseSettings):

@@ -308,15 +308,21 @@ class Storage(ABC):
                             "stored ones)", building, result.conflicts)
         return results
 
-    def reading_bounds(self, building: str, since: Any = None
+    def reading_bounds(self, building: str, since: Any = None, until: Any = None
                        ) -> tuple[datetime | None, datetime | None, datetime | None]:
         """First reading time at or after ``since`` (any time if None), latest reading
-        time, and latest arrival (``received_at``) of ``building``; None where no row.
+        time (before ``until`` if given), and latest arrival (``received_at``) of
+        ``building``; None where no row.
 
         The online runner uses these to find its first step, to skip gaps and as the
-        watermark of the stream.
+        watermark of the stream; ``until`` keeps implausible future times out of both
+        reading times.
         """
         where, params = "building = ?", [building]
+        received_where, received_params = where, list(params)
+        if until is not None:
+            where += " AND time < ?"
+            params.append(self._to_db(_utc(until, "until")))
         first_where, first_params = where, list(params)
         if since is not None:
             first_where += " AND time >= ?"
@@ -329,11 +335,53 @@ class Storage(ABC):
             first = cur.fetchone()[0]
             cur.execute(self._sql(f"SELECT MAX(time) FROM readings WHERE {where}"), params)
             last = cur.fetchone()[0]
-            cur.execute(self._sql(f"SELECT MAX(received_at) FROM readings WHERE {where}"),
-                        params)
+            cur.execute(self._sql(f"SELECT MAX(received_at) FROM readings WHERE "
+                                  f"{received_where}"), received_params)
             received = cur.fetchone()[0]
         return tuple(None if v is None else self._from_db(v)  # type: ignore[return-value]
                      for v in (first, last, received))
+
+    def supported_watermark(self, building: str, since: Any, until: Any,
+                            min_points: int = 2) -> datetime | None:
+        """The latest time in ``[since, until)`` at which readings of at least
+        ``min_points`` points of ``building`` are stored; None if there is none.
+
+        The runner's watermark: a lone reading far ahead of the stream (a publisher with a
+        wrong clock) is not one, so it cannot close the rows before it. One backwards walk
+        of the ``(building, time)`` index from ``until``, with a count per candidate time;
+        it stops at the first time that qualifies.
+        """
+        if min_points < 1:
+            raise ValueError(f"min_points must be >= 1, got {min_points}")
+        lo, hi = self._to_db(_utc(since, "since")), self._to_db(_utc(until, "until"))
+        with self._transaction() as cur:
+            cur.execute(self._sql(
+                "SELECT r.time FROM readings r WHERE r.building = ? AND r.time >= ? "
+                "AND r.time < ? AND (SELECT COUNT(*) FROM readings s WHERE s.building = "
+                "r.building AND s.time = r.time) >= ? ORDER BY r.time DESC LIMIT 1"),
+                (building, lo, hi, int(min_points)))
+            row = cur.fetchone()
+        return None if row is None else self._from_db(row[0])
+
+    def late_readings(self, building: str, received_after: Any, received_until: Any,
+                      before: Any) -> tuple[int, datetime | None, datetime | None]:
+        """Readings of ``building`` that arrived in ``(received_after, received_until]`` with
+        a time before ``before``: (count, earliest time, latest time).
+
+        The runner counts with this the readings that came for rows it had already
+        processed (a scan of the arrivals since its last poll, by the
+        ``(building, received_at)`` index).
+        """
+        with self._transaction() as cur:
+            cur.execute(self._sql(
+                "SELECT COUNT(*), MIN(time), MAX(time) FROM readings WHERE building = ? "
+                "AND received_at > ? AND received_at <= ? AND time < ?"),
+                (building, self._to_db(_utc(received_after, "received_after")),
+                 self._to_db(_utc(received_until, "received_until")),
+                 self._to_db(_utc(before, "before"))))
+            n, lo, hi = cur.fetchone()
+        return (int(n), None if lo is None else self._from_db(lo),
+                None if hi is None else self._from_db(hi))
 
     def readings(self, building: str, start: Any, end: Any,
                  points: Sequence[str] | None = None) -> pd.DataFrame:

@@ -390,13 +390,19 @@ def serve(config: Annotated[Path | None, typer.Option(
                    "overrides it.")] = None,
           host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
           port: Annotated[int, typer.Option(help="TCP port.")] = 8000,
-          log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info") -> None:
+          log_level: Annotated[str, typer.Option(help="Log level: debug, info, warning, "
+                                                 "error.")] = "info",
+          log_format: Annotated[str, typer.Option(
+              help="text (time, level, logger, message, key=value fields) or json (one "
+                   "object per line).")] = "text") -> None:
     """Run the online service: MQTT ingest, one runner per building, REST API."""
     import uvicorn
 
     from zonecast.service.app import create_app
+    from zonecast.service.logs import configure_logging
     from zonecast.service.settings import load_settings
     try:
+        configure_logging(log_format, log_level)
         settings = load_settings(config)
         # one BLAS thread unless OPENBLAS_NUM_THREADS says otherwise: the runners' products
         # are small, and threads of several buildings only contend (docs/service.md)
@@ -404,7 +410,9 @@ def serve(config: Annotated[Path | None, typer.Option(
             threadpool_limits(1, user_api="blas")
     except ValueError as exc:
         _fail(exc)
-    uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level)
+    # log_config=None: uvicorn keeps the handlers configure_logging installed
+    uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level.lower(),
+                log_config=None)
 
 
 @app.command("replay")
@@ -423,9 +431,13 @@ def replay_cmd(data: Annotated[Path, typer.Option(help="Folder with telemetry.cs
                    envvar="ZONECAST_REPLAY_PASSWORD", help="Broker password (or the "
                    "environment variable ZONECAST_REPLAY_PASSWORD).")] = None,
                protocol: Annotated[str, typer.Option(help="MQTT version: 5 or 3.1.1.")] = "5",
-               prefix: Annotated[str, typer.Option(help="Topic prefix.")] = "zonecast") -> None:
+               prefix: Annotated[str, typer.Option(help="Topic prefix.")] = "zonecast",
+               client_id: Annotated[str | None, typer.Option(
+                   help="MQTT client id (default: zonecast-replay-<host>-<random>).")] = None
+               ) -> None:
     """Publish recorded telemetry like a BMS: one QoS-1 message per row on
-    <prefix>/<building>/telemetry."""
+    <prefix>/<building>/telemetry, each waiting for its PUBACK (exit status 2 if one is
+    missing or refused)."""
     from zonecast.service.replay import parse_broker_url, replay
     from zonecast.service.settings import MqttSettings, TLSSettings
     try:
@@ -433,7 +445,8 @@ def replay_cmd(data: Annotated[Path, typer.Option(help="Folder with telemetry.cs
         settings = MqttSettings(host=host, port=port, username=username, password=password,
                                 tls=TLSSettings() if tls else None, protocol=protocol,
                                 topic_prefix=prefix)
-        res = replay(data, settings, building, speed=speed, start=start, end=end)
+        res = replay(data, settings, building, speed=speed, start=start, end=end,
+                     client_id=client_id)
     except (ValueError, ConnectionError) as exc:
         _fail(exc)
     typer.echo(f"published {res['messages']} messages ({res['readings']} readings) from "

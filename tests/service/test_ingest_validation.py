@@ -118,7 +118,7 @@ def test_size_and_count_limits():
 
 
 def test_future_limit_is_configurable():
-    payload = {"time": "2015-04-11T18:20:00Z", "readings": {"GHI": 1}}
+    payload = {"time": "2015-04-11T18:15:00Z", "readings": {"GHI": 1}}
     assert rejected(payload).reason is Reason.FUTURE_TIME
     assert check(payload, limits=IngestLimits(max_future=timedelta(hours=1))).readings
 

@@ -330,17 +330,23 @@ def test_rest_ingest_state_gains_forecast(tmp_path, vb, bundle, telemetry):
         # rejections: whole message and per reading, with reasons
         r = client.post("/api/v1/buildings/office6/telemetry", content=b"{oops", headers=AUTH)
         assert r.status_code == 422 and r.json()["detail"].startswith("malformed_json")
+        # nothing accepted: 422 with every reading's reason; something accepted: 200
         r = client.post("/api/v1/buildings/office6/telemetry", headers=AUTH, json={
             "time": "2015-04-13T03:00:00-07:00", "readings": {"OAT": "warm", "nope": 1}})
-        assert r.status_code == 200
+        assert r.status_code == 422
         assert sorted(x["reason"] for x in r.json()["rejected"]) == ["unknown_point", "wrong_type"]
+        assert r.json()["detail"].startswith("no reading accepted: ")
+        r = client.post("/api/v1/buildings/office6/telemetry", headers=AUTH, json={
+            "time": "2015-04-13T03:00:00-07:00", "readings": {"OAT": 11.5, "nope": 1}})
+        assert r.status_code == 200 and r.json()["stored"] == 1
+        assert [x["reason"] for x in r.json()["rejected"]] == ["unknown_point"]
         r = client.post("/api/v1/buildings/office6/telemetry", headers=AUTH,
                         content=b"x" * (2 * 1024 * 1024))
         assert r.status_code == 413
         assert client.get("/api/v1/buildings/elsewhere", headers=AUTH).status_code == 404
         issued = f["issued"]
         metrics = client.get("/metrics", headers=AUTH).text
-        assert 'zonecast_rejected_total{reason="unknown_point",transport="rest"} 1.0' in metrics
+        assert 'zonecast_rejected_total{reason="unknown_point",transport="rest"} 2.0' in metrics
         assert "zonecast_step_latency_seconds_count" in metrics
         assert "zonecast_nis_per_dof" in metrics
     assert gc.get_freeze_count() == 0  # released at shutdown

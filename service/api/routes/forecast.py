@@ -13,7 +13,10 @@ from zonecast.service import schemas as S
 from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, RunnerDep
 from zonecast.service.bodies import forecast_json
 
-router = APIRouter(prefix="/buildings", tags=["forecast"], dependencies=AUTH, responses=ERRORS)
+router = APIRouter(prefix="/buildings", tags=["forecast"], dependencies=AUTH,
+                   responses={**ERRORS, 409: {"model": S.ErrorBody, "description": (
+                       "no forecast to serve: the filter has not started, or an input has "
+                       "never had a value (the detail names the points)")}})
 
 
 @functools.lru_cache(maxsize=256)

@@ -32,6 +32,12 @@ def readyz(ctx: Ctx):
         broker = ctx.ingester.wait_ready(0)
         if not broker:
             errors["broker"] = f"not connected to {ctx.settings.mqtt.host}:{ctx.settings.mqtt.port}"
+        waiting = ctx.ingester.unacknowledged_for()
+        if waiting > ctx.settings.mqtt.stall_after:
+            broker = False
+            errors["ingest"] = (f"a message has waited {waiting:.0f} s for storage and its "
+                                "acknowledgement (see the storage_errors and worker_errors "
+                                "counters in /metrics)")
     models = {b: b in ctx.bundles for b in ctx.settings.buildings}
     ready = storage_ok and broker is not False and all(models.values())
     body = S.Readiness(ready=ready, storage=storage_ok, broker=broker, models=models,

@@ -1,18 +1,34 @@
 """``/api/v1/buildings/{building_id}/telemetry``: REST ingest, the same validation, dead
-letters and storage as MQTT."""
+letters and storage as MQTT.
+
+Answers, consistent with MQTT (where the good readings of a message are stored and each bad
+one is dead-lettered): 200 when at least one reading passed validation (stored, or already
+stored: ``duplicates``), with the rejected readings listed; 422 when none did (the whole
+message was rejected, or every reading was), with the reasons; 413 for a body over
+``max_body_bytes``. Never 500 on input: validation cannot raise (``accept``), and storage
+refusing validated data is answered 422 ``storage_rejected`` and dead-lettered.
+"""
 
 from __future__ import annotations
 
 from datetime import UTC, datetime
 
 from fastapi import APIRouter, HTTPException, Request
+from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 from zonecast.service import schemas as S
 from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, get_runner
-from zonecast.service.ingest import accept
+from zonecast.service.ingest import (
+    MessageRejected,
+    Reason,
+    accept,
+    log_rejections,
+    refuse,
+)
 
 router = APIRouter(prefix="/buildings", tags=["telemetry"], dependencies=AUTH,
-                   responses={**ERRORS, 413: {"model": S.ErrorBody}})
+                   responses={**ERRORS, 413: {"model": S.ErrorBody},
+                              422: {"model": S.TelemetryRefused}})
 
 _telemetry_body = {"requestBody": {"required": True, "content": {"application/json": {"schema": {
     "type": "object", "description": "map form {time, readings: {point: value}} or batch form "
@@ -24,6 +40,11 @@ _telemetry_body = {"requestBody": {"required": True, "content": {"application/js
                            "point": {"type": "string"}, "time": {"type": "string"},
                            "value": {"type": "number"}}}}]}},
     "required": ["readings"]}}}}}
+
+
+def _rejections(acc) -> list[S.TelemetryRejection]:
+    return [S.TelemetryRejection(point=r.point, reason=r.reason.value, detail=r.detail)
+            for r in acc.rejections]
 
 
 @router.post("/{building_id}/telemetry", response_model=S.TelemetryResult,
@@ -39,22 +60,32 @@ async def post_telemetry(ctx: Ctx, building_id: BuildingId, request: Request):
         raise HTTPException(413, f"body is {len(body)} bytes, the limit is {limit}")
     if building_id not in ctx.catalogues:
         await get_runner(ctx, building_id)  # raises 404 with the reason
-    topic = f"{ctx.settings.mqtt.topic_prefix}/{building_id}/telemetry"
+    prefix = ctx.settings.mqtt.topic_prefix
+    topic = f"{prefix}/{building_id}/telemetry"
     received = datetime.now(UTC)
     ctx.rest["messages_in"] += 1
     acc = accept(topic, body, received, ctx.catalogues, limits=ctx.settings.mqtt.limits,
-                 prefix=ctx.settings.mqtt.topic_prefix)
+                 prefix=prefix)
+    batches = [] if acc.error is not None else [(building_id, acc.readings)]
+    try:
+        stored = await run_in_threadpool(ctx.storage.put_many, batches, acc.dead_letters,
+                                         received_at=received)
+    except ValueError as exc:  # storage refused validated data (a bug): dead-letter it
+        acc = refuse(topic, body, received, MessageRejected(
+            Reason.STORAGE_REJECTED, f"{type(exc).__name__}: {str(exc)[:300]}", building_id))
+        await run_in_threadpool(ctx.storage.put_many, [], acc.dead_letters,
+                                received_at=received)
     if acc.error is not None:
         ctx.rest["messages_rejected"] += 1
     ctx.rest_rejected.update(acc.reasons)
-    batches = [] if acc.error is not None else [(building_id, acc.readings)]
-    stored = await run_in_threadpool(ctx.storage.put_many, batches, acc.dead_letters,
-                                     received_at=received)
-    if acc.error is not None:
-        raise HTTPException(422, str(acc.error))
+    log_rejections(acc, topic, "rest")
+    if acc.error is not None or not acc.readings:
+        detail = (str(acc.error) if acc.error is not None else
+                  "no reading accepted: " + "; ".join(f"{r.reason.value}: {r.detail}"
+                                                      for r in acc.rejections[:5]))
+        return JSONResponse(S.TelemetryRefused(detail=detail, rejected=_rejections(acc))
+                            .model_dump(), status_code=422)
     ctx.rest["readings_stored"] += stored[0].inserted
     return S.TelemetryResult(
         building=building_id, accepted=len(acc.readings), stored=stored[0].inserted,
-        duplicates=stored[0].duplicates,
-        rejected=[S.TelemetryRejection(point=r.point, reason=r.reason.value, detail=r.detail)
-                  for r in acc.rejections])
+        duplicates=stored[0].duplicates, rejected=_rejections(acc))

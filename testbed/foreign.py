@@ -64,6 +64,7 @@ from zonecast.testbed.run import (
     energyplus_dir,
     fast_csv,
     run_energyplus,
+    run_periods,
     weather_columns,
     write_csv,
 )
@@ -751,13 +752,7 @@ def run_foreign(idf: str | Path, out: str | Path, weeks: list[dt.date] | None = 
     loc = _epw_location(wfile)
     tzname = local_timezone(data, loc["time_zone"], timezone)
     std = dt.timezone(dt.timedelta(hours=loc["time_zone"]))
-    periods: list[tuple[dt.date, dt.date]] = []
-    for w in weeks:
-        first, last = w - dt.timedelta(days=1), w + dt.timedelta(days=6)
-        if periods and first <= periods[-1][1] + dt.timedelta(days=1):
-            periods[-1] = (periods[-1][0], last)
-        else:
-            periods.append((first, last))
+    periods = run_periods(weeks)
     lo = max([t.minimum_fraction for t in layout.terminals if t.vav]
              + [CV_MINIMUM_FRACTION for t in layout.terminals if not t.vav])
     blocks = plan_blocks(layout.zones, lo, days, layout.neighbours, seed)

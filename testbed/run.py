@@ -341,6 +341,20 @@ def write_csv(df: pd.DataFrame, path: Path, tz: str) -> None:
     fast_csv(path, list(df.columns), df.to_numpy(dtype=float), "%.6g", stamps)
 
 
+def run_periods(weeks: list[dt.date]) -> list[tuple[dt.date, dt.date]]:
+    """EnergyPlus run periods (first, last day) covering Monday-to-Sunday ``weeks``, each
+    with one lead day (local midnight is 23:00 standard time in summer); adjacent weeks
+    merge into one period."""
+    periods: list[tuple[dt.date, dt.date]] = []
+    for w in weeks:
+        first, last = w - dt.timedelta(days=1), w + dt.timedelta(days=6)
+        if periods and first <= periods[-1][1] + dt.timedelta(days=1):
+            periods[-1] = (periods[-1][0], last)
+        else:
+            periods.append((first, last))
+    return periods
+
+
 def run_weeks(weeks: list[dt.date], out: Path, seed: int = 0, effects: Effects | None = None,
               excitation_weekends: list[dt.date] | None = None,
               config: BuildingConfig | str = "office6",
@@ -364,14 +378,7 @@ def run_weeks(weeks: list[dt.date], out: Path, seed: int = 0, effects: Effects |
     for d in exc_days:
         if not any(w <= d < w + dt.timedelta(days=7) for w in weeks):
             raise ValueError(f"excitation day {d} lies in none of the simulated weeks")
-    # run periods: one lead day (local midnight is 23:00 standard time in summer)
-    periods: list[tuple[dt.date, dt.date]] = []
-    for w in weeks:
-        first, last = w - dt.timedelta(days=1), w + dt.timedelta(days=6)
-        if periods and first <= periods[-1][1] + dt.timedelta(days=1):
-            periods[-1] = (periods[-1][0], last)
-        else:
-            periods.append((first, last))
+    periods = run_periods(weeks)
     out = Path(out)
     t0 = time.perf_counter()
     wide, blocks, t_ep = simulate(cfg, periods, out, seed, effects, exc_days, progress)

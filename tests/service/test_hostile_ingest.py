@@ -191,7 +191,14 @@ def test_poison_then_good_through_a_real_broker_all_good_stored(broker, tmp_path
 def test_known_bad_kinds_and_poison_keep_ingest_flowing(broker, tmp_path):
     """The malformed kinds of test_mqtt_ingester plus the poison kinds, each between two
     good messages, on the ingester alone: each dead-lettered with its reason."""
-    from test_mqtt_ingester import BAD, DeadLetterWatcher, Publisher, catalogue, count, telemetry
+    from test_mqtt_ingester import (
+        BAD,
+        DeadLetterWatcher,
+        Publisher,
+        catalogue,
+        count,
+        interleave_bad_messages,
+    )
     from zonecast.service.mqtt import Ingester
     from zonecast.service.settings import MqttSettings
     from zonecast.service.storage import open_storage
@@ -211,17 +218,7 @@ def test_known_bad_kinds_and_poison_keep_ingest_flowing(broker, tmp_path):
     publisher = Publisher(broker)
     try:
         with Ingester(settings, store, {building: catalogue()}) as ingester:
-            assert ingester.wait_ready(15)
-            for step, (where, payload, _) in enumerate(cases):
-                publisher.send(f"zonecast/{building}/telemetry", telemetry(step))
-                topic = (f"zonecast/other{building}/telemetry" if where == "UNKNOWN"
-                         else f"zonecast/{building}/{where}")
-                publisher.send(topic, payload)
-            publisher.send(f"zonecast/{building}/telemetry", telemetry(len(cases)))
-            wait_until(lambda: ingester.counters()["messages_stored"] == 2 * len(cases) + 1,
-                       what="all messages")
-            wait_until(lambda: len(watcher.notices) == len(cases), what="notices")
-            counters = ingester.counters()
+            counters = interleave_bad_messages(ingester, watcher, publisher, building, cases)
     finally:
         watcher.close()
         publisher.close()

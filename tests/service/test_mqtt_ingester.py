@@ -178,23 +178,30 @@ BAD = [  # (topic suffix or full topic, payload, reason)
 ]
 
 
+def interleave_bad_messages(ingester, watcher, publisher, building, cases) -> dict:
+    """Publish a good telemetry message before each bad one of ``cases`` (topic suffix or
+    UNKNOWN, payload, reason) and one after them all; wait until every good message is
+    stored and every bad one dead-lettered; the ingester's counters."""
+    assert ingester.wait_ready(15)
+    for step, (where, payload, _) in enumerate(cases):
+        publisher.send(f"zonecast/{building}/telemetry", telemetry(step))
+        topic = (f"zonecast/other{building}/telemetry" if where == "UNKNOWN"
+                 else f"zonecast/{building}/{where}")
+        publisher.send(topic, payload)
+    publisher.send(f"zonecast/{building}/telemetry", telemetry(len(cases)))
+    wait_until(lambda: ingester.counters()["messages_stored"] == 2 * len(cases) + 1,
+               what="all messages")
+    wait_until(lambda: len(watcher.notices) == len(cases), what="dead-letter notices")
+    return ingester.counters()
+
+
 def test_each_bad_message_is_dead_lettered_and_ingest_keeps_flowing(
         broker, settings, building, publisher, tmp_path):
     store = open_storage(f"sqlite:///{tmp_path}/z.db")
     watcher = DeadLetterWatcher(broker)
     settings = settings.model_copy(update={"max_payload_bytes": 2048, "max_readings": 50})
     with Ingester(settings, store, {building: catalogue()}) as ingester:
-        assert ingester.wait_ready(15)
-        for step, (where, payload, _) in enumerate(BAD):
-            publisher.send(f"zonecast/{building}/telemetry", telemetry(step))
-            topic = (f"zonecast/other{building}/telemetry" if where == "UNKNOWN"
-                     else f"zonecast/{building}/{where}")
-            publisher.send(topic, payload)
-        publisher.send(f"zonecast/{building}/telemetry", telemetry(len(BAD)))
-        wait_until(lambda: ingester.counters()["messages_stored"] == 2 * len(BAD) + 1,
-                   what="all messages")
-        wait_until(lambda: len(watcher.notices) == len(BAD), what="dead-letter notices")
-        counters = ingester.counters()
+        counters = interleave_bad_messages(ingester, watcher, publisher, building, BAD)
     watcher.close()
     expected = [reason for _, _, reason in BAD]
     assert [n["rejections"][0]["reason"] for n in watcher.notices] == expected

@@ -38,6 +38,9 @@ class ModelData:
     segments : contiguous row ranges [start, stop)
     excitation : (N,) True inside an experiment period of the site
     timezone : IANA name for local time
+    reheat : (N, n_boxes) discharge-air temperature above the supply air [K], the rise
+        reheat coils add (:meth:`~.telemetry.Telemetry.discharge_rise`); zero for boxes
+        without a discharge-air point and where a box is shut. Default: zeros.
     """
 
     times: pd.DatetimeIndex
@@ -49,6 +52,14 @@ class ModelData:
     segments: list[tuple[int, int]]
     excitation: np.ndarray
     timezone: str
+    reheat: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.reheat is None:
+            self.reheat = np.zeros_like(self.u, dtype=float)
+        elif self.reheat.shape != self.u.shape:
+            raise ValueError(f"reheat has shape {self.reheat.shape}; expected {self.u.shape} "
+                             "(one discharge-air rise per box and step)")
 
     def __len__(self) -> int:
         return len(self.times)
@@ -60,14 +71,16 @@ class ModelData:
         step = (self.times[1] - self.times[0]) if len(self.times) > 1 else STEP
         return ModelData(times, self.u[idx], self.v[idx], self.y[idx], self.zones, self.boxes,
                          segments_of(times, step.to_pytimedelta()), self.excitation[idx],
-                         self.timezone)
+                         self.timezone, self.reheat[idx])
 
     def local_times(self) -> pd.DatetimeIndex:
         return self.times.tz_convert(self.timezone)
 
     def missing_inputs(self) -> np.ndarray:
-        """Rows whose u or v has a NaN: the model cannot be stepped over them."""
-        return ~(np.isfinite(self.u).all(axis=1) & np.isfinite(self.v).all(axis=1))
+        """Rows whose u, v or discharge-air rise has a NaN: the model cannot be stepped
+        over them."""
+        return ~(np.isfinite(self.u).all(axis=1) & np.isfinite(self.v).all(axis=1)
+                 & np.isfinite(self.reheat).all(axis=1))
 
 
 def zone_weights(site: Site, room_volume: Mapping[str, float] | None) -> dict[str, np.ndarray] | None:
@@ -109,5 +122,9 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
     exc = np.zeros(len(w), dtype=bool)
     for e in site.experiments:
         exc |= (w.index >= e.start) & (w.index < e.end)
-    return ModelData(tel.times, tel.airflow(), v, tel.zone_temperature(zone_weights(site, room_volume)),
-                     list(site.zones), list(site.boxes), list(tel.segments), exc, site.timezone)
+    u = tel.airflow()
+    rise = tel.discharge_rise()
+    rise[(u == 0) & ~np.isfinite(rise)] = 0.0  # a shut box delivers no heat
+    return ModelData(tel.times, u, v, tel.zone_temperature(zone_weights(site, room_volume)),
+                     list(site.zones), list(site.boxes), list(tel.segments), exc, site.timezone,
+                     rise)

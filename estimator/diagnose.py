@@ -185,7 +185,8 @@ def baseline(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
                 continue
             x0 = tr.track.x[r - tr.start]
             f = _profile_at(profile, data.times[r:r + H])
-            pred[r + 1:r + 1 + H] = model.simulate(x0, data.u[r:r + H], data.v[r:r + H], f).y[1:]
+            pred[r + 1:r + 1 + H] = model.simulate(x0, data.u[r:r + H], data.v[r:r + H], f,
+                                                   reheat=data.reheat[r:r + H]).y[1:]
             lead[r + 1:r + 1 + H] = np.arange(1, H + 1)
             issue_of_row[r + 1:r + 1 + H] = len(issues)
             issues.append(r)
@@ -193,7 +194,8 @@ def baseline(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
             x0s.append(x0)
         s0 = tr.start
         f = _profile_at(profile, data.times[s0:b])
-        sim[s0:b] = model.simulate(tr.track.x[0], data.u[s0:b], data.v[s0:b], f).y[:-1]
+        sim[s0:b] = model.simulate(tr.track.x[0], data.u[s0:b], data.v[s0:b], f,
+                                   reheat=data.reheat[s0:b]).y[:-1]
     if not issues:
         raise DiagnosisError("no forecast could be issued: the data need whole weeks with "
                              "local midnights after their first day")
@@ -342,7 +344,8 @@ def _mass_response(model: BilinearModel, data: ModelData, base: Baseline) -> np.
         m = scaled_capacity(model, scale)
         for i, r, H in _forecast_windows(base):
             f = _profile_at(base.profile, data.times[r:r + H])
-            y = m.simulate(base.x0[i], data.u[r:r + H], data.v[r:r + H], f).y[1:]
+            y = m.simulate(base.x0[i], data.u[r:r + H], data.v[r:r + H], f,
+                           reheat=data.reheat[r:r + H]).y[1:]
             out[r + 1:r + 1 + H, :, j] = (y - base.pred[r + 1:r + 1 + H]) / MASS_STEP
     return out
 

@@ -222,7 +222,8 @@ def filter_day(model: BilinearModel, data: ModelData, start: int, issue: int, *,
     for i in range(issue - start):
         k = start + i
         phi, gv, gi = model.step_matrices(data.u[k])
-        kf.predict(phi, gv @ data.v[k] + gi @ (c_ig + prior[i]))
+        kf.predict(phi, gv @ data.v[k] + gi @ (c_ig + prior[i])
+                   + model.reheat_step(data.u[k], data.reheat[k]))
         inn = kf.update(y[i + 1])
         if inn.dof:
             resid = np.full(model.n_zones, np.nan)
@@ -364,8 +365,9 @@ def issue_forecast(model: BilinearModel, data: ModelData, issue: int, profile: W
     out = {}
     for m in methods:
         f = _gains(m, data, issue, horizon, profile, fd, issuer)
-        out[m] = Forecast(data.times[issue], times, model.simulate(fd.x, u, v, f).y[1:], std, f,
-                          list(data.zones), issue_row=issue)
+        y = model.simulate(fd.x, u, v, f, reheat=data.reheat[issue:issue + horizon]).y[1:]
+        out[m] = Forecast(data.times[issue], times, y, std, f, list(data.zones),
+                          issue_row=issue)
     return out
 
 
@@ -397,7 +399,8 @@ def empirical_halfwidth(model: BilinearModel, data: ModelData, tracks: list[Week
                 continue
             x0 = wt.track.x[r - wt.start]
             f = np.nan_to_num(profile(data.times[r:r + h]))
-            y = model.simulate(x0, data.u[r:r + h], data.v[r:r + h], f).y[1:]
+            y = model.simulate(x0, data.u[r:r + h], data.v[r:r + h], f,
+                               reheat=data.reheat[r:r + h]).y[1:]
             e = np.full((horizon, model.n_zones), np.nan)
             e[:h] = np.abs(y - data.y[r + 1:r + 1 + h])
             errors.append(e)

@@ -153,8 +153,9 @@ def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
     gains = model.params.c_ig
 
     def step(k):
-        phi, gv, gi = model.step_matrices(data.u[start + k])
-        return phi, gv @ data.v[start + k] + gi @ gains
+        u = data.u[start + k]
+        phi, gv, gi = model.step_matrices(u)
+        return phi, gv @ data.v[start + k] + gi @ gains + model.reheat_step(u, data.reheat[start + k])
 
     res = run_filter(x0, default_initial_covariance(model.n, air), step, y, model.C,
                      default_process_noise(model.n, air, sigma_air=sigma_air),
@@ -175,7 +176,8 @@ def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequen
     local = data.local_times()
     for a, b in identification_spans(data, saturdays, window):
         x0 = kalman_state(model, data, a - X0_WINDOW, a)
-        y = model.simulate(x0, data.u[a:b], data.v[a:b], np.zeros((b - a, model.n_zones))).y
+        y = model.simulate(x0, data.u[a:b], data.v[a:b], np.zeros((b - a, model.n_zones)),
+                           reheat=data.reheat[a:b]).y
         rows = measured_rows(data, a, b)
         meas = data.y[rows]
         sat = local[a] - pd.Timedelta(days=(local[a].day_of_week - 5) % 7)
@@ -371,6 +373,8 @@ class _Problem:
         self.u_max = np.max(np.vstack([data.u[a:b] for a, b in spans]), axis=0)
         self.B_ig = model.B_ig
         self.C = model.C
+        # the discharge air's known forcing does not depend on theta (room air capacity fixed)
+        self.rh = [model.reheat_forcing(data.u[a:b], data.reheat[a:b]) for a, b in spans]
 
     def bound(self, theta: np.ndarray) -> float:
         """Spectral bound L [1/s] of A(theta) at the spans' largest airflows."""
@@ -392,9 +396,9 @@ class _Problem:
         coef = chebyshev_coefficients(r)
         Bv = self.bv0 + np.tensordot(phys, self.bvp, axes=1)
         out = []
-        for (a, b), x0 in zip(self.spans, self.x0s):
+        for (a, b), x0, rh in zip(self.spans, self.x0s, self.rh):
             u, v = self.data.u[a:b], self.data.v[a:b]
-            forcing = v @ Bv.T + c_ig @ self.B_ig.T
+            forcing = v @ Bv.T + c_ig @ self.B_ig.T + rh
             xs = np.empty((b - a + 1, n))
             _run(self.indptr, self.indices, data_vals, self.rooms, self.bxu,
                  np.ascontiguousarray(x0, float), np.ascontiguousarray(u, float),

@@ -50,7 +50,8 @@ def track_gains(model: BilinearModel, data: ModelData, start: int, stop: int,
     """Estimate f_IG over rows [start, stop) of ``data`` from the initial state ``x0``."""
     st = stepper or stepper_for(model, data.u[start:stop])
     nz, n = model.n_zones, model.n
-    base = data.v[start:stop] @ model.Bv.T + model.params.c_ig @ model.B_ig.T
+    base = (data.v[start:stop] @ model.Bv.T + model.params.c_ig @ model.B_ig.T
+            + model.reheat_forcing(data.u[start:stop], data.reheat[start:stop]))
     N = stop - start
     f = np.zeros((N, nz))
     cb = np.zeros((N, nz, nz))

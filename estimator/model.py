@@ -291,6 +291,15 @@ class BilinearModel:
         phi, gam = self._lookup(u)
         return phi, gam @ self.input_matrix(u), gam @ self.B_ig
 
+    def reheat_step(self, u: np.ndarray, reheat: np.ndarray | None) -> np.ndarray:
+        """Gamma(u) times :meth:`reheat_forcing`: the step's state increment [K] from the
+        boxes' discharge air above the supply air, with u and the rise held over the step."""
+        u = np.asarray(u, dtype=float)
+        if reheat is None or not np.any(reheat):
+            return np.zeros(self.n)
+        _, gam = self._lookup(u)
+        return gam @ self.reheat_forcing(u, reheat)
+
     # paper fixed-matrix form -------------------------------------------------
     def discrete_bilinear(self) -> DiscreteBilinear:
         """Fixed matrices of paper eq:model_dt, linearised in u around ``u_nominal``."""
@@ -319,6 +328,34 @@ class BilinearModel:
         return self._fixed
 
     # simulation ------------------------------------------------------------------
+    def reheat_forcing(self, u: np.ndarray, reheat: np.ndarray | None) -> np.ndarray:
+        """Forcing [K/s] of each state by the boxes' discharge air above the supply air.
+
+        The supply-air term of paper eq:ct_model, c_p u_j (T_s - T_room), assumes every box
+        blows air at the AHU supply temperature. A box with a discharge-air point blows it
+        at T_s + r_j (r_j: the reheat coil's rise, measured); the difference,
+        c_p u_j r_j / C_room, is a known input added here (zero when ``reheat`` is None).
+
+        Parameters
+        ----------
+        u : (N, n_boxes) or (n_boxes,) airflows [kg/s]
+        reheat : same shape, discharge-air rise over the supply air [K]
+
+        Returns
+        -------
+        ndarray (N, n) or (n,)
+        """
+        u = np.asarray(u, dtype=float)
+        out = np.zeros(u.shape[:-1] + (self.n,))
+        if reheat is None:
+            return out
+        q = -self._bxu * u * np.asarray(reheat, dtype=float)  # K/s per box (bxu < 0)
+        if u.ndim == 1:
+            np.add.at(out, self._rooms, q)
+        else:
+            np.add.at(out.T, self._rooms, q.T)
+        return out
+
     def _check_inputs(self, x0, u, v, f_ig):
         u = np.atleast_2d(np.asarray(u, dtype=float))
         v = np.atleast_2d(np.asarray(v, dtype=float))
@@ -349,6 +386,7 @@ class BilinearModel:
         v: np.ndarray,
         f_ig: np.ndarray | None = None,
         method: str | None = None,
+        reheat: np.ndarray | None = None,
     ) -> SimulationResult:
         """Simulate paper eq:model_dt.
 
@@ -364,25 +402,38 @@ class BilinearModel:
             Time-varying internal gains [W/m2]; default zero.
         method : {"exact", "eig", "bilinear"}, optional
             Default: the model's method.
+        reheat : ndarray (N, n_boxes), optional
+            Discharge-air rise over the supply air per box [K] (:meth:`reheat_forcing`);
+            default none.
 
         Returns
         -------
         SimulationResult
         """
         x0, u, v, f_ig = self._check_inputs(x0, u, v, f_ig)
+        if reheat is not None:
+            reheat = np.atleast_2d(np.asarray(reheat, dtype=float))
+            if reheat.shape != u.shape:
+                raise ValueError(f"reheat has shape {reheat.shape}; expected {u.shape} "
+                                 "(K per box)")
+            if not np.all(np.isfinite(reheat)):
+                raise ValueError("reheat contains NaN or inf; fill gaps before simulating")
+            if not np.any(reheat):
+                reheat = None
         method = method or self.method
         nsteps = len(u)
         xs = np.empty((nsteps + 1, self.n))
         xs[0] = x0
         gains = f_ig + self.params.c_ig
         x = x0
+        extra = self.reheat_forcing(u, reheat) if reheat is not None else 0.0
         if method == "exact":
-            forcing = v @ self.Bv.T + gains @ self.B_ig.T
+            forcing = v @ self.Bv.T + gains @ self.B_ig.T + extra
             xs = simulate_exact(self.structure.A(self.params.physical), self._rooms, self._bxu,
                                 x0, u, forcing, v[:, 1], self.step,
                                 capacity=self.structure.capacity)
         elif method == "eig":
-            forcing = v @ self.Bv.T + gains @ self.B_ig.T  # parts independent of u
+            forcing = v @ self.Bv.T + gains @ self.B_ig.T + extra  # u held per step
             ts = v[:, 1]
             props: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
             for k in range(nsteps):
@@ -395,6 +446,9 @@ class BilinearModel:
                 xs[k + 1] = x
         elif method == "bilinear":
             d = self.discrete_bilinear()
+            if reheat is not None:
+                raise ValueError("the 'bilinear' method (paper's fixed matrices) has no "
+                                 "discharge-air input; simulate with method='exact'")
             lin = v @ d.Bv.T + gains @ d.B_ig.T
             for k in range(nsteps):
                 m = d.A + np.tensordot(u[k], d.Bxu, axes=1)

@@ -70,14 +70,26 @@ class IrradiancePoint(_QuantityPoint):
 
 
 class Box(_Strict):
-    """A VAV box: the room (EnergyPlus zone) it serves and its airflow point."""
+    """A VAV box: the room (EnergyPlus zone) it serves, its airflow point and, optionally,
+    its discharge-air temperature point (the air leaving the box, after any reheat coil).
+
+    With a discharge-air point the model takes the heat a box delivers as
+    c_p u (T_discharge - T_room) instead of c_p u (T_supply - T_room): reheat becomes a
+    measured input rather than part of the unknown internal gains (docs/model.md).
+    """
     room: str
     airflow: AirflowPoint
+    discharge_temperature: TemperaturePoint | None = None
 
     @field_validator("airflow", mode="before")
     @classmethod
     def _short(cls, v):
         return _point(v, "kg/s")
+
+    @field_validator("discharge_temperature", mode="before")
+    @classmethod
+    def _short_t(cls, v):
+        return None if v is None else _point(v, "degC")
 
 
 class Solar(_Strict):
@@ -210,7 +222,7 @@ class Site(_Strict):
     location : latitude, longitude [deg] and elevation [m].
     step : the model step (15 min in the paper).
     zones : model zone -> EnergyPlus zone names (rooms).
-    boxes : VAV box id -> room served and airflow point.
+    boxes : VAV box id -> room served, airflow point and optional discharge-air point.
     points : telemetry columns by role, with units.
     experiments : excitation experiment periods, if any.
     thermostat : the zones' set point schedule, if known.
@@ -284,6 +296,8 @@ class Site(_Strict):
         pts += [p.supply_air_temperature, p.outdoor_air_temperature, p.solar.global_horizontal,
                 p.solar.direct_normal, p.solar.diffuse_horizontal]
         pts += [b.airflow for b in self.boxes.values()]
+        pts += [b.discharge_temperature for b in self.boxes.values()
+                if b.discharge_temperature is not None]
         return pts
 
     def point_units(self) -> dict[str, str]:

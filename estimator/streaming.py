@@ -62,7 +62,7 @@ from zonecast.estimator.constants import (
     STEP,
     Z90,
 )
-from zonecast.estimator.dataset import DISTURBANCES, model_data, zone_weights
+from zonecast.estimator.dataset import DISTURBANCES, ModelData, model_data, zone_weights
 from zonecast.estimator.forecast import Forecast
 from zonecast.estimator.gains import (
     DayAheadGains,
@@ -84,8 +84,8 @@ from zonecast.estimator.telemetry import Telemetry, load_telemetry, segments_of
 from zonecast.estimator.units import to_si
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
-           "StepReport", "checkpoint_header", "offline_forecasts", "rows_from_frame",
-           "telemetry_frame"]
+           "StepReport", "checkpoint_header", "has_discharge", "model_rows", "offline_forecasts",
+           "rows_from_frame", "telemetry_frame"]
 
 _DAY_NS = 86_400 * 10**9
 _CKPT_MAGIC = b"ZCE2"
@@ -103,23 +103,40 @@ class StepReport:
     held_inputs: list[str]
 
 
-def rows_from_frame(bundle: ModelBundle, frame: pd.DataFrame):
+def model_rows(bundle: ModelBundle, frame: pd.DataFrame) -> ModelData:
     """Telemetry in SI units (UTC index on the step grid, one column per point) -> the
-    model's arrays: times, u (N, boxes) [kg/s], v (N, 6), y (N, zones) [degC].
-
-    Missing points are NaN columns. The same function serves the runner (a few rows
-    from storage) and the offline path (a whole file).
-    """
+    model's arrays (:class:`~zonecast.estimator.dataset.ModelData`: u, v, y and the boxes'
+    discharge-air rise). Missing points are NaN columns."""
     site = bundle.site
     cols = list(site.point_units())
     frame = frame.reindex(columns=cols).astype(float)
     tel = Telemetry(frame, site, segments_of(frame.index, site.step))
-    data = model_data(tel, bundle.room_volume)
+    return model_data(tel, bundle.room_volume)
+
+
+def rows_from_frame(bundle: ModelBundle, frame: pd.DataFrame):
+    """Telemetry in SI units (UTC index on the step grid, one column per point) -> the
+    model's arrays: times, u (N, boxes) [kg/s], v (N, 6), y (N, zones) [degC]
+    (:func:`model_rows` also gives the discharge-air rise).
+
+    Missing points are NaN columns. The same function serves the runner (a few rows
+    from storage) and the offline path (a whole file).
+    """
+    data = model_rows(bundle, frame)
     return data.times, data.u, data.v, data.y
 
 
+def has_discharge(bundle: ModelBundle) -> bool:
+    """Whether any box of the site reports its discharge-air temperature (then the
+    estimator's inputs carry each box's discharge-air rise after u and v)."""
+    return any(b.discharge_temperature is not None for b in bundle.site.boxes.values())
+
+
 def _input_names(bundle: ModelBundle) -> list[str]:
-    return [f"u:{b}" for b in bundle.site.boxes] + [f"v:{d}" for d in DISTURBANCES]
+    names = [f"u:{b}" for b in bundle.site.boxes] + [f"v:{d}" for d in DISTURBANCES]
+    if has_discharge(bundle):
+        names += [f"r:{b}" for b in bundle.site.boxes]
+    return names
 
 
 @dataclass(frozen=True)
@@ -168,7 +185,8 @@ class OnlineEstimator:
         self.max_gap = pd.Timedelta(max_gap)
         m = bundle.model
         self._n, self._nz = m.n, m.n_zones
-        self._nin = m.n_boxes + 6
+        self._rh = has_discharge(bundle)  # inputs end with the boxes' discharge-air rise
+        self._nin = m.n_boxes + 6 + (m.n_boxes if self._rh else 0)
         air = m.structure.air_states(measured_only=True)
         ns = bundle.noise
         Q = air_wall_covariance(m.n, air, ns.sigma_air, ns.sigma_wall)
@@ -247,7 +265,7 @@ class OnlineEstimator:
         self._observed = np.isfinite(y)
 
     # --- one row ---------------------------------------------------------------------
-    def advance(self, t, u, v, y) -> StepReport | None:
+    def advance(self, t, u, v, y, reheat=None) -> StepReport | None:
         """Process the row at ``t`` (after every earlier row).
 
         Parameters
@@ -260,6 +278,9 @@ class OnlineEstimator:
             Ta, Ts [degC], solE, solS, solW, solN [W/m2] over the same interval.
         y : array (n_zones,)
             Zone temperatures at t [degC]; NaN = missing.
+        reheat : array (n_boxes,), optional
+            Discharge-air rise of each box over the supply air [K] over the interval, for
+            a site with discharge-air points (:func:`has_discharge`); ignored otherwise.
 
         Returns
         -------
@@ -270,7 +291,11 @@ class OnlineEstimator:
         if self.time is not None and t <= self.time:
             raise ValueError(f"row {t.isoformat()} is not after the last processed row "
                              f"{self.time.isoformat()}")
-        inputs = np.concatenate([np.asarray(u, float), np.asarray(v, float)])
+        parts = [np.asarray(u, float), np.asarray(v, float)]
+        if self._rh:
+            parts.append(np.full(len(parts[0]), np.nan) if reheat is None
+                         else np.asarray(reheat, float))
+        inputs = np.concatenate(parts)
         y = np.asarray(y, dtype=float)
         reset = False
         if self.started and t - self.time > self.max_gap:
@@ -305,15 +330,19 @@ class OnlineEstimator:
 
     def _step(self, t: pd.Timestamp, y: np.ndarray) -> tuple[float, int]:
         m = self.bundle.model
-        if not np.isfinite(self._pending).all():
+        nb = m.n_boxes
+        if not np.isfinite(self._pending[:nb + 6]).all():
             # an input never seen since the start: the model cannot be stepped; the
             # filter restarts at the next measurement
             self.reset()
             self.resets += 1
             return float("nan"), 0
-        u, v = self._pending[:m.n_boxes], self._pending[m.n_boxes:]
+        u, v = self._pending[:nb], self._pending[nb:nb + 6]
         st = self._ladder.for_airflows(u)
         base = m.Bv @ v + m.B_ig @ m.params.c_ig
+        if self._rh:
+            # a discharge-air point never heard from: no rise (the paper's supply-air term)
+            base = base + m.reheat_forcing(u, np.nan_to_num(self._pending[nb + 6:]))
         x_tilde = st.step(self._x, u, base, v[1])  # Eq:xnoig_ynoig (f_IG = 0)
         gig, cgig = self._gamma_ig(st, u)           # Gamma_IG(u), C Gamma_IG(u)
         try:
@@ -355,9 +384,10 @@ class OnlineEstimator:
 
         Parameters
         ----------
-        inputs : ndarray (96, n_boxes + 6), optional
+        inputs : ndarray (96, n_inputs), optional
             u and v over the 96 forecast intervals (airflows [kg/s], then Ta, Ts [degC],
-            solE, solS, solW, solN [W/m2]) when a site has forecasts of them (or, for an
+            solE, solS, solW, solN [W/m2], then, for a site with discharge-air points, each
+            box's discharge-air rise [K]) when a site has forecasts of them (or, for an
             evaluation, the measured ones); default: persistence inputs.
         """
         if not self.started:
@@ -375,13 +405,19 @@ class OnlineEstimator:
             ins[0] = current
             for h in range(1, HORIZON):
                 ins[h] = past.get(day_ago + h * STEP.value, current)
+            if self._rh:
+                ins[:, m.n_boxes + 6:] = np.nan_to_num(ins[:, m.n_boxes + 6:])
         else:
             ins = np.asarray(inputs, dtype=float)
             if ins.shape != (HORIZON, self._nin) or not np.isfinite(ins).all():
                 raise ValueError(f"inputs must be finite with shape ({HORIZON}, {self._nin}): "
-                                 "u per box, then Ta, Ts, solE, solS, solW, solN per interval")
-        u, v = ins[:, :m.n_boxes], ins[:, m.n_boxes:]
+                                 "u per box, then Ta, Ts, solE, solS, solW, solN per interval"
+                                 + (", then the discharge-air rise per box" if self._rh else ""))
+        nb = m.n_boxes
+        u, v = ins[:, :nb], ins[:, nb:nb + 6]
         forcing = v @ m.Bv.T + (f_ig + m.params.c_ig) @ m.B_ig.T
+        if self._rh:
+            forcing = forcing + m.reheat_forcing(u, ins[:, nb + 6:])
         xs = self._ladder.for_airflows(u).run(self._x, u, forcing, v[:, 1])
         std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
         times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
@@ -537,6 +573,10 @@ class RowConverter:
             by_unit.setdefault(unit, []).append(col[p])
         self._groups = [(unit, np.array(idx)) for unit, idx in by_unit.items()]
         self._box = np.array([col[b.airflow.point] for b in site.boxes.values()], dtype=int)
+        # discharge-air point of each box, -1 where a box has none
+        self._dat = np.array([-1 if b.discharge_temperature is None
+                              else col[b.discharge_temperature.point]
+                              for b in site.boxes.values()], dtype=int)
         pts = site.points
         self._ta = col[pts.outdoor_air_temperature.point]
         self._ts = col[pts.supply_air_temperature.point]
@@ -556,7 +596,13 @@ class RowConverter:
         self.albedo, self.sky_model = float(albedo), sky_model
 
     def convert(self, times_ns, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Rows of readings -> (u, v, y).
+        """Rows of readings -> (u, v, y) (:meth:`convert_rows` without the discharge air)."""
+        u, v, y, _ = self.convert_rows(times_ns, values)
+        return u, v, y
+
+    def convert_rows(self, times_ns, values
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Rows of readings -> (u, v, y, reheat).
 
         Parameters
         ----------
@@ -568,7 +614,10 @@ class RowConverter:
 
         Returns
         -------
-        u (N, n_boxes) [kg/s], v (N, 6) [degC, degC, W/m2 x 4], y (N, n_zones) [degC]
+        u (N, n_boxes) [kg/s], v (N, 6) [degC, degC, W/m2 x 4], y (N, n_zones) [degC],
+        reheat (N, n_boxes) discharge-air rise over the supply air [K] (as
+        :meth:`~zonecast.estimator.telemetry.Telemetry.discharge_rise`, zero for a box
+        without a discharge-air point or shut)
         """
         raw = np.asarray(values, dtype=float)
         if raw.ndim != 2 or raw.shape[1] != len(self.points):
@@ -593,7 +642,13 @@ class RowConverter:
             wsum = (good * w).sum(axis=1)
             with np.errstate(invalid="ignore", divide="ignore"):
                 y[:, j] = np.where(wsum > 0, np.nansum(vals * w, axis=1) / wsum, np.nan)
-        return si[:, self._box], v, y
+        u = si[:, self._box]
+        reheat = np.zeros_like(u)
+        has = self._dat >= 0
+        if has.any():
+            reheat[:, has] = si[:, self._dat[has]] - si[:, [self._ts]]
+            reheat[(u == 0) & ~np.isfinite(reheat)] = 0.0  # a shut box delivers no heat
+        return u, v, y, reheat
 
 
 # --------------------------------------------------------------------------- offline replay
@@ -651,11 +706,12 @@ def offline_forecasts(model_file: ModelBundle | str | Path,
     est = OnlineEstimator(bundle, max_gap=max_gap)
     out: dict[pd.Timestamp, Forecast] = {}
     last = max(wanted) if wanted else None
-    tt, u, v, y = rows_from_frame(bundle, frame)
+    rows = model_rows(bundle, frame)
+    tt, u, v, y, rh = rows.times, rows.u, rows.v, rows.y, rows.reheat
     for k, t in enumerate(tt):
         if last is not None and t > last:
             break
-        est.advance(t, u[k], v[k], y[k])
+        est.advance(t, u[k], v[k], y[k], rh[k])
         if t in wanted and est.started:
             out[t] = est.forecast(None if inputs is None else inputs.get(t))
     missing = sorted(wanted - set(out))

@@ -117,6 +117,18 @@ class Telemetry:
         """u(k): box airflows (N, n_boxes) [kg/s], boxes in site order."""
         return self.frame[[b.airflow.point for b in self.site.boxes.values()]].to_numpy()
 
+    def discharge_rise(self) -> np.ndarray:
+        """Discharge-air temperature of each box above the supply air (N, n_boxes) [K], boxes
+        in site order: T_discharge - T_supply, the rise a reheat coil (or duct) adds. Zero for
+        a box without a discharge-air point; NaN where the point or the supply air did not
+        report."""
+        ts = self.frame[self.site.points.supply_air_temperature.point].to_numpy()
+        out = np.zeros((len(self.frame), len(self.site.boxes)))
+        for j, b in enumerate(self.site.boxes.values()):
+            if b.discharge_temperature is not None:
+                out[:, j] = self.frame[b.discharge_temperature.point].to_numpy() - ts
+        return out
+
     def weather(self) -> pd.DataFrame:
         """Outdoor air [degC], supply air [degC] and GHI, DNI, DHI [W/m2]."""
         p = self.site.points

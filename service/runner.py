@@ -270,10 +270,11 @@ class Runner:
         """One row: ``row`` holds the readings of :attr:`points` at ``t`` in their wire
         units (NaN = none)."""
         t0 = _time.perf_counter()
-        u, v, y = self.convert.convert(np.array([t.value], dtype=np.int64), row[None, :])
+        u, v, y, rh = self.convert.convert_rows(np.array([t.value], dtype=np.int64),
+                                                row[None, :])
         every = self.settings.forecast_every
         with self.lock:
-            report = self.est.advance(t, u[0], v[0], y[0])
+            report = self.est.advance(t, u[0], v[0], y[0], rh[0])
             if report is not None:
                 self.last_report = report
             issue = self.est.started and (t.value // STEP.value) % every == 0

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pydantic import BaseModel, ConfigDict, Field
 
 EFFECTS = ("reheat", "infiltration", "gains", "window_solar", "sensor_noise", "sensor_bias",
-           "supply_offset")
+           "supply_offset", "discharge_sensors")
 
 
 class Effects(BaseModel):
@@ -30,6 +30,9 @@ class Effects(BaseModel):
     mass : per model zone scale of the furniture (internal mass) area [-].
     mixing : per model zone air flow exchanged both ways between each of its rooms and
         each neighbouring room of another zone (open doors, transfer grilles) [m3/s].
+    discharge_sensors : the VAV boxes report their discharge-air temperature (a telemetry
+        point per box in the site description); False: a BMS without them, where reheat
+        is an effect the model does not see.
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -44,6 +47,7 @@ class Effects(BaseModel):
     supply_offset: float = Field(0.0, ge=-5, le=5)
     mass: dict[str, float] = Field(default_factory=dict)
     mixing: dict[str, float] = Field(default_factory=dict)
+    discharge_sensors: bool = True
 
     def gain_scale(self, zone: str) -> float:
         return self.gains.get(zone, 1.0)
@@ -92,6 +96,8 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
             data["sensor_bias"] = {}
         elif item == "supply_offset":
             data["supply_offset"] = 0.0
+        elif item == "discharge_sensors":
+            data["discharge_sensors"] = False
         else:
             raise ValueError(f"--disable {item}: unknown effect; choose from {list(EFFECTS)} "
                              f"or gains.ZONE")

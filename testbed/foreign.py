@@ -437,6 +437,7 @@ def patch_epjson(data: dict, layout: Layout, periods: list[tuple[dt.date, dt.dat
     variables = [("*", v) for v in ZONE_VARIABLES + SITE_VARIABLES]
     for t in layout.terminals:
         variables.append((t.outlet_node, "System Node Mass Flow Rate"))
+        variables.append((t.outlet_node, "System Node Temperature"))
         if t.reheat_coil:
             variables.append((t.reheat_coil, "Heating Coil Heating Rate"))
     for node in layout.loops.values():
@@ -575,6 +576,7 @@ def point_names(layout: Layout) -> dict:
     """Telemetry columns: ``T_<zone>``, ``<terminal>_flow``, AHU_SAT, OAT, GHI, DNI, DHI."""
     return {"temp": {z: f"T_{_safe(z)}" for z in layout.zones},
             "flow": {t.name: f"{_safe(t.name)}_flow" for t in layout.terminals},
+            "discharge": {t.name: f"{_safe(t.name)}_DAT" for t in layout.terminals},
             "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI"}
 
 
@@ -602,7 +604,8 @@ def to_records(layout: Layout, wide: pd.DataFrame, per_hour: int, keep: list, st
     temperatures at t and inputs averaged over [t, t + 15 min).
 
     Telemetry: ``T_<zone>`` [degC] (true air temperature + sensor noise, rounded as the
-    testbed's default sensors), ``<terminal>_flow`` [kg/s], ``AHU_SAT`` [degC] (supply outlet
+    testbed's default sensors), ``<terminal>_flow`` [kg/s], ``<terminal>_DAT`` [degC] (discharge air: the terminal's
+    outlet node, after any reheat coil), ``AHU_SAT`` [degC] (supply outlet
     node of the air loop; with several loops their flow-weighted mean, each also as
     ``AHU_SAT_<loop>``), ``OAT`` [degC], ``GHI``/``DNI``/``DHI`` [W/m2]. Truth: as the
     testbed's truth.csv, per zone and ``zone:<Z>`` (model zone = EnergyPlus zone).
@@ -623,6 +626,8 @@ def to_records(layout: Layout, wide: pd.DataFrame, per_hour: int, keep: list, st
     for t in layout.terminals:
         flow = _col(iv, t.outlet_node, "System Node Mass Flow Rate")
         tel[names["flow"][t.name]] = flow
+        if effects.discharge_sensors:
+            tel[names["discharge"][t.name]] = _col(iv, t.outlet_node, "System Node Temperature")
         tru[f"airflow:{t.name}"] = flow
     temps = {loop: _col(iv, node, "System Node Temperature") for loop, node in layout.loops.items()
              if loop in {t.air_loop for t in layout.terminals}}
@@ -793,8 +798,12 @@ def run_foreign(idf: str | Path, out: str | Path, weeks: list[dt.date] | None = 
         "location": {"latitude": loc["latitude"], "longitude": loc["longitude"],
                      "elevation": loc["elevation"]},
         "step": "15min", "zones": {z: [z] for z in layout.zones},
-        "boxes": {t.name: {"room": t.zone, "airflow": {"point": names["flow"][t.name],
-                                                       "unit": "kg/s"}} for t in layout.terminals},
+        "boxes": {t.name: {"room": t.zone,
+                           "airflow": {"point": names["flow"][t.name], "unit": "kg/s"},
+                           **({"discharge_temperature": {"point": names["discharge"][t.name],
+                                                         "unit": "degC"}}
+                              if effects.discharge_sensors else {})}
+                  for t in layout.terminals},
         "points": {
             "zone_temperature": {z: [{"point": names["temp"][z], "unit": "degC", "room": z}]
                                  for z in layout.zones},

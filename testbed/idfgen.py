@@ -195,5 +195,6 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
         add(obj("Output:Variable", key, var, "Timestep"))
     for room in cfg.rooms:
         add(obj("Output:Variable", supply_node(room), "System Node Mass Flow Rate", "Timestep"))
+        add(obj("Output:Variable", supply_node(room), "System Node Temperature", "Timestep"))
     add(obj("Output:Variable", ahu_outlet_node(), "System Node Temperature", "Timestep"))
     return "\n".join(out)

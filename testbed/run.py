@@ -186,18 +186,22 @@ def point_names(cfg: BuildingConfig) -> dict:
     """Telemetry column names a BMS of this building would use."""
     return {"room_temp": {r: f"T_{r}" for r in cfg.rooms},
             "flow": {r: f"{box_name(r)}_flow" for r in cfg.rooms},
+            "discharge": {r: f"{box_name(r)}_DAT" for r in cfg.rooms},
             "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI"}
 
 
-def make_site(cfg: BuildingConfig, experiments: list[tuple[dt.datetime, dt.datetime]]) -> Site:
+def make_site(cfg: BuildingConfig, experiments: list[tuple[dt.datetime, dt.datetime]],
+              discharge_sensors: bool = True) -> Site:
     names = point_names(cfg)
+    dat = {r: {"discharge_temperature": {"point": names["discharge"][r], "unit": "degC"}}
+           if discharge_sensors else {} for r in cfg.rooms}
     return Site.model_validate({
         "building": cfg.name, "idf": "building.idf", "timezone": cfg.location.timezone,
         "location": {"latitude": cfg.location.latitude, "longitude": cfg.location.longitude,
                      "elevation": cfg.location.elevation},
         "step": "15min", "zones": cfg.zones,
-        "boxes": {box_name(r): {"room": r, "airflow": {"point": names["flow"][r], "unit": "kg/s"}}
-                  for r in cfg.rooms},
+        "boxes": {box_name(r): {"room": r, "airflow": {"point": names["flow"][r], "unit": "kg/s"},
+                                **dat[r]} for r in cfg.rooms},
         "points": {
             "zone_temperature": {z: [{"point": names["room_temp"][r], "unit": "degC", "room": r}
                                      for r in rooms] for z, rooms in cfg.zones.items()},
@@ -287,6 +291,10 @@ def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Time
         if effects.airflow_noise > 0:
             flow = flow * (1 + rng.normal(0.0, effects.airflow_noise, len(flow)))
         tel[names["flow"][r]] = flow
+        # the box's discharge-air sensor: mean over the step of the zone inlet node (after
+        # the reheat coil); where the box is shut the node keeps its last value
+        if effects.discharge_sensors:
+            tel[names["discharge"][r]] = _col(iv, supply_node(r), "System Node Temperature")
         tru[f"air_temperature:{r}"] = true_t
         tru[f"people:{r}"] = _opt(iv, r, "Zone People Total Heating Rate")
         tru[f"lights:{r}"] = _col(iv, r, "Zone Lights Total Heating Rate")
@@ -392,7 +400,7 @@ def run_weeks(weeks: list[dt.date], out: Path, seed: int = 0, effects: Effects |
         day_blocks = [b for b in blocks if b.start.date() == d]
         experiments.append((min(b.start for b in day_blocks).replace(tzinfo=tz),
                             max(b.end for b in day_blocks).replace(tzinfo=tz)))
-    site = make_site(cfg, experiments)
+    site = make_site(cfg, experiments, effects.discharge_sensors)
     progress("writing files")
     write_csv(tel, out / "telemetry.csv", cfg.location.timezone)
     write_csv(tru, out / "truth.csv", cfg.location.timezone)

@@ -319,3 +319,37 @@ def test_write_summary(five_model, tmp_path):
     assert s["parameters"]["gamma_EW"]["unit"] == "W/(m2 K)"
     z = np.load(tmp_path / "m.npz")
     assert z["A"].shape == (five_model.n, five_model.n)
+
+
+@pytest.mark.parametrize("method", ["exact", "eig"])
+def test_discharge_rise_equals_warmer_supply(five_model, method):
+    """A box's discharge air r K above the supply air delivers c_p u (T_s + r - T_room): with
+    the same rise at every box it is the model driven by a supply r K warmer."""
+    u, v, f = _inputs(192, 5, 2, seed=5)
+    rise = np.where(np.arange(192)[:, None] % 96 < 40, 12.0, 0.0) * np.ones((1, 5))
+    x0 = five_model.steady_state(u[0], v[0], f[0])
+    warm = v.copy()
+    warm[:, 1] += rise[:, 0]
+    ref = five_model.simulate(x0, u, warm, f, method=method)
+    got = five_model.simulate(x0, u, v, f, method=method, reheat=rise)
+    assert np.abs(got.x - ref.x).max() < 1e-9
+    plain = five_model.simulate(x0, u, v, f, method=method)
+    assert np.abs(got.y - plain.y).max() > 1.0  # the rise matters
+
+
+def test_discharge_rise_heat_and_errors(five_model):
+    """One box's rise heats its own room only, by c_p u r / C_room [K/s]."""
+    u = np.full(5, 0.4)
+    r = np.array([0.0, 10.0, 0.0, 0.0, 0.0])
+    q = five_model.reheat_forcing(u, r)
+    room = five_model._rooms[1]
+    assert np.flatnonzero(q).tolist() == [room]
+    assert q[room] == pytest.approx(1005.0 * 0.4 * 10.0 / five_model.structure.capacity[room],
+                                    rel=1e-3)
+    uu, v, f = _inputs(8, 5, 2)
+    with pytest.raises(ValueError, match="reheat has shape"):
+        five_model.simulate(20.0, uu, v, f, reheat=np.zeros((8, 4)))
+    with pytest.raises(ValueError, match="NaN"):
+        five_model.simulate(20.0, uu, v, f, reheat=np.full((8, 5), np.nan))
+    with pytest.raises(ValueError, match="method='exact'"):
+        five_model.simulate(20.0, uu, v, f, method="bilinear", reheat=np.ones((8, 5)))

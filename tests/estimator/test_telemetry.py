@@ -74,3 +74,37 @@ def test_bad_files_are_rejected_with_row_and_column(site, telemetry_csv, edit, m
 def test_missing_file(site, tmp_path):
     with pytest.raises(TelemetryError, match="not found"):
         load_telemetry(tmp_path / "nope.csv", site)
+
+
+def test_discharge_air_point_gives_the_rise_over_supply(tmp_path, site_dict, telemetry_csv):
+    """A box's optional discharge-air point (any temperature unit) -> T_discharge - T_supply
+    [K]; boxes without one have zero rise; a shut box's missing reading is no heat, an open
+    box's missing reading stays missing."""
+    from zonecast.estimator.dataset import model_data
+    site_dict["boxes"]["VAV-B"]["discharge_temperature"] = {"point": "B DAT", "unit": "degF"}
+    site = load_site(write_site(tmp_path, site_dict))
+    assert site.point_units()["B DAT"] == "degF"
+    df = telemetry_frame()
+    df["B DAT"] = 95.0  # 35 degC: 22 K above the 13 degC supply
+    df = df.astype({"B DAT": object})
+    df.loc[2, "B DAT"] = ""
+    df.loc[3, "B DAT"] = ""
+    df.loc[3, "B flow"] = 0.0
+    tel = load_telemetry(telemetry_csv(df), site)
+    rise = tel.discharge_rise()
+    assert rise.shape == (8, 2) and np.all(rise[:, 0] == 0.0)
+    np.testing.assert_allclose(rise[[0, 1, 4], 1], 22.0)
+    assert np.isnan(rise[2, 1]) and np.isnan(rise[3, 1])
+    data = model_data(tel)
+    assert np.isnan(data.reheat[2, 1]) and data.reheat[3, 1] == 0.0
+    assert data.missing_inputs()[2] and not data.missing_inputs()[3]
+
+
+def test_discharge_air_point_is_a_temperature(tmp_path, site_dict):
+    from zonecast.estimator.site import SiteError
+    site_dict["boxes"]["VAV-B"]["discharge_temperature"] = {"point": "B DAT", "unit": "kg/s"}
+    with pytest.raises(SiteError, match="discharge_temperature"):
+        load_site(write_site(tmp_path, site_dict))
+    site_dict["boxes"]["VAV-B"]["discharge_temperature"] = "SAT"
+    with pytest.raises(SiteError, match="more than one role"):
+        load_site(write_site(tmp_path, site_dict))

@@ -48,6 +48,13 @@ def test_row_converter_equals_rows_from_frame_on_every_row(bundle, telemetry):
     shifted = frame.iloc[40:41].copy()
     shifted.index = shifted.index + pd.Timedelta("1min")
     np.testing.assert_allclose(off, rows_from_frame(bundle, shifted)[2], rtol=0, atol=1e-12)
+    # the boxes' discharge-air rise (the virtual building reports every box's discharge air)
+    from zonecast.estimator.streaming import has_discharge, model_rows
+    assert has_discharge(bundle)
+    rise = model_rows(bundle, frame).reheat
+    got = conv.convert_rows(ns, values)[3]
+    np.testing.assert_allclose(got, rise, rtol=0, atol=1e-12)
+    assert rise.max() > 5.0  # reheat coils ran
 
 
 def test_dayahead_gains_on_arrays_equal_dayahead_issue(bundle, telemetry):
@@ -102,3 +109,22 @@ def test_npz_checkpoint_of_the_earlier_format_still_loads(bundle, telemetry):
         assert np.array_equal(e.x, a.x) and e.steps == a.steps
         fa, fe = a.forecast(), e.forecast()
         assert np.array_equal(fa.mean, fe.mean) and np.array_equal(fa.f_ig, fe.f_ig)
+
+
+def test_discharge_air_enters_the_online_step_and_a_silent_point_means_no_rise(bundle, telemetry):
+    """The runner's estimator uses each box's discharge-air rise; a discharge point that
+    never reported is reported as held and stepped as no rise (the supply-air term), which
+    is what an estimator without the point computes."""
+    from zonecast.estimator.streaming import OnlineEstimator, model_rows
+
+    d = model_rows(bundle, si_frame(bundle, telemetry.iloc[:2 * 96]))
+    assert np.abs(d.reheat).max() > 5.0
+    with_rh, silent, zero = (OnlineEstimator(bundle) for _ in range(3))
+    for k in range(len(d)):
+        with_rh.advance(d.times[k], d.u[k], d.v[k], d.y[k], d.reheat[k])
+        rep = silent.advance(d.times[k], d.u[k], d.v[k], d.y[k])
+        zero.advance(d.times[k], d.u[k], d.v[k], d.y[k], np.zeros(len(d.boxes)))
+    assert any(name.startswith("r:") for name in rep.held_inputs)
+    assert np.array_equal(silent.x, zero.x)
+    assert np.array_equal(silent.forecast().mean, zero.forecast().mean)
+    assert np.abs(with_rh.forecast().mean - zero.forecast().mean).max() > 0.05

@@ -25,6 +25,7 @@ from zonecast.estimator.forecast import coverage, issue_rows, week_split
 from zonecast.estimator.identify import weekend_simulations
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.rc.network import ModelOptions
+from zonecast.estimator.streaming import has_discharge
 from zonecast.estimator.study import forecast_study
 
 RESULTS_SCHEMA_VERSION = 1
@@ -242,12 +243,15 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int)
     times = [data.times[r] for r, _ in issues]
     # the same forecasts with the measured u and v over the horizon (as Table 3's): what the
     # steady-state filter and online gains give when the inputs are known
+    served = Pipeline.from_model_file(model_file)
     measured = {}
     for r, _ in issues:
-        ins = np.hstack([data.u[r:r + HORIZON], data.v[r:r + HORIZON]])
+        parts = [data.u[r:r + HORIZON], data.v[r:r + HORIZON]]
+        if has_discharge(served.bundle):
+            parts.append(data.reheat[r:r + HORIZON])
+        ins = np.hstack(parts)
         if len(ins) == HORIZON and np.isfinite(ins).all():
             measured[data.times[r]] = ins
-    served = Pipeline.from_model_file(model_file)
     runs = {"service": served.forecast(telemetry, times),
             "service_known_inputs": served.forecast(telemetry, times, inputs=measured)}
     nz = len(data.zones)

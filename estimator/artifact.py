@@ -223,7 +223,7 @@ def _noise(doc: dict, path: Path) -> NoiseSettings:
     return NoiseSettings(**{k: float(v) for k, v in known.items()})
 
 
-_OPTION_KEYS = ("window_solar", "floor_share", "roof_solar")
+_OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration")
 #: what a model file without ``model_options`` was built with (files written before the
 #: key existed put window solar on the room air, the paper's placement)
 LEGACY_OPTIONS = {"window_solar": "air"}
@@ -242,6 +242,8 @@ def _model_options(doc: dict, path: Path, notes: list[str]):
     if unknown:
         raise ModelFileError(f"{path}: unknown model_options {unknown}; known: "
                              f"{list(_OPTION_KEYS)}")
+    # files written before the infiltration option were built without it
+    raw = {"infiltration": "none", **raw}
     try:
         return ModelOptions(**raw)
     except ModelDefinitionError as exc:

@@ -35,6 +35,7 @@ __all__ = [
     "EnergyPlusInstall",
     "EnergyPlusNotFoundError",
     "IdfConversionError",
+    "Infiltration",
     "InternalMass",
     "Layer",
     "Surface",
@@ -545,6 +546,33 @@ class Window:
     kind: str = "Window"
 
 
+#: conditions at which an infiltration object's flow is taken as a constant (docs/model.md,
+#: "Infiltration"): wind speed [m/s] and indoor-outdoor temperature difference [K]
+INFILTRATION_WIND = 4.0
+INFILTRATION_DELTA_T = 10.0
+
+
+@dataclass(frozen=True)
+class Infiltration:
+    """A ZoneInfiltration:DesignFlowRate object as a constant outdoor-air flow into one zone.
+
+    EnergyPlus's flow is I_design F_schedule (A + B |T_zone - T_out| + C w + D w^2); here
+    F_schedule is the value of a constant schedule (1 for any other schedule: the flow
+    when the building's fans are off, which is when it matters most) and the terms are
+    taken at :data:`INFILTRATION_WIND` and :data:`INFILTRATION_DELTA_T`.
+
+    Attributes
+    ----------
+    name, zone : str
+    flow : float
+        Nominal outdoor-air volume flow [m^3/s].
+    """
+
+    name: str
+    zone: str
+    flow: float
+
+
 @dataclass(frozen=True)
 class InternalMass:
     """An InternalMass object (furniture, partitions) inside one zone.
@@ -591,6 +619,7 @@ class Building:
     constructions: dict[str, Construction]
     internal_masses: dict[str, InternalMass]
     unsupported: list[Unsupported] = field(default_factory=list)
+    infiltration: dict[str, Infiltration] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
     def zone(self, name: str) -> Zone:
@@ -971,11 +1000,57 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
     for z in zones.values():
         if z.geometry_computed:
             notes.append(f"zone {z.name}: {', '.join(z.geometry_computed)} computed from geometry")
+    infiltration = _infiltration(data, zkey, zones, surfaces, unsupported, notes)
     return Building(
         name=bname, version=version_text, north_axis=north, zones=zones, surfaces=surfaces,
         windows=windows, constructions=constructions, internal_masses=masses,
-        unsupported=unsupported, notes=notes,
+        unsupported=unsupported, notes=notes, infiltration=infiltration,
     )
+
+
+def _infiltration(data: Mapping[str, Any], zkey: Mapping[str, str], zones: Mapping[str, Zone],
+                  surfaces: Mapping[str, Surface], unsupported: list[Unsupported],
+                  notes: list[str]) -> dict[str, Infiltration]:
+    """ZoneInfiltration:DesignFlowRate objects as nominal constant flows (:class:`Infiltration`)."""
+    constants = {k.lower(): _num(f.get("hourly_value"), 1.0)
+                 for k, f in data.get("Schedule:Constant", {}).items()}
+    out: dict[str, Infiltration] = {}
+    for name, f in data.get("ZoneInfiltration:DesignFlowRate", {}).items():
+        zname = str(f.get("zone_or_zonelist_or_space_or_spacelist_name")
+                    or f.get("zone_or_zonelist_name") or f.get("zone_name") or "")
+        if zname.lower() not in zkey:
+            unsupported.append(Unsupported("ZoneInfiltration:DesignFlowRate", name,
+                                           f"refers to {zname!r}, not a single zone; not modelled"))
+            continue
+        zone = zones[zkey[zname.lower()]]
+        method = str(f.get("design_flow_rate_calculation_method", "Flow/Zone")).lower()
+        outdoor = [s for s in surfaces.values() if s.zone == zone.name and s.boundary == "Outdoors"]
+        if method == "flow/zone":
+            design = _num(f.get("design_flow_rate"), 0.0)
+        elif method == "flow/area":
+            design = _num(f.get("flow_rate_per_floor_area"), 0.0) * zone.floor_area
+        elif method in ("flow/exteriorarea", "flow/exteriorwallarea"):
+            faces = outdoor if method == "flow/exteriorarea" else \
+                [s for s in outdoor if s.surface_type.lower() == "wall"]
+            design = (_num(f.get("flow_rate_per_exterior_surface_area"), 0.0)
+                      * sum(s.gross_area for s in faces))
+        elif method == "airchanges/hour":
+            design = _num(f.get("air_changes_per_hour"), 0.0) * zone.volume / 3600.0
+        else:
+            unsupported.append(Unsupported("ZoneInfiltration:DesignFlowRate", name,
+                                           f"calculation method {method!r}; not modelled"))
+            continue
+        sched = str(f.get("schedule_name", "")).lower()
+        factor = constants.get(sched, 1.0)
+        if sched and sched not in constants:
+            notes.append(f"infiltration {name}: schedule {f.get('schedule_name')} taken as 1")
+        terms = (_num(f.get("constant_term_coefficient"), 1.0)
+                 + _num(f.get("temperature_term_coefficient"), 0.0) * INFILTRATION_DELTA_T
+                 + _num(f.get("velocity_term_coefficient"), 0.0) * INFILTRATION_WIND
+                 + _num(f.get("velocity_squared_term_coefficient"), 0.0) * INFILTRATION_WIND**2)
+        flow = max(design * factor * terms, 0.0)
+        out[name] = Infiltration(name, zone.name, flow)
+    return out
 
 
 def _zone(name: str, f: Mapping[str, Any], base: Mapping[str, Mapping[str, Any]]) -> Zone:

@@ -301,7 +301,10 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   window: Annotated[str, typer.Option(
                       help="'weekend' or 'experiments' (as zonecast identify)")] = "weekend",
                   sensitivity: Annotated[bool, typer.Option(
-                      help="also identify the paper's window-solar placement")] = True) -> None:
+                      help="also identify the paper's window-solar placement")] = True,
+                  infiltration: Annotated[str, typer.Option(
+                      help="'none' (the paper) or 'idf': the IDF's infiltration as a fixed "
+                           "outdoor-air conductance")] = "none") -> None:
     """The paper's tables and figures on the virtual building: campaign, identification,
     internal gains, forecasts; writes results.json, figures and report.md."""
     try:
@@ -310,7 +313,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
             res = reproduce.run(out, campaign, seed, starts,
                                 progress=lambda m: prog.update(task, description=f"reproduce: {m}"),
                                 priors=priors, sigma_e=sigma_e, window=window,
-                                sensitivity=sensitivity)
+                                sensitivity=sensitivity, infiltration=infiltration)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

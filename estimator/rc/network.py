@@ -124,6 +124,11 @@ class ModelOptions:
         elements keeps it on the air. Same parameter in every case (docs/model.md).
     floor_share : float
         Share [-] of the window solar on the floors with ``window_solar="surfaces"``.
+    infiltration : {"none", "idf"}
+        Outdoor air leaking into the rooms: none (the paper), or the IDF's
+        ZoneInfiltration:DesignFlowRate objects as a fixed conductance rho c_p q between
+        the outdoor air and the room air (:class:`~zonecast.estimator.idf.Infiltration`;
+        no parameter).
     """
 
     roof_solar: str = "mean"
@@ -132,8 +137,11 @@ class ModelOptions:
     cp_air: float = CP_AIR
     window_solar: str = "surfaces"
     floor_share: float = 0.25
+    infiltration: str = "none"
 
     def __post_init__(self):
+        if self.infiltration not in ("none", "idf"):
+            raise ModelDefinitionError("infiltration must be 'none' or 'idf'")
         if self.window_solar not in ("air", "floor", "surfaces"):
             raise ModelDefinitionError("window_solar must be 'surfaces', 'floor' or 'air'")
         if not 0.0 <= self.floor_share <= 1.0:
@@ -538,6 +546,12 @@ def build_structure(
             notes.append(f"interior window {name}: U_win coupling between rooms")
         else:
             notes.append(f"window {name} on a {parent.boundary} surface: ignored")
+    if opts.infiltration == "idf":
+        for inf in building.infiltration.values():
+            if inf.flow > 0 and inf.zone in room_state:
+                # outdoor air at v_Ta replacing room air: rho c_p q (v_Ta - x_room), fixed
+                asm.to_temperature(room_state[inf.zone], 0, opts.rho_air * opts.cp_air * inf.flow,
+                                   -1)
 
 
     cap, a_list, b_list = asm.matrices()

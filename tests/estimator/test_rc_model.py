@@ -25,7 +25,7 @@ FIVE_ZONES = {"Perim": ["space1-1", "SPACE2-1", "SPACE3-1", "SPACE4-1"], "Core":
 FIVE_BOXES = {f"VAV{i}": f"Space{i}-1" for i in range(1, 6)}
 
 
-def _wall_building(layers, area=(4.0, 3.0)):
+def _wall_building(layers, area=(4.0, 3.0), extra=None):
     """One room whose south wall is exterior; all other surfaces adiabatic."""
     w, h = area
     depth = 5.0
@@ -57,7 +57,7 @@ def _wall_building(layers, area=(4.0, 3.0)):
     }
     data = {"Version": {"V": {"version_identifier": "25.2"}}, "Building": {"B": {}},
             "Zone": {"Room": {}}, "Construction": {"C": cons},
-            "BuildingSurface:Detailed": surfs, **mats}
+            "BuildingSurface:Detailed": surfs, **mats, **(extra or {})}
     return building_from_epjson(data)
 
 
@@ -353,3 +353,33 @@ def test_discharge_rise_heat_and_errors(five_model):
         five_model.simulate(20.0, uu, v, f, reheat=np.full((8, 5), np.nan))
     with pytest.raises(ValueError, match="method='exact'"):
         five_model.simulate(20.0, uu, v, f, method="bilinear", reheat=np.ones((8, 5)))
+
+
+LAYERS = [(0.1, 0.72, 1920, 840), (2.0, None, 0, 0), (0.0127, 0.16, 800, 1090)]
+
+
+@pytest.mark.parametrize("fields, flow", [
+    ({"design_flow_rate_calculation_method": "Flow/ExteriorWallArea",
+      "flow_rate_per_exterior_surface_area": 0.001}, 0.001 * 12.0),
+    ({"design_flow_rate_calculation_method": "AirChanges/Hour", "air_changes_per_hour": 0.5,
+      "schedule_name": "Half"}, 0.5 * 60.0 / 3600.0 * 0.5),
+    ({"design_flow_rate_calculation_method": "Flow/Zone", "design_flow_rate": 0.01,
+      "constant_term_coefficient": 0.0, "velocity_term_coefficient": 0.25}, 0.01 * 0.25 * 4.0),
+])
+def test_infiltration_read_and_modelled_as_outdoor_air_conductance(fields, flow):
+    """ZoneInfiltration:DesignFlowRate -> a nominal flow q (schedule constant, wind 4 m/s);
+    with infiltration='idf' the room air gains rho c_p q (T_a - x) and nothing else changes."""
+    obj = {"zone_or_zonelist_or_space_or_spacelist_name": "Room", **fields}
+    b = _wall_building(LAYERS, extra={"ZoneInfiltration:DesignFlowRate": {"Leak": obj},
+                                      "Schedule:Constant": {"Half": {"hourly_value": 0.5}}})
+    assert b.infiltration["Leak"].flow == pytest.approx(flow, rel=1e-12)
+    plain = build_structure(b, {"Z": ["room"]}, {})
+    leaky = build_structure(b, {"Z": ["room"]}, {}, ModelOptions(infiltration="idf"))
+    g = 1.2 * 1005.0 * flow / leaky.capacity[0]
+    dA = (leaky.A0 - plain.A0).toarray()
+    dB = (leaky.Bv0 - plain.Bv0).toarray()
+    assert dA[0, 0] == pytest.approx(-g) and np.count_nonzero(dA) == 1
+    assert dB[0, 0] == pytest.approx(g) and np.count_nonzero(dB) == 1
+    assert all((p - q).nnz == 0 for p, q in zip(leaky.A_p, plain.A_p))
+    with pytest.raises(ModelDefinitionError, match="infiltration"):
+        ModelOptions(infiltration="wind")

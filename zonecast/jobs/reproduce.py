@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -275,10 +276,12 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int)
 
 def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
         progress=lambda s: None, *, priors: bool = False, sigma_e: float = 0.3,
-        window: str = "weekend", sensitivity: bool = True) -> Results:
+        window: str = "weekend", sensitivity: bool = True,
+        infiltration: str = "none") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
-    ``sensitivity``: also identify the paper's window-solar placement (one start)."""
+    ``sensitivity``: also identify the paper's window-solar placement (one start);
+    ``infiltration``: :class:`~zonecast.estimator.rc.network.ModelOptions` ``infiltration``."""
     out.mkdir(parents=True, exist_ok=True)
     timings = {}
     t0 = time.perf_counter()
@@ -288,7 +291,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
         progress("virtual building campaign (EnergyPlus)")
         run_campaign(campaign, seed=seed, progress=lambda s: progress(f"campaign: {s}"))
     timings["campaign"] = time.perf_counter() - t0
-    pipe = Pipeline.from_site(campaign / "site.yaml")
+    pipe = Pipeline.from_site(campaign / "site.yaml",
+                              options=ModelOptions(infiltration=infiltration))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()
@@ -298,7 +302,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
     progress("identification with window solar on the room air (paper's placement)")
-    ident_air = pipe.with_options(ModelOptions(window_solar="air")).identify(
+    ident_air = pipe.with_options(replace(pipe.options, window_solar="air")).identify(
         data, n_starts=1, seed=seed, priors=priors, sigma_e=sigma_e,
         window=window) if sensitivity else None
     fitted = ident.model

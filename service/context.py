@@ -57,6 +57,14 @@ def catalogue_for_site(site: Site) -> Catalogue:
     return out
 
 
+def _log_refused_publish(client, userdata, mid, reason_code, properties) -> None:
+    """MQTT v5: the broker refused a state/forecast publish (e.g. 0x87 not authorised: the
+    service user lacks write access to ``<prefix>/<building>/state|forecast`` in the ACL)."""
+    if getattr(reason_code, "is_failure", False):
+        log.error("broker refused a state/forecast publish: %s (check the service user's "
+                  "ACL, docs/security.md)", reason_code)
+
+
 class ServiceContext:
     """Everything the running service holds (``app.state.zc``)."""
 
@@ -101,6 +109,7 @@ class ServiceContext:
             self.ingester = Ingester(s.mqtt, self.storage, self.catalogues).start()
             if s.runner.publish:
                 self.publisher = connect_publisher(s.mqtt, client_id=unique_client_id("pub"))
+                self.publisher.on_publish = _log_refused_publish
         for bid, bundle in self.bundles.items():
             runner = Runner(bundle, self.storage, s.runner, publish=self._published)
             self.runners[bid] = runner

@@ -4,7 +4,9 @@ Delivery contract (see ``docs/service.md``):
 
 - QoS 1 subscription on a persistent session (MQTT v5 ``clean_start=False``
   with a session expiry interval, or MQTT 3.1.1 ``clean_session=False``) under
-  a fixed client id, so the broker keeps queueing while the ingester is down.
+  a client id that stays the same across restarts (``MqttSettings.client_id``, default
+  generated once per storage: :func:`ingester_client_id`), so the broker keeps queueing
+  while the ingester is down.
 - Manual acknowledgement: a message's PUBACK is sent only after the readings
   it carries, or the dead letter recording why it was rejected, are committed
   to storage. A crash before the commit leaves the message unacknowledged and
@@ -50,10 +52,14 @@ from zonecast.service.ingest import (
     log_rejections,
     refuse,
 )
+from zonecast.service.replay import unique_client_id
 from zonecast.service.settings import DEFAULT_PREFIX, MqttSettings
 from zonecast.service.storage import PutResult, Storage
 
-__all__ = ["Ingester", "dead_letter_topic"]
+__all__ = ["CLIENT_ID_KEY", "Ingester", "dead_letter_topic", "ingester_client_id"]
+
+#: key of the generated ingester client id in storage (``Storage.instance_value``)
+CLIENT_ID_KEY = "mqtt_client_id"
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +67,17 @@ log = logging.getLogger(__name__)
 def dead_letter_topic(building: str | None, prefix: str = DEFAULT_PREFIX) -> str:
     """``<prefix>/<building>/deadletter``, or ``<prefix>/deadletter`` without a building."""
     return f"{prefix}/{building}/deadletter" if building else f"{prefix}/deadletter"
+
+
+def ingester_client_id(settings: MqttSettings, storage: Storage) -> str:
+    """The ingester's MQTT client id: ``settings.client_id`` if set, else the id kept in
+    ``storage`` under :data:`CLIENT_ID_KEY`, generated on first use as
+    ``zonecast-ingest-<host>-<16 hex>``. Stable across restarts on the same storage (the
+    broker's queued messages are keyed on it), different for every storage, so two service
+    instances with their own databases never take over each other's session."""
+    if settings.client_id is not None:
+        return settings.client_id
+    return storage.instance_value(CLIENT_ID_KEY, unique_client_id("ingest", random_hex=16))
 
 
 def _notice(message: mqtt.MQTTMessage, received: datetime, acc: Accepted) -> dict[str, Any]:
@@ -124,6 +141,8 @@ class Ingester:
         self.storage = storage
         self.catalogues = catalogues
         self._limits = settings.limits
+        #: the MQTT client id (:func:`ingester_client_id`)
+        self.client_id = ingester_client_id(settings, storage)
         self._queue: queue.Queue[tuple[mqtt.MQTTMessage, datetime]] = queue.Queue()
         self._stopping = threading.Event()
         self._aborted = False
@@ -156,7 +175,8 @@ class Ingester:
         """Store and acknowledge what was received, then disconnect cleanly.
 
         The session stays on the broker: messages published meanwhile are
-        delivered to the next ingester started with the same client id.
+        delivered to the next ingester started with the same client id (the same storage,
+        or the same ``MqttSettings.client_id``).
         """
         if self._client is None:
             return
@@ -226,7 +246,7 @@ class Ingester:
         if not v5:
             kwargs["clean_session"] = False
         client = mqtt.Client(callback_api_version=CallbackAPIVersion.VERSION2,
-                             client_id=s.client_id, manual_ack=True, **kwargs)
+                             client_id=self.client_id, manual_ack=True, **kwargs)
         if s.username is not None:
             client.username_pw_set(s.username,
                                    s.password.get_secret_value() if s.password else None)
@@ -263,9 +283,9 @@ class Ingester:
             return
         self._count("connects")
         log.info("MQTT connected to %s:%d as %s (session present: %s)", self.settings.host,
-                 self.settings.port, self.settings.client_id, flags.session_present,
+                 self.settings.port, self.client_id, flags.session_present,
                  extra={"broker": f"{self.settings.host}:{self.settings.port}",
-                        "client_id": self.settings.client_id,
+                        "client_id": self.client_id,
                         "session_present": bool(flags.session_present)})
         if self.settings.protocol == "5":
             # retainHandling=1: retained messages only for a new subscription.

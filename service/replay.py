@@ -12,6 +12,7 @@ two replays never disconnect each other.
 from __future__ import annotations
 
 import json
+import logging
 import math
 import socket
 import threading
@@ -31,13 +32,17 @@ from zonecast.service.settings import MqttSettings
 
 __all__ = ["ReplayResult", "connect_publisher", "parse_broker_url", "replay", "unique_client_id"]
 
+log = logging.getLogger(__name__)
 
-def unique_client_id(role: str) -> str:
-    """``zonecast-<role>-<host>-<6 hex>``: a client id no other process uses, for clients
-    without a persistent session (replay, the service's publisher). The ingester's id stays
-    fixed (``MqttSettings.client_id``): the broker keys its queued messages on it."""
+
+def unique_client_id(role: str, random_hex: int = 6) -> str:
+    """``zonecast-<role>-<host>-<random_hex hex digits>``: a client id no other process uses,
+    for clients without a persistent session (replay, the service's publisher). The
+    ingester's id must stay the same across restarts (the broker keys its queued messages on
+    it): it is generated once with this function (16 hex digits, hard to guess) and kept in
+    storage (``zonecast.service.mqtt.ingester_client_id``)."""
     host = "".join(c for c in socket.gethostname() if c.isalnum() or c in "-_")[:32] or "host"
-    return f"zonecast-{role}-{host}-{uuid.uuid4().hex[:6]}"
+    return f"zonecast-{role}-{host}-{uuid.uuid4().hex[:random_hex]}"
 
 
 def parse_broker_url(url: str) -> tuple[str, int, bool]:
@@ -68,14 +73,23 @@ def connect_publisher(settings: MqttSettings, *, client_id: str,
                        keyfile=settings.tls.keyfile)
         client.tls_insecure_set(settings.tls.insecure)
     connected = threading.Event()
-    client.on_connect = lambda c, u, f, rc, p: connected.set() if not rc.is_failure else None
+
+    def on_connect(c, userdata, flags, reason_code, properties) -> None:
+        if reason_code.is_failure:  # e.g. bad user name or password; paho retries
+            log.error("MQTT connect of %s to %s:%d refused: %s", client_id, settings.host,
+                      settings.port, reason_code)
+        else:
+            connected.set()
+
+    client.on_connect = on_connect
     client.reconnect_delay_set(1, 30)
     client.connect_async(settings.host, settings.port, settings.keepalive)
     client.loop_start()
     if timeout is not None and not connected.wait(timeout):
         client.loop_stop()
         raise ConnectionError(f"no connection to the broker {settings.host}:{settings.port} "
-                              f"within {timeout} s")
+                              f"within {timeout} s (refused credentials are logged; check "
+                              "the user name and password)")
     return client
 
 

@@ -2,7 +2,7 @@
 
 Environment variables carry the prefix ``ZONECAST_`` and use ``__`` for nesting, e.g.
 ``ZONECAST_STORAGE_URL=postgresql://...``, ``ZONECAST_MQTT__HOST=broker``,
-``ZONECAST_API_TOKENS='["token-1"]'`` (JSON for lists),
+``ZONECAST_API_TOKENS='["token-1"]'`` (JSON for lists and mappings),
 ``ZONECAST_BUILDINGS__office6=/models/office6.json``. The YAML file (e.g.
 ``configs/service.yaml``) has the same structure with lower-case keys. See
 ``docs/service.md`` for every field.
@@ -17,7 +17,14 @@ from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import AwareDatetime, BaseModel, Field, SecretStr, field_validator
+from pydantic import (
+    AwareDatetime,
+    BaseModel,
+    Field,
+    SecretStr,
+    field_validator,
+    model_validator,
+)
 from pydantic_settings import (
     BaseSettings,
     PydanticBaseSettingsSource,
@@ -28,6 +35,7 @@ from pydantic_settings import (
 __all__ = [
     "DEFAULT_PREFIX",
     "DEFAULT_URL",
+    "SCOPE_PATTERN",
     "IngestLimits",
     "MqttSettings",
     "RunnerSettings",
@@ -40,6 +48,10 @@ __all__ = [
 DEFAULT_URL = "sqlite:///zonecast.db"
 #: first topic level of the MQTT topics
 DEFAULT_PREFIX = "zonecast"
+
+#: API token scopes (docs/security.md): ``admin`` (everything), ``metrics`` (``/metrics``),
+#: ``building:<id>`` (read and write that building), ``building:<id>:read`` (read only)
+SCOPE_PATTERN = r"admin|metrics|building:[A-Za-z0-9_-]{1,64}(:read)?"
 
 _YAML: contextvars.ContextVar[Path | None] = contextvars.ContextVar("zonecast_yaml", default=None)
 
@@ -100,11 +112,16 @@ class MqttSettings(BaseModel):
     ----------
     host, port : str, int
         Broker address.
-    client_id : str
-        FIXED client id: the broker keys the persistent session on it, so a
-        restarted ingester receives what it missed. One id per ingester.
+    client_id : str, optional
+        Client id of the ingester. The broker keys the persistent session on it, so it
+        must stay the same across restarts (a restarted ingester then receives what it
+        missed) and differ between ingesters. Default None: ``zonecast-ingest-<host>-<random>``
+        generated once and kept in storage (``Storage.instance_value``), so each storage
+        (database or PostgreSQL schema) has its own stable id.
     username, password : str, optional
-        Broker credentials.
+        Broker credentials of the service (``docs/security.md``: the service user reads
+        all telemetry and is the only one allowed to write state, forecast and dead
+        letters); used by the ingester and by the state/forecast publisher.
     tls : TLSSettings, optional
         Enable TLS (use port 8883 on most brokers).
     protocol : {"5", "3.1.1"}
@@ -136,7 +153,7 @@ class MqttSettings(BaseModel):
 
     host: str = "127.0.0.1"
     port: int = Field(1883, ge=1, le=65535)
-    client_id: str = Field("zonecast-ingest", min_length=1)
+    client_id: str | None = Field(None, min_length=1, max_length=128)
     username: str | None = None
     password: SecretStr | None = None
     tls: TLSSettings | None = None
@@ -190,9 +207,12 @@ class ServiceSettings(BaseSettings):
         Run the MQTT ingester (off: REST ingest only).
     mqtt : MqttSettings
         Broker host, port, username, password, TLS, client id, validation limits.
-    api_tokens : list of secret str
-        Bearer tokens accepted by the API (compared in constant time). Empty: every
-        authenticated endpoint answers 401.
+    api_tokens : dict of secret str -> scopes
+        Bearer tokens accepted by the API (compared in constant time) and what each may do
+        (docs/security.md): a mapping token -> scopes (``admin``, ``metrics``,
+        ``building:<id>``, ``building:<id>:read``), or a list of tokens, each then
+        ``admin`` (the form before scopes existed). Empty: every authenticated endpoint
+        answers 401.
     buildings : dict
         Building id -> identified-model file (``zonecast identify`` output). Relative paths
         are resolved against the settings file's folder (else the working directory).
@@ -207,7 +227,7 @@ class ServiceSettings(BaseSettings):
     storage_url: str = DEFAULT_URL
     mqtt_enabled: bool = True
     mqtt: MqttSettings = Field(default_factory=MqttSettings)
-    api_tokens: list[SecretStr] = Field(default_factory=list)
+    api_tokens: dict[SecretStr, tuple[str, ...]] = Field(default_factory=dict)
     buildings: dict[str, Path] = Field(default_factory=dict)
     runner: RunnerSettings = Field(default_factory=RunnerSettings)
     max_body_bytes: int = Field(1024 * 1024, ge=1024)
@@ -219,6 +239,37 @@ class ServiceSettings(BaseSettings):
         if bad:
             raise ValueError(f"building ids {bad} may only use letters, digits, '-' and '_'")
         return v
+
+    @field_validator("api_tokens", mode="before")
+    @classmethod
+    def _token_forms(cls, v: Any) -> Any:
+        if isinstance(v, list | tuple | set):  # list form: every token is admin
+            return {t: ("admin",) for t in v}
+        if isinstance(v, dict):  # one scope may be given as a plain string
+            return {t: (s,) if isinstance(s, str) else s for t, s in v.items()}
+        return v
+
+    @model_validator(mode="after")
+    def _token_scopes(self) -> ServiceSettings:
+        for token, scopes in self.api_tokens.items():
+            secret = token.get_secret_value()
+            if not secret or secret != secret.strip():
+                raise ValueError("api_tokens: a token is empty or has surrounding whitespace "
+                                 "(e.g. a newline from a file); generate one with "
+                                 "`python -c 'import secrets; print(secrets.token_urlsafe(32))'`")
+            if not scopes:
+                raise ValueError("api_tokens: a token has no scope; give it 'admin', 'metrics', "
+                                 "'building:<id>' or 'building:<id>:read'")
+            for scope in scopes:
+                if not re.fullmatch(SCOPE_PATTERN, scope):
+                    raise ValueError(f"api_tokens: unknown scope {scope!r}; use 'admin', "
+                                     "'metrics', 'building:<id>' or 'building:<id>:read'")
+                bid = scope.split(":")[1] if scope.startswith("building:") else None
+                if bid is not None and bid not in self.buildings:
+                    raise ValueError(f"api_tokens: scope {scope!r} names no configured building "
+                                     f"(buildings: {sorted(self.buildings)}); fix the id or "
+                                     "remove the scope")
+        return self
 
     @classmethod
     def settings_customise_sources(

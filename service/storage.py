@@ -560,6 +560,20 @@ class Storage(ABC):
             return None
         return Checkpoint(self._from_db(row[0]), bytes(row[1]), self._from_db(row[2]))
 
+    # --- identity of the service instance ------------------------------------
+    def instance_value(self, key: str, default: str) -> str:
+        """The value stored under ``key`` in table ``instance``; if there is none, store
+        ``default`` and return it. Atomic: of two processes opening the same storage at once
+        both get the value the first one stored. Used for values that must outlive restarts
+        of the service, e.g. the MQTT ingester's client id (``mqtt_client_id``)."""
+        if not key or not isinstance(default, str) or not default:
+            raise ValueError("instance_value needs a non-empty key and default string")
+        with self._lock, self._transaction() as cur:
+            cur.execute(self._sql("INSERT INTO instance (key, value) VALUES (?, ?) "
+                                  "ON CONFLICT (key) DO NOTHING"), (key, default))
+            cur.execute(self._sql("SELECT value FROM instance WHERE key = ?"), (key,))
+            return str(cur.fetchone()[0])
+
     # --- lifecycle ------------------------------------------------------------
     def close(self) -> None:
         """Close the connection (idempotent)."""
@@ -595,6 +609,8 @@ class SQLiteStorage(Storage):
         ),
         # the runner's watermark query: latest arrival per building without a scan
         2: ("CREATE INDEX readings_by_received ON readings (building, received_at)",),
+        # values that outlive restarts of the service (the MQTT client id)
+        3: ("CREATE TABLE instance (key TEXT PRIMARY KEY, value TEXT NOT NULL)",),
     }
 
     def __init__(self, url: str):
@@ -688,6 +704,7 @@ class PostgresStorage(Storage):
              "state BYTEA NOT NULL, saved_at TIMESTAMPTZ NOT NULL)"),
         ),
         2: ("CREATE INDEX readings_by_received ON readings (building, received_at)",),
+        3: ("CREATE TABLE instance (key TEXT PRIMARY KEY, value TEXT NOT NULL)",),
     }
 
     def __init__(self, url: str):

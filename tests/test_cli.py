@@ -86,7 +86,7 @@ def test_every_documented_command_exists():
     res = runner.invoke(app, ["--help"])
     assert res.exit_code == 0
     for cmd in ("testbed", "check", "model", "identify", "forecast", "reproduce", "demo", "serve",
-                "replay"):
+                "replay", "mqtt-config"):
         assert cmd in res.output, cmd
 
 

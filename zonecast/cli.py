@@ -456,5 +456,42 @@ def replay_cmd(data: Annotated[Path, typer.Option(help="Folder with telemetry.cs
                f"{res['first']} to {res['last']} in {res['seconds']:.1f} s")
 
 
+@app.command("mqtt-config")
+def mqtt_config_cmd(buildings: Annotated[str, typer.Option(
+                        help="Building ids, comma-separated: one broker user each (user name = "
+                             "building id).")],
+                    out: Annotated[Path, typer.Option(
+                        help="Folder for passwd, acl and credentials.txt (mounted into "
+                             "Mosquitto; keep it out of version control).")],
+                    service_user: Annotated[str, typer.Option(
+                        help="Broker user of the zonecast service (settings mqtt.username).")
+                    ] = "zonecast",
+                    prefix: Annotated[str, typer.Option(help="Topic prefix.")] = "zonecast",
+                    rotate: Annotated[str, typer.Option(
+                        help="Users whose password is replaced, comma-separated (others keep "
+                             "theirs).")] = "") -> None:
+    """Mosquitto password file and ACL for the service user and one user per building
+    (docs/security.md): a building may publish only its own telemetry; only the service
+    writes state and forecasts. Users already in OUT/passwd keep their passwords; new and
+    rotated ones are written to OUT/credentials.txt."""
+    from zonecast.service.brokerconf import write_broker_files
+
+    def split(text: str) -> list[str]:
+        return [x.strip() for x in text.split(",") if x.strip()]
+
+    try:
+        res = write_broker_files(split(buildings), out, service_user=service_user,
+                                 prefix=prefix, rotate=split(rotate))
+    except (ValueError, OSError) as exc:
+        _fail(exc)
+    typer.echo(f"wrote {res.passwd} and {res.acl} (mode 0600)")
+    if res.kept:
+        typer.echo(f"kept the passwords of {', '.join(res.kept)}")
+    if res.credentials is not None:
+        typer.echo(f"new passwords of {', '.join(res.passwords)} in {res.credentials}: hand "
+                   "each line to its owner, then delete the file")
+    typer.echo("reload Mosquitto (SIGHUP) to apply; it must be able to read the files")
+
+
 def main() -> None:  # pragma: no cover - console entry
     app(sys.argv[1:])

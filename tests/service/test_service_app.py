@@ -78,7 +78,8 @@ def test_settings_yaml_then_environment_then_arguments(tmp_path, monkeypatch):
     assert s.runner.grace == 60 and s.runner.forecast_every == 4
     assert s.storage_url == "sqlite:///b.db"
     assert s.buildings["office6"] == tmp_path / "models" / "office6.json"
-    assert s.api_tokens[0].get_secret_value() == "s3cr3t-xyz" and "s3cr3t" not in repr(s)
+    assert [t.get_secret_value() for t in s.api_tokens] == ["s3cr3t-xyz"]
+    assert s.api_tokens[next(iter(s.api_tokens))] == ("admin",) and "s3cr3t" not in repr(s)
     with pytest.raises(ValueError, match="not found"):
         load_settings(tmp_path / "missing.yaml")
     with pytest.raises(ValueError, match="letters, digits"):

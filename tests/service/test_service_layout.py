@@ -48,25 +48,25 @@ def test_service_imports_at_module_level():
 OPERATIONS = {
     ("get", "/api/v1/buildings"): (
         "list_buildings_api_v1_buildings_get", ["buildings"], [],
-        ["200", "401", "404", "422"]),
+        ["200", "401", "403", "404", "422"]),
     ("get", "/api/v1/buildings/{building_id}"): (
         "get_building_api_v1_buildings__building_id__get", ["buildings"],
-        [("building_id", "path")], ["200", "401", "404", "422"]),
+        [("building_id", "path")], ["200", "401", "403", "404", "422"]),
     ("get", "/api/v1/buildings/{building_id}/state"): (
         "get_state_api_v1_buildings__building_id__state_get", ["state"],
-        [("building_id", "path")], ["200", "401", "404", "422"]),
+        [("building_id", "path")], ["200", "401", "403", "404", "422"]),
     ("get", "/api/v1/buildings/{building_id}/internal-gains"): (
         "get_gains_api_v1_buildings__building_id__internal_gains_get", ["internal-gains"],
-        [("building_id", "path")], ["200", "401", "404", "422"]),
+        [("building_id", "path")], ["200", "401", "403", "404", "422"]),
     ("get", "/api/v1/buildings/{building_id}/forecast"): (
         "get_forecast_api_v1_buildings__building_id__forecast_get", ["forecast"],
-        [("building_id", "path"), ("horizon", "query")], ["200", "401", "404", "409", "422"]),
+        [("building_id", "path"), ("horizon", "query")], ["200", "401", "403", "404", "409", "422"]),
     ("post", "/api/v1/buildings/{building_id}/telemetry"): (
         "post_telemetry_api_v1_buildings__building_id__telemetry_post", ["telemetry"],
-        [("building_id", "path")], ["200", "401", "404", "413", "422"]),
+        [("building_id", "path")], ["200", "401", "403", "404", "413", "422"]),
     ("get", "/healthz"): ("healthz_healthz_get", ["health"], [], ["200"]),
     ("get", "/readyz"): ("readyz_readyz_get", ["health"], [], ["200", "503"]),
-    ("get", "/metrics"): ("get_metrics_metrics_get", ["metrics"], [], ["200", "401"]),
+    ("get", "/metrics"): ("get_metrics_metrics_get", ["metrics"], [], ["200", "401", "403"]),
 }
 
 

@@ -30,10 +30,10 @@ def rows_at(n, point="T_NW", start=T0, value=20.0):
 
 
 def test_schema_created_and_versioned(storage, storage_url):
-    assert storage.schema_version == 2
+    assert storage.schema_version == 3
     storage.close()
     again = open_storage(storage_url)  # reopening does not re-apply migrations
-    assert again.schema_version == 2
+    assert again.schema_version == 3
     again.close()
 
 
@@ -50,7 +50,7 @@ def test_version_1_database_is_migrated_and_keeps_its_readings(tmp_path):
     old.put_readings("office6", rows_at(3))
     old.close()
     store = open_storage(url)
-    assert store.schema_version == 2
+    assert store.schema_version == 3
     assert store.readings("office6", T0, T0 + timedelta(hours=1))["T_NW"].tolist() == \
         [20.0, 21.0, 22.0]
     store.close()
@@ -295,3 +295,17 @@ def test_postgres_reconnects_after_connection_loss(postgres_url):
         store.put_readings("b", rows_at(2))
     assert store.put_readings("b", rows_at(2)) == (1, 1)  # ...the retry reconnects
     store.close()
+
+
+def test_instance_value_is_stored_once_and_kept(storage, storage_url):
+    """The first default stored under a key stays: later defaults and a reopened storage
+    get it back (the MQTT client id's persistence, docs/security.md)."""
+    assert storage.instance_value("mqtt_client_id", "zonecast-ingest-a") == "zonecast-ingest-a"
+    assert storage.instance_value("mqtt_client_id", "zonecast-ingest-b") == "zonecast-ingest-a"
+    assert storage.instance_value("other", "x") == "x"
+    storage.close()
+    again = open_storage(storage_url)
+    assert again.instance_value("mqtt_client_id", "zonecast-ingest-c") == "zonecast-ingest-a"
+    again.close()
+    with open_storage(storage_url) as third, pytest.raises(ValueError, match="non-empty key"):
+        third.instance_value("", "x")

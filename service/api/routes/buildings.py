@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 from zonecast.service import schemas as S
-from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, RunnerDep
+from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, PrincipalDep, RunnerDep
 from zonecast.service.bodies import as_utc
 from zonecast.service.runner import Runner
 
@@ -18,9 +18,11 @@ def _summary(bid: str, runner: Runner) -> S.BuildingSummary:
                              last_update=as_utc(runner.est.time))
 
 
-@router.get("", response_model=list[S.BuildingSummary], summary="List buildings")
-def list_buildings(ctx: Ctx):
-    return [_summary(bid, r) for bid, r in sorted(ctx.runners.items())]
+@router.get("", response_model=list[S.BuildingSummary], summary="List buildings",
+            description="The buildings the token may read (all of them for scope admin).")
+def list_buildings(ctx: Ctx, principal: PrincipalDep):
+    return [_summary(bid, r) for bid, r in sorted(ctx.runners.items())
+            if principal.can_read(bid)]
 
 
 @router.get("/{building_id}", response_model=S.BuildingDetail, summary="One building")

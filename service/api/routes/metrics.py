@@ -1,4 +1,5 @@
-"""``/metrics``: Prometheus metrics of the service (bearer token)."""
+"""``/metrics``: Prometheus metrics of the service (bearer token with scope ``metrics`` or
+``admin``)."""
 
 from __future__ import annotations
 
@@ -6,9 +7,10 @@ from fastapi import APIRouter
 from fastapi.responses import Response
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from zonecast.service import schemas as S
-from zonecast.service.api.deps import AUTH, Ctx
+from zonecast.service.api.deps import METRICS_AUTH, Ctx
 
-router = APIRouter(tags=["metrics"], dependencies=AUTH, responses={401: {"model": S.ErrorBody}})
+router = APIRouter(tags=["metrics"], dependencies=METRICS_AUTH,
+                   responses={401: {"model": S.ErrorBody}, 403: {"model": S.ErrorBody}})
 
 
 @router.get("/metrics", summary="Prometheus metrics (text exposition format)",

@@ -17,7 +17,7 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 from zonecast.service import schemas as S
-from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, get_runner
+from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, PrincipalDep, get_runner
 from zonecast.service.ingest import (
     MessageRejected,
     Reason,
@@ -50,7 +50,8 @@ def _rejections(acc) -> list[S.TelemetryRejection]:
 @router.post("/{building_id}/telemetry", response_model=S.TelemetryResult,
              summary="Ingest readings (same validation and storage as MQTT)",
              openapi_extra=_telemetry_body)
-async def post_telemetry(ctx: Ctx, building_id: BuildingId, request: Request):
+async def post_telemetry(ctx: Ctx, building_id: BuildingId, request: Request,
+                         principal: PrincipalDep):
     limit = ctx.settings.max_body_bytes
     declared = request.headers.get("content-length")
     if declared is not None and declared.isdigit() and int(declared) > limit:
@@ -59,7 +60,7 @@ async def post_telemetry(ctx: Ctx, building_id: BuildingId, request: Request):
     if len(body) > limit:
         raise HTTPException(413, f"body is {len(body)} bytes, the limit is {limit}")
     if building_id not in ctx.catalogues:
-        await get_runner(ctx, building_id)  # raises 404 with the reason
+        await get_runner(ctx, building_id, principal)  # raises 404 with the reason
     prefix = ctx.settings.mqtt.topic_prefix
     topic = f"{prefix}/{building_id}/telemetry"
     received = datetime.now(UTC)

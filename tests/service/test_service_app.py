@@ -211,6 +211,29 @@ def test_checkpoint_round_trip_is_exact(bundle, telemetry):
         a.advance(tt[3], u[3], v[3], y[3])
 
 
+def test_step_report_innovation_is_the_one_the_filter_scored(bundle, telemetry):
+    """The innovation a step reports (the /health RMS) is the filter's: its NIS with the
+    steady-state innovation covariance H P H' + R of the observed zones is the step's NIS,
+    and it is NaN exactly for the zones without a measurement."""
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    frame = telemetry_si(bundle, telemetry.iloc[:40])
+    times, u, v, y = rows_from_frame(bundle, frame)
+    y = y.copy()
+    y[20:25, 1] = np.nan  # zone 1 unobserved for five rows
+    est = OnlineEstimator(bundle)
+    filt = est._steady.filt
+    first = est.advance(times[0], u[0], v[0], y[0])
+    assert np.isnan(first.innovation).all()  # the row that starts the filter
+    for k in range(1, len(times)):
+        rep = est.advance(times[k], u[k], v[k], y[k])
+        obs = np.isfinite(y[k])
+        assert (np.isfinite(rep.innovation) == obs).all()
+        nu = rep.innovation[obs]
+        S = filt.H[obs] @ filt.P @ filt.H[obs].T + filt.R[np.ix_(obs, obs)]
+        assert nu @ np.linalg.solve(S, nu) == pytest.approx(rep.nis, rel=1e-9)
+
+
 def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemetry):
     """Steps without any measurement are predictions: the state's standard deviation
     after k of them is the forecast's at horizon k, and grows."""

@@ -19,10 +19,13 @@ from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 from zonecast.service.api.routes import (
     buildings,
+    diagnosis,
     forecast,
     health,
+    history,
     internal_gains,
     metrics,
+    model_health,
     state,
     telemetry,
 )
@@ -82,7 +85,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     async def _invalid(request: Request, exc: RequestValidationError):
         return JSONResponse({"detail": _message(exc)}, status_code=422)
 
-    for module in (buildings, state, internal_gains, forecast, telemetry):
+    for module in (buildings, state, internal_gains, forecast, telemetry, history,
+                   model_health, diagnosis):
         app.include_router(module.router, prefix=API)
     app.include_router(health.router)
     app.include_router(metrics.router)

@@ -203,11 +203,15 @@ CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMEDRIVER = shutil.which("chromedriver")
 
 
+#: on the browser tests: skipped before the service fixture starts
+needs_chromium = pytest.mark.skipif(
+    CHROMIUM is None or CHROMEDRIVER is None,
+    reason="needs Debian's chromium and chromium-driver on PATH (make ui-deps: "
+           "apt-get install -y chromium chromium-driver)")
+
+
 @pytest.fixture
 def browser():
-    if CHROMIUM is None or CHROMEDRIVER is None:
-        pytest.skip("needs Debian's chromium and chromium-driver on PATH "
-                    "(make ui-deps: apt-get install -y chromium chromium-driver)")
     webdriver = pytest.importorskip("selenium.webdriver", reason="selenium (dev extra)")
     from selenium.webdriver.chrome.service import Service
 
@@ -245,7 +249,8 @@ def _local(times, tz: str) -> list[str]:
             for t in pd.DatetimeIndex(pd.to_datetime(times)).tz_convert(tz)]
 
 
-def test_ui_plots_each_zone_in_headless_chromium(served, browser, bundle):
+@needs_chromium
+def test_ui_plots_each_zone_in_headless_chromium(browser, served, bundle):
     import httpx
     from selenium.webdriver.common.by import By
 
@@ -296,7 +301,8 @@ def test_ui_plots_each_zone_in_headless_chromium(served, browser, bundle):
     assert "no confident effect in this zone" in cards[1].text
 
 
-def test_ui_wrong_token_shows_an_error_and_no_data(served, browser):
+@needs_chromium
+def test_ui_wrong_token_shows_an_error_and_no_data(browser, served):
     from selenium.webdriver.common.by import By
 
     base, _, _ = served

@@ -9,7 +9,7 @@ import pandas as pd
 from zonecast.estimator.constants import STEP, STEP_S
 from zonecast.service.runner import Runner
 
-__all__ = ["innovation_rms", "missing_per_point", "window", "zone_history"]
+__all__ = ["innovation_rms", "missing_per_point", "readings", "window", "zone_history"]
 
 
 def window(runner: Runner, hours: int) -> pd.DatetimeIndex:
@@ -26,41 +26,40 @@ def window(runner: Runner, hours: int) -> pd.DatetimeIndex:
     return pd.date_range(end=pd.Timestamp(end).tz_convert("UTC"), periods=n, freq=STEP)
 
 
-def _rows(times: pd.DatetimeIndex, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Row of each stored time in ``times`` and which stored times are on it."""
+def readings(runner: Runner, times: pd.DatetimeIndex, points: list[str]) -> np.ndarray:
+    """Stored readings of ``points`` (wire units) at the grid ``times``: shape
+    (len(times), len(points)), NaN where there is none (one storage read)."""
+    out = np.full((len(times), len(points)), np.nan)
+    if not len(times):
+        return out
+    stamps, values = runner.storage.readings_matrix(runner.building, times[0],
+                                                    times[-1] + STEP, points)
     grid = times.as_unit("ns").asi8
     rows = grid.searchsorted(stamps)
     on = (rows < len(grid)) & (grid[np.minimum(rows, len(grid) - 1)] == stamps)
-    return rows, on
+    out[rows[on]] = values[on]
+    return out
 
 
-def zone_history(runner: Runner, times: pd.DatetimeIndex) -> np.ndarray:
+def zone_history(runner: Runner, times: pd.DatetimeIndex,
+                 all_points: np.ndarray | None = None) -> np.ndarray:
     """Measured zone temperatures y [degC] at ``times`` (rows) per zone (columns), NaN
     where no sensor of the zone reported: the stored readings converted as the runner
-    converts them (:meth:`~zonecast.estimator.streaming.RowConverter.zone_temperatures`)."""
-    y = np.full((len(times), len(runner.bundle.zones)), np.nan)
-    if not len(times):
-        return y
+    converts them (:meth:`~zonecast.estimator.streaming.RowConverter.zone_temperatures`).
+    ``all_points``: the :func:`readings` of every point of the site, if already read."""
     conv = runner.convert
-    stamps, values = runner.storage.readings_matrix(runner.building, times[0],
-                                                    times[-1] + STEP, conv.zone_points)
-    rows, on = _rows(times, stamps)
-    if on.any():
-        y[rows[on]] = conv.zone_temperatures(values[on])
-    return y
+    if all_points is None:
+        zone = readings(runner, times, conv.zone_points)
+    else:
+        col = {p: j for j, p in enumerate(runner.points)}
+        zone = all_points[:, [col[p] for p in conv.zone_points]]
+    return conv.zone_temperatures(zone)
 
 
-def missing_per_point(runner: Runner, times: pd.DatetimeIndex) -> dict[str, int]:
-    """Point -> grid times of ``times`` without a stored reading of it [-] (every point of
-    the site, zeros included)."""
-    points = runner.points
-    if not len(times):
-        return dict.fromkeys(points, 0)
-    stamps, values = runner.storage.readings_matrix(runner.building, times[0],
-                                                    times[-1] + STEP, points)
-    _, on = _rows(times, stamps)
-    present = np.isfinite(values[on]).sum(axis=0)
-    return {p: int(len(times) - n) for p, n in zip(points, present)}
+def missing_per_point(runner: Runner, all_points: np.ndarray) -> dict[str, int]:
+    """Point -> grid times without a reading of it [-], from the :func:`readings` of every
+    point of the site (zeros included)."""
+    return {p: int(n) for p, n in zip(runner.points, np.isnan(all_points).sum(axis=0))}
 
 
 def innovation_rms(runner: Runner, since: pd.Timestamp | None) -> tuple[np.ndarray, np.ndarray]:

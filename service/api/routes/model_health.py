@@ -10,7 +10,13 @@ from fastapi import APIRouter, Query
 from zonecast.service import schemas as S
 from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, RunnerDep
 from zonecast.service.bodies import as_utc, finite_or_none, state_body
-from zonecast.service.recent import innovation_rms, missing_per_point, window, zone_history
+from zonecast.service.recent import (
+    innovation_rms,
+    missing_per_point,
+    readings,
+    window,
+    zone_history,
+)
 
 router = APIRouter(prefix="/buildings", tags=["model-health"], dependencies=AUTH,
                    responses=ERRORS)
@@ -24,10 +30,11 @@ def get_model_health(ctx: Ctx, building_id: BuildingId, runner: RunnerDep,
                          "length of the window ending at the last processed step [h]"))] = 48):
     state = state_body(ctx, runner)
     times = window(runner, hours)
-    y = zone_history(runner, times)
+    every = readings(runner, times, runner.points)  # one read for both
+    y = zone_history(runner, times, every)
     seen = np.isfinite(y)
     rms, n = innovation_rms(runner, times[0] if len(times) else None)
-    gaps = missing_per_point(runner, times)
+    gaps = missing_per_point(runner, every)
     _, last_reading, _ = runner.storage.reading_bounds(runner.building)
     zones = []
     for j, z in enumerate(runner.bundle.zones):

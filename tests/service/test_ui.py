@@ -12,6 +12,7 @@ A screenshot is written to ``$ZONECAST_UI_SCREENSHOT`` when that is set (docs/ui
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import socket
@@ -98,8 +99,13 @@ def served(tmp_path_factory, vb, bundle, telemetry):
                                      "publish": False})
     app = create_app(settings)
     port = _free_port()
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning",
-                                           lifespan="on"))
+    config = uvicorn.Config(app, host="127.0.0.1", port=port, log_level="info",
+                            access_log=True, lifespan="on")
+    server = uvicorn.Server(config)
+    # every line the server logs (access log included): the token must never be in one
+    lines = _Lines()
+    for name in ("uvicorn.access", "uvicorn.error", "zonecast"):
+        logging.getLogger(name).addHandler(lines)
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     _wait(lambda: server.started, 30, "uvicorn")
@@ -111,9 +117,21 @@ def served(tmp_path_factory, vb, bundle, telemetry):
             return runner.forecast is not None and runner.forecast.issued == last
 
     _wait(caught_up, 60, "runner")
+    app.state.log_lines = lines.lines
     yield f"http://127.0.0.1:{port}", app, frame
     server.should_exit = True
     thread.join(30)
+    for name in ("uvicorn.access", "uvicorn.error", "zonecast"):
+        logging.getLogger(name).removeHandler(lines)
+
+
+class _Lines(logging.Handler):
+    def __init__(self):
+        super().__init__(logging.DEBUG)
+        self.lines: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.lines.append(record.getMessage())
 
 
 def _expected_y(bundle, frame: pd.DataFrame) -> np.ndarray:
@@ -254,7 +272,7 @@ def test_ui_plots_each_zone_in_headless_chromium(browser, served, bundle):
     import httpx
     from selenium.webdriver.common.by import By
 
-    base, _, frame = served
+    base, app, frame = served
     with httpx.Client(base_url=base, headers=AUTH, timeout=10) as c:
         fc = c.get("/api/v1/buildings/office6/forecast").json()
         gains = c.get("/api/v1/buildings/office6/internal-gains").json()
@@ -299,6 +317,11 @@ def test_ui_plots_each_zone_in_headless_chromium(browser, served, bundle):
     assert "reheat" in browser.find_element(By.ID, "diagnosis").text
     assert "reheat (0.620 → 0.350 K)" in cards[0].text
     assert "no confident effect in this zone" in cards[1].text
+    # the server logged the page's requests, never the token
+    logged = app.state.log_lines
+    assert any("/api/v1/buildings/office6/history?hours=48" in line for line in logged)
+    assert any('"GET /ui HTTP' in line for line in logged)
+    assert not any(TOKEN in line for line in logged)
 
 
 @needs_chromium

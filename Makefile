@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 EXTRAS ?= testbed,service,dev
 DEMO_OUT ?= demo-out
 
-.PHONY: venv demo test bench lint clean
+.PHONY: venv demo test bench lint clean ui-deps
 
 venv: $(VENV)/.installed
 
@@ -25,6 +25,11 @@ test: venv
 
 bench: venv
 	for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+
+# Debian's headless browser for tests/service/test_ui.py (the /ui page); the test skips,
+# saying so, without them. Needs root (or run the apt-get line with sudo).
+ui-deps:
+	apt-get install -y chromium chromium-driver
 
 lint: venv
 	$(BIN)/ruff check estimator service testbed zonecast tests

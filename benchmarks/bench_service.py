@@ -64,7 +64,13 @@ def virtual_building(data: Path | None, work: Path) -> Path:
 
 
 def bench_steps(data: Path, work: Path, days: int) -> dict:
-    from zonecast.estimator.streaming import STEP, OnlineEstimator, rows_from_frame, telemetry_frame
+    from zonecast.estimator.streaming import (
+        STEP,
+        OnlineEstimator,
+        model_rows,
+        rows_from_frame,
+        telemetry_frame,
+    )
     from zonecast.service.bodies import forecast_json
     from zonecast.service.runner import Runner
     from zonecast.service.settings import RunnerSettings
@@ -74,7 +80,8 @@ def bench_steps(data: Path, work: Path, days: int) -> dict:
     m = bundle.model
     frame = telemetry_frame(data, bundle).iloc[: STEPS_PER_DAY * (days + 1)]
     hist, live = frame.iloc[: STEPS_PER_DAY * days], frame.iloc[STEPS_PER_DAY * days:]
-    tt, u, v, y = rows_from_frame(bundle, hist)
+    rows = model_rows(bundle, hist)  # with the boxes' discharge-air rise when the site has it
+    tt, u, v, y, rh = rows.times, rows.u, rows.v, rows.y, rows.reheat
     # reference: one exact propagator for a never-seen airflow vector
     ref = []
     for k in range(5):
@@ -86,7 +93,7 @@ def bench_steps(data: Path, work: Path, days: int) -> dict:
     step, fc = [], []
     for k in range(len(tt)):
         t0 = time.perf_counter()
-        est.advance(tt[k], u[k], v[k], y[k])
+        est.advance(tt[k], u[k], v[k], y[k], rh[k])
         step.append(time.perf_counter() - t0)
         if k % 8 == 0:
             t0 = time.perf_counter()

@@ -48,7 +48,7 @@ import io
 import json
 from collections import deque
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -101,6 +101,9 @@ class StepReport:
     reset: bool
     missing_zones: list[str]
     held_inputs: list[str]
+    #: innovation y - C x(t|t-1) per zone of this row's update [K]; NaN for a zone not
+    #: observed (and for every zone when the row started or restarted the filter)
+    innovation: np.ndarray | None = field(default=None, compare=False)
 
 
 def model_rows(bundle: ModelBundle, frame: pd.DataFrame) -> ModelData:
@@ -303,6 +306,7 @@ class OnlineEstimator:
             self.resets += 1
             reset = True
         nis, dof = float("nan"), 0
+        self._innovation = np.full(self._nz, np.nan)
         if not self.started:
             if not np.isfinite(y).any():
                 return None
@@ -316,7 +320,7 @@ class OnlineEstimator:
         self.last_y = y.copy()
         held = [n for n, good in zip(self._names, ok) if not good]
         missing = [z for z, val in zip(self.bundle.zones, y) if not np.isfinite(val)]
-        return StepReport(t, nis, dof, reset, missing, held)
+        return StepReport(t, nis, dof, reset, missing, held, self._innovation)
 
     def _bridge_and_step(self, t: pd.Timestamp, y: np.ndarray) -> tuple[float, int]:
         empty = np.full(self._nz, np.nan)
@@ -351,6 +355,8 @@ class OnlineEstimator:
             f = np.full(self._nz, np.nan)
         x_prior = x_tilde + gig @ self._online      # eq:online_ig
         self._x, inn = self._steady.filt.update(x_prior, y)
+        self._innovation = np.full(self._nz, np.nan)
+        self._innovation[inn.observed] = inn.innovation
         if inn.dof:
             self._since, self._observed = 0, inn.observed
             self.nis_sum += inn.nis
@@ -635,20 +641,45 @@ class RowConverter:
                                 albedo=self.albedo, sky_model=self.sky_model,
                                 total=True)["poa_global"]
         v = np.column_stack([si[:, self._ta], si[:, self._ts], sol])
-        y = np.full((n, len(self._zones)), np.nan)
-        for j, (idx, w) in enumerate(self._zones):
-            vals = si[:, idx]
-            good = np.isfinite(vals)
-            wsum = (good * w).sum(axis=1)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                y[:, j] = np.where(wsum > 0, np.nansum(vals * w, axis=1) / wsum, np.nan)
         u = si[:, self._box]
         reheat = np.zeros_like(u)
         has = self._dat >= 0
         if has.any():
             reheat[:, has] = si[:, self._dat[has]] - si[:, [self._ts]]
             reheat[(u == 0) & ~np.isfinite(reheat)] = 0.0  # a shut box delivers no heat
-        return u, v, y, reheat
+        return u, v, self._zone_means(si), reheat
+
+    def _zone_means(self, si: np.ndarray) -> np.ndarray:
+        y = np.full((len(si), len(self._zones)), np.nan)
+        for j, (idx, w) in enumerate(self._zones):
+            vals = si[:, idx]
+            good = np.isfinite(vals)
+            wsum = (good * w).sum(axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                y[:, j] = np.where(wsum > 0, np.nansum(vals * w, axis=1) / wsum, np.nan)
+        return y
+
+    @property
+    def zone_points(self) -> list[str]:
+        """The zone-temperature points of the site, in :attr:`points` order."""
+        used = set()
+        for idx, _ in self._zones:
+            used.update(int(i) for i in idx)
+        return [self.points[i] for i in sorted(used)]
+
+    def zone_temperatures(self, values) -> np.ndarray:
+        """Zone temperatures y [degC], shape (N, n_zones), from readings of
+        :attr:`zone_points` (wire units, NaN = missing, shape (N, len(zone_points))): the
+        y of :meth:`convert` without the inputs (the service's history of measurements)."""
+        pts = self.zone_points
+        raw = np.asarray(values, dtype=float)
+        if raw.ndim != 2 or raw.shape[1] != len(pts):
+            raise ValueError(f"values must have shape (N, {len(pts)})")
+        col = {p: i for i, p in enumerate(self.points)}
+        si = np.full((len(raw), len(self.points)), np.nan)
+        for j, p in enumerate(pts):
+            si[:, col[p]] = to_si(raw[:, j], self.units[p])
+        return self._zone_means(si)
 
 
 # --------------------------------------------------------------------------- offline replay

@@ -5,7 +5,8 @@ loads every building's model, starts the MQTT ingester (if enabled), the MQTT pu
 of state and forecasts, and one runner thread per building (:class:`ServiceContext`), and
 stops them in reverse order. Routes (docs/service.md, "REST API"): one router per resource
 (``api/routes/``) under ``/api/v1`` plus ``/healthz``, ``/readyz`` and ``/metrics`` at the
-root; their dependencies are in ``api/deps.py``.
+root; their dependencies are in ``api/deps.py``. The operator's page ``/ui`` (``ui/``) is
+static files that read the API with the operator's token.
 """
 
 from __future__ import annotations
@@ -17,12 +18,16 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
+from zonecast.service import ui
 from zonecast.service.api.routes import (
     buildings,
+    diagnosis,
     forecast,
     health,
+    history,
     internal_gains,
     metrics,
+    model_health,
     state,
     telemetry,
 )
@@ -82,8 +87,10 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     async def _invalid(request: Request, exc: RequestValidationError):
         return JSONResponse({"detail": _message(exc)}, status_code=422)
 
-    for module in (buildings, state, internal_gains, forecast, telemetry):
+    for module in (buildings, state, internal_gains, forecast, telemetry, history,
+                   model_health, diagnosis):
         app.include_router(module.router, prefix=API)
     app.include_router(health.router)
     app.include_router(metrics.router)
+    app.include_router(ui.router)  # the operator's page /ui (docs/service.md)
     return app

@@ -111,6 +111,10 @@ class Runner:
         self.forecast: Forecast | None = None
         self.history: deque[Forecast] = deque(maxlen=1024)
         self.last_report: StepReport | None = None
+        #: (row time, innovation per zone [K]) of the last two days of processed rows, in
+        #: memory only (empty after a restart): the model health of /health and /ui
+        self.innovations: deque[tuple[pd.Timestamp, np.ndarray]] = deque(
+            maxlen=2 * STEPS_PER_DAY)
         self.latencies: deque[float] = deque(maxlen=10000)
         self.lock = threading.RLock()
         self.errors = 0
@@ -277,6 +281,8 @@ class Runner:
             report = self.est.advance(t, u[0], v[0], y[0], rh[0])
             if report is not None:
                 self.last_report = report
+                if report.innovation is not None:
+                    self.innovations.append((report.time, report.innovation))
             issue = self.est.started and (t.value // STEP.value) % every == 0
             if issue:
                 self._set_forecast(self.est.forecast())

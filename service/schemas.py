@@ -10,9 +10,10 @@ from datetime import datetime
 from pydantic import AwareDatetime, BaseModel, Field
 
 __all__ = [
-    "BuildingDetail", "BuildingSummary", "ErrorBody", "ForecastBody", "Health", "InternalGains",
+    "BuildingDetail", "BuildingSummary", "DiagnosisBody", "DiagnosisEffect", "ErrorBody",
+    "ForecastBody", "Health", "HistoryBody", "InternalGains", "ModelHealth", "PointGaps",
     "Readiness", "StateBody", "TelemetryRefused", "TelemetryResult", "ZoneForecast", "ZoneGains",
-    "ZoneState",
+    "ZoneHealth", "ZoneHistory", "ZoneState",
 ]
 
 
@@ -142,3 +143,76 @@ class Readiness(BaseModel):
     broker: bool | None = Field(description="null when MQTT is disabled")
     models: dict[str, bool] = Field(description="building -> model loaded")
     errors: dict[str, str] = Field(description="component -> why it is not ready")
+
+
+class ZoneHistory(BaseModel):
+    zone: str
+    measured: list[float | None] = Field(
+        description="measured zone temperature per time (the model's y: the weighted mean of "
+                    "the zone's sensors that reported) [degC]; null where none reported")
+
+
+class HistoryBody(BaseModel):
+    building: str
+    step_s: float = Field(description="spacing of the times [s]")
+    times: list[AwareDatetime] = Field(
+        description="grid times of the window, ending at the last processed step (UTC); "
+                    "empty before any reading")
+    zones: list[ZoneHistory]
+
+
+class ZoneHealth(BaseModel):
+    zone: str
+    innovation_rms: float | None = Field(
+        description="RMS of the filter's innovations y - C x(t|t-1) over the steps of the "
+                    "window processed since the service started [K]; null without any")
+    innovation_steps: int = Field(description="innovations in that RMS [-]")
+    missing_steps: int = Field(
+        description="grid times of the window without a measurement of the zone [-]")
+    last_measured: AwareDatetime | None = Field(
+        description="latest time in the window with a measurement of the zone (UTC)")
+
+
+class PointGaps(BaseModel):
+    point: str
+    missing: int = Field(description="grid times of the window without a reading [-]")
+
+
+class ModelHealth(BaseModel):
+    building: str
+    window_start: AwareDatetime | None = Field(description="first grid time of the window (UTC)")
+    window_end: AwareDatetime | None = Field(
+        description="last grid time of the window: the last processed step (UTC)")
+    window_steps: int = Field(description="grid times in the window [-]")
+    last_update: AwareDatetime | None = Field(description="last processed step (UTC)")
+    last_reading: AwareDatetime | None = Field(
+        description="time of the newest stored reading (UTC); null if none")
+    nis_per_dof: float | None = Field(
+        description="normalised innovation squared per observed output since the filter "
+                    "started [-]; about 1 for a consistent filter")
+    zones: list[ZoneHealth]
+    points_missing: list[PointGaps] = Field(
+        description="points of the site with at least one grid time of the window without a "
+                    "reading, most missing first")
+    quality: list[str] = Field(description="the flags of /state")
+
+
+class DiagnosisEffect(BaseModel):
+    effect: str = Field(description="unmodelled effect (docs/diagnosis.md)")
+    zones: list[str] = Field(description="zones with a fitted parameter")
+    confident: bool = Field(description="confidence and score above the report's thresholds")
+    score: float = Field(description="share of the training residual explained [-]")
+    confidence: float = Field(description="1 - p of the per-day reductions [-]")
+    heldout_rms_before: dict[str, float] = Field(
+        description="zone (and 'mean') -> forecast RMS on held-out weeks without it [K]")
+    heldout_rms_after: dict[str, float] = Field(
+        description="zone (and 'mean') -> the same with the effect added [K]")
+
+
+class DiagnosisBody(BaseModel):
+    building: str
+    available: bool = Field(description="a diagnosis report is configured and readable")
+    file: str | None = Field(description="file name of the report (no folder)")
+    modified: AwareDatetime | None = Field(description="when the report file was written (UTC)")
+    detail: str | None = Field(description="why there is none, or null")
+    effects: list[DiagnosisEffect] = Field(description="ranked effects, most likely first")

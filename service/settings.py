@@ -216,6 +216,10 @@ class ServiceSettings(BaseSettings):
     buildings : dict
         Building id -> identified-model file (``zonecast identify`` output). Relative paths
         are resolved against the settings file's folder (else the working directory).
+    diagnoses : dict
+        Building id -> ``diagnosis.json`` of ``zonecast diagnose`` (optional), shown by
+        ``/api/v1/buildings/{id}/diagnosis`` and the operator page; relative paths as for
+        ``buildings``.
     runner : RunnerSettings
     max_body_bytes : int
         Largest accepted REST request body [bytes] (telemetry POST).
@@ -229,6 +233,7 @@ class ServiceSettings(BaseSettings):
     mqtt: MqttSettings = Field(default_factory=MqttSettings)
     api_tokens: dict[SecretStr, tuple[str, ...]] = Field(default_factory=dict)
     buildings: dict[str, Path] = Field(default_factory=dict)
+    diagnoses: dict[str, Path] = Field(default_factory=dict)
     runner: RunnerSettings = Field(default_factory=RunnerSettings)
     max_body_bytes: int = Field(1024 * 1024, ge=1024)
 
@@ -311,4 +316,10 @@ def load_settings(path: str | Path | None = None, **overrides: Any) -> ServiceSe
             _YAML.reset(token)
     settings.buildings = {k: (p if p.is_absolute() else base / p)
                           for k, p in settings.buildings.items()}
+    unknown = sorted(set(settings.diagnoses) - set(settings.buildings))
+    if unknown:
+        raise ValueError(f"diagnoses of buildings that are not configured: {unknown}; "
+                         f"buildings: {sorted(settings.buildings)}")
+    settings.diagnoses = {k: (p if p.is_absolute() else base / p)
+                          for k, p in settings.diagnoses.items()}
     return settings

@@ -212,6 +212,29 @@ def test_checkpoint_round_trip_is_exact(bundle, telemetry):
         a.advance(tt[3], u[3], v[3], y[3])
 
 
+def test_step_report_innovation_is_the_one_the_filter_scored(bundle, telemetry):
+    """The innovation a step reports (the /health RMS) is the filter's: its NIS with the
+    steady-state innovation covariance H P H' + R of the observed zones is the step's NIS,
+    and it is NaN exactly for the zones without a measurement."""
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    frame = telemetry_si(bundle, telemetry.iloc[:40])
+    times, u, v, y = rows_from_frame(bundle, frame)
+    y = y.copy()
+    y[20:25, 1] = np.nan  # zone 1 unobserved for five rows
+    est = OnlineEstimator(bundle)
+    filt = est._steady.filt
+    first = est.advance(times[0], u[0], v[0], y[0])
+    assert np.isnan(first.innovation).all()  # the row that starts the filter
+    for k in range(1, len(times)):
+        rep = est.advance(times[k], u[k], v[k], y[k])
+        obs = np.isfinite(y[k])
+        assert (np.isfinite(rep.innovation) == obs).all()
+        nu = rep.innovation[obs]
+        S = filt.H[obs] @ filt.P @ filt.H[obs].T + filt.R[np.ix_(obs, obs)]
+        assert nu @ np.linalg.solve(S, nu) == pytest.approx(rep.nis, rel=1e-9)
+
+
 def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemetry):
     """Steps without any measurement are predictions: the state's standard deviation
     after k of them is the forecast's at horizon k, and grows."""
@@ -238,16 +261,19 @@ def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemet
 def test_forecast_with_supplied_inputs(bundle, telemetry, tmp_path):
     """Supplied horizon inputs replace persistence; the persistence inputs passed
     explicitly give the default forecast bitwise; bad shapes are refused."""
-    from zonecast.estimator.streaming import OnlineEstimator, offline_forecasts, rows_from_frame
+    from zonecast.estimator.streaming import OnlineEstimator, model_rows, offline_forecasts
 
     frame = telemetry_si(bundle, telemetry.iloc[:2 * DAY + 10])
-    tt, u, v, y = rows_from_frame(bundle, frame)
+    d = model_rows(bundle, frame)
+    tt, u, v, y, rh = d.times, d.u, d.v, d.y, d.reheat
     est = OnlineEstimator(bundle)
     for k in range(len(tt)):
-        est.advance(tt[k], u[k], v[k], y[k])
+        est.advance(tt[k], u[k], v[k], y[k], rh[k])
     k = len(tt) - 1
-    persistence = np.vstack([np.hstack([u[k], v[k]])]
-                            + [np.hstack([u[k - DAY + h], v[k - DAY + h]]) for h in range(1, DAY)])
+    # inputs: u, v, then the boxes' discharge-air rise (the virtual building reports it)
+    persistence = np.vstack([np.hstack([u[k], v[k], rh[k]])]
+                            + [np.hstack([u[k - DAY + h], v[k - DAY + h], rh[k - DAY + h]])
+                               for h in range(1, DAY)])
     a, b = est.forecast(), est.forecast(persistence)
     assert np.array_equal(a.mean, b.mean) and np.array_equal(a.std, b.std)
     warmer = persistence.copy()
@@ -268,7 +294,8 @@ def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
     app = create_app(make_settings(tmp_path, vb))
     paths = ["/api/v1/buildings", "/api/v1/buildings/office6", "/api/v1/buildings/office6/state",
              "/api/v1/buildings/office6/internal-gains", "/api/v1/buildings/office6/forecast",
-             "/metrics"]
+             "/api/v1/buildings/office6/history", "/api/v1/buildings/office6/health",
+             "/api/v1/buildings/office6/diagnosis", "/metrics"]
     with TestClient(app) as client:
         for p in paths:
             for headers in ({}, {"Authorization": "Bearer wrong"}, {"Authorization": "Basic x"}):
@@ -282,7 +309,7 @@ def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
         assert client.get("/readyz").json()["ready"] is True
         spec = client.get("/openapi.json").json()
     ops = {(path, m): op for path, item in spec["paths"].items() for m, op in item.items()}
-    assert len(ops) == 9
+    assert len(ops) == 12  # /ui and its files are not in the spec
     for (path, method), op in ops.items():
         assert bool(op.get("security")) == (path not in ("/healthz", "/readyz")), path
 

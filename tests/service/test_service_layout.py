@@ -64,6 +64,15 @@ OPERATIONS = {
     ("post", "/api/v1/buildings/{building_id}/telemetry"): (
         "post_telemetry_api_v1_buildings__building_id__telemetry_post", ["telemetry"],
         [("building_id", "path")], ["200", "401", "403", "404", "413", "422"]),
+    ("get", "/api/v1/buildings/{building_id}/history"): (
+        "get_history_api_v1_buildings__building_id__history_get", ["history"],
+        [("building_id", "path"), ("hours", "query")], ["200", "401", "403", "404", "422"]),
+    ("get", "/api/v1/buildings/{building_id}/health"): (
+        "get_model_health_api_v1_buildings__building_id__health_get", ["model-health"],
+        [("building_id", "path"), ("hours", "query")], ["200", "401", "403", "404", "422"]),
+    ("get", "/api/v1/buildings/{building_id}/diagnosis"): (
+        "get_diagnosis_api_v1_buildings__building_id__diagnosis_get", ["diagnosis"],
+        [("building_id", "path")], ["200", "401", "403", "404", "422"]),
     ("get", "/healthz"): ("healthz_healthz_get", ["health"], [], ["200"]),
     ("get", "/readyz"): ("readyz_readyz_get", ["health"], [], ["200", "503"]),
     ("get", "/metrics"): ("get_metrics_metrics_get", ["metrics"], [], ["200", "401", "403"]),

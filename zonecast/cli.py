@@ -228,6 +228,9 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                      help="what of each weekend is fitted: 'weekend' (Saturday and Sunday, the "
                           "paper) or 'experiments' (the site's declared experiment periods "
                           "with 2 h before and after)")] = "weekend",
+                 infiltration: Annotated[str, typer.Option(
+                     help="'none' (the paper) or 'idf': the IDF's infiltration objects as a "
+                          "fixed outdoor-air conductance (docs/model.md)")] = "none",
                  seed: Seed = 0) -> None:
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the
@@ -238,6 +241,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
             done = identify_site(site, data, out, train=train, validate=validate, starts=starts,
                                  profile_weeks=profile_weeks, window_solar=window_solar,
                                  seed=seed, priors=priors, sigma_e=sigma_e, window=window,
+                                 infiltration=infiltration,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)

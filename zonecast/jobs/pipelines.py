@@ -72,10 +72,13 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   validate: list[str] | None = None, starts: int = 3,
                   profile_weeks: bool = True, window_solar: str = "surfaces", seed: int = 0,
                   priors: bool = False, sigma_e: float = 0.3, window: str = "weekend",
+                  infiltration: str = "none",
                   progress: Progress = _quiet) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
-    profile (4-B) from every whole week, and write the model file."""
-    pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar))
+    profile (4-B) from every whole week, and write the model file. ``infiltration``: as
+    :class:`~zonecast.estimator.rc.network.ModelOptions`."""
+    pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar,
+                                                         infiltration=infiltration))
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window,

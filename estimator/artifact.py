@@ -223,7 +223,9 @@ def _noise(doc: dict, path: Path) -> NoiseSettings:
     return NoiseSettings(**{k: float(v) for k, v in known.items()})
 
 
-_OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration")
+_OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration", "facades")
+#: what a model file without an option was built with (options added later)
+_LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal"}
 #: what a model file without ``model_options`` was built with (files written before the
 #: key existed put window solar on the room air, the paper's placement)
 LEGACY_OPTIONS = {"window_solar": "air"}
@@ -242,8 +244,8 @@ def _model_options(doc: dict, path: Path, notes: list[str]):
     if unknown:
         raise ModelFileError(f"{path}: unknown model_options {unknown}; known: "
                              f"{list(_OPTION_KEYS)}")
-    # files written before the infiltration option were built without it
-    raw = {"infiltration": "none", **raw}
+    # files written before an option existed were built without it
+    raw = {**_LEGACY_DEFAULTS, **raw}
     try:
         return ModelOptions(**raw)
     except ModelDefinitionError as exc:
@@ -390,6 +392,7 @@ def save_structure(path: str | Path, structure: RCStructure,
             "cp_air": structure.cp_air, "notes": structure.notes, "areas": structure.areas,
             "window_rooms": list(structure.window_area), "n_A_p": len(structure.A_p),
             "n_Bv_p": len(structure.Bv_p), "options": asdict(structure.options),
+            "facade_rotation": structure.facade_rotation,
             "room_volume": {k: float(v) for k, v in room_volume.items()}}
     path = Path(path)
     with path.open("wb") as fh:
@@ -420,7 +423,8 @@ def load_structure(path: str | Path) -> tuple[RCStructure, dict[str, float]]:
             B_ig=z["B_ig"], room_of_box=z["room_of_box"], C=z["C"], cp_air=meta["cp_air"],
             notes=list(meta["notes"]), areas=dict(meta["areas"]),
             window_area={r: z[f"window_area.{r}"] for r in meta["window_rooms"]},
-            options=ModelOptions(**meta["options"]))
+            options=ModelOptions(**{**_LEGACY_DEFAULTS, **meta["options"]}),
+            facade_rotation=float(meta.get("facade_rotation", 0.0)))
     return structure, {k: float(v) for k, v in meta["room_volume"].items()}
 
 

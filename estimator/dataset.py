@@ -9,7 +9,7 @@ and north [W/m2], computed with pvlib from the weather station's GHI, DNI and DH
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +17,7 @@ import pandas as pd
 from zonecast.estimator.constants import STEP
 from zonecast.estimator.rc.network import DISTURBANCES
 from zonecast.estimator.site import Site
-from zonecast.estimator.solar import facade_irradiance
+from zonecast.estimator.solar import FACADE_AZIMUTHS, facade_irradiance
 from zonecast.estimator.telemetry import Telemetry, segments_of
 
 __all__ = ["DISTURBANCES", "ModelData", "model_data", "zone_weights"]
@@ -98,7 +98,8 @@ def zone_weights(site: Site, room_volume: Mapping[str, float] | None) -> dict[st
 
 
 def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *,
-               sky_model: str = "perez", albedo: float = 0.2) -> ModelData:
+               sky_model: str = "perez", albedo: float = 0.2,
+               facade_azimuths: Sequence[float] = FACADE_AZIMUTHS) -> ModelData:
     """Build :class:`ModelData` from validated telemetry.
 
     Parameters
@@ -107,6 +108,8 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
     room_volume : room (EnergyPlus zone) -> air volume [m3], to weight several sensors of a
         zone like the model's output matrix C; default equal weights.
     sky_model, albedo : passed to the facade irradiance model.
+    facade_azimuths : the four facades [deg] of v's solar columns (the model's
+        :attr:`~.rc.network.RCStructure.facade_azimuths`; default E, S, W, N).
     """
     site = tel.site
     w = tel.weather()
@@ -117,7 +120,8 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
                                     w.dhi.to_numpy()[ok], site.location.latitude,
                                     site.location.longitude, site.location.elevation,
                                     albedo=albedo, sky_model=sky_model,
-                                    interval=pd.Timedelta(site.step), label="start")
+                                    interval=pd.Timedelta(site.step), label="start",
+                                    azimuths=facade_azimuths)
     v = np.column_stack([w.Ta.to_numpy(), w.Ts.to_numpy(), sol])
     exc = np.zeros(len(w), dtype=bool)
     for e in site.experiments:

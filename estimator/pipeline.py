@@ -179,7 +179,9 @@ class Pipeline:
     def data(self, telemetry: Telemetry | str | os.PathLike) -> ModelData:
         """Telemetry in the model's terms (paper u, v, y; sensors weighted like C)."""
         tel = telemetry if isinstance(telemetry, Telemetry) else self.telemetry(telemetry)
-        return model_data(tel, self.model().room_weights())
+        model = self.model()
+        return model_data(tel, model.room_weights(),
+                          facade_azimuths=model.structure.facade_azimuths)
 
     # --- identification ----------------------------------------------------------------
     def identify(self, data: ModelData, train: Sequence[str] | None = None,

@@ -426,6 +426,7 @@ def facade_irradiance(
     sky_model: str = "perez",
     interval: str | pd.Timedelta = "15min",
     label: Label = "start",
+    azimuths: Sequence[float] = FACADE_AZIMUTHS,
 ) -> np.ndarray:
     """Irradiance on vertical facades in the paper's order [solE, solS, solW, solN].
 
@@ -439,12 +440,17 @@ def facade_irradiance(
 
     Returns
     -------
+    azimuths : four azimuths [deg]
+        The facades' directions, default east, south, west and north (90, 180, 270, 0);
+        a rotated building's own (:attr:`~.rc.network.RCStructure.facade_azimuths`).
+
+    Returns
+    -------
     numpy.ndarray, shape (N, 4)
-        Global irradiance on vertical surfaces facing east, south, west and north
-        (azimuth 90, 180, 270, 0 deg) [W/m²].
+        Global irradiance on vertical surfaces facing ``azimuths`` [W/m²].
     """
     return surface_irradiance(
         times, ghi, dni, dhi, latitude, longitude, elevation,
-        surfaces=[(90.0, az) for az in FACADE_AZIMUTHS],
+        surfaces=[(90.0, float(az)) for az in azimuths],
         albedo=albedo, sky_model=sky_model, interval=interval, label=label,
     )

@@ -79,7 +79,7 @@ from zonecast.estimator.kalman import (
     initial_state_from_measurement,
     steady_state_covariance,
 )
-from zonecast.estimator.solar import FACADE_AZIMUTHS, SKY_MODELS, SolarGeometryCache, transpose
+from zonecast.estimator.solar import SKY_MODELS, SolarGeometryCache, transpose
 from zonecast.estimator.telemetry import Telemetry, load_telemetry, segments_of
 from zonecast.estimator.units import to_si
 
@@ -114,7 +114,8 @@ def model_rows(bundle: ModelBundle, frame: pd.DataFrame) -> ModelData:
     cols = list(site.point_units())
     frame = frame.reindex(columns=cols).astype(float)
     tel = Telemetry(frame, site, segments_of(frame.index, site.step))
-    return model_data(tel, bundle.room_volume)
+    return model_data(tel, bundle.room_volume,
+                      facade_azimuths=bundle.model.structure.facade_azimuths)
 
 
 def rows_from_frame(bundle: ModelBundle, frame: pd.DataFrame):
@@ -598,7 +599,7 @@ class RowConverter:
             self._zones.append((idx, w))
         loc = site.location
         self.solar = SolarGeometryCache(loc.latitude, loc.longitude, loc.elevation, site.step)
-        self._facades = np.array([(90.0, az) for az in FACADE_AZIMUTHS])
+        self._facades = np.array([(90.0, az) for az in bundle.model.structure.facade_azimuths])
         self.albedo, self.sky_model = float(albedo), sky_model
 
     def convert(self, times_ns, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -124,6 +124,11 @@ class ModelOptions:
         elements keeps it on the air. Same parameter in every case (docs/model.md).
     floor_share : float
         Share [-] of the window solar on the floors with ``window_solar="surfaces"``.
+    facades : {"building", "cardinal"}
+        The four solar columns of v: irradiance on facades facing the building's own
+        four directions (:func:`facade_rotation`; a rotated plan's facades get their own
+        sun), or facing E/S/W/N whatever the plan (the paper; each facade takes the
+        nearest).
     infiltration : {"none", "idf"}
         Outdoor air leaking into the rooms: none (the paper), or the IDF's
         ZoneInfiltration:DesignFlowRate objects as a fixed conductance rho c_p q between
@@ -138,8 +143,11 @@ class ModelOptions:
     window_solar: str = "surfaces"
     floor_share: float = 0.25
     infiltration: str = "none"
+    facades: str = "building"
 
     def __post_init__(self):
+        if self.facades not in ("building", "cardinal"):
+            raise ModelDefinitionError("facades must be 'building' or 'cardinal'")
         if self.infiltration not in ("none", "idf"):
             raise ModelDefinitionError("infiltration must be 'none' or 'idf'")
         if self.window_solar not in ("air", "floor", "surfaces"):
@@ -152,7 +160,8 @@ class ModelOptions:
             raise ModelDefinitionError("ground must be 'adiabatic' (the only supported choice)")
 
 
-def facade_of(tilt: float, azimuth: float, roof_solar: str = "mean") -> dict[str, float]:
+def facade_of(tilt: float, azimuth: float, roof_solar: str = "mean",
+              rotation: float = 0.0) -> dict[str, float]:
     """Solar columns (with weights) acting on a surface.
 
     Parameters
@@ -162,19 +171,39 @@ def facade_of(tilt: float, azimuth: float, roof_solar: str = "mean") -> dict[str
     azimuth : float
         [deg] clockwise from north.
     roof_solar : {"mean", "none"}
+    rotation : float
+        [deg] the building's facade rotation (:func:`facade_rotation`): the solar columns
+        are the irradiances on facades facing 90/180/270/0 deg plus it.
 
     Returns
     -------
     dict
-        Disturbance name -> weight; vertical surfaces take the nearest of
-        E/S/W/N (90/180/270/0 deg), surfaces facing down none.
+        Disturbance name -> weight; vertical surfaces take the nearest of the four
+        facade directions, surfaces facing down none.
     """
     if tilt > 120.0:
         return {}
     if tilt < 60.0:
         return {f: 0.25 for f in _FACADES.values()} if roof_solar == "mean" else {}
-    diffs = {f: abs((azimuth - a + 180.0) % 360.0 - 180.0) for a, f in _FACADES.items()}
+    diffs = {f: abs((azimuth - a - rotation + 180.0) % 360.0 - 180.0) for a, f in _FACADES.items()}
     return {min(diffs, key=diffs.get): 1.0}
+
+
+def facade_rotation(building: Building) -> float:
+    """The building's facade rotation [deg] in [-45, 45): the four-fold circular mean of
+    the azimuths of its vertical exterior surfaces, weighted by gross area (0 for a plan
+    whose facades face E/S/W/N; the building's own rotation for a rectangular plan turned
+    by its north axis). Rounded to 0.1 deg; 0 when there are no exterior walls."""
+    s = c = 0.0
+    for surf in building.surfaces.values():
+        if surf.boundary == "Outdoors" and 60.0 <= surf.tilt <= 120.0:
+            a = np.radians(4.0 * surf.azimuth)
+            s += surf.gross_area * np.sin(a)
+            c += surf.gross_area * np.cos(a)
+    if s == 0.0 and c == 0.0:
+        return 0.0
+    rot = round(float(np.degrees(np.arctan2(s, c)) / 4.0), 1)
+    return 0.0 if rot == 0.0 else rot  # no negative zero
 
 
 @dataclass
@@ -228,6 +257,13 @@ class RCStructure:
     areas: dict[str, float] = field(default_factory=dict)
     window_area: dict[str, np.ndarray] = field(default_factory=dict)
     options: ModelOptions = field(default_factory=ModelOptions)
+    facade_rotation: float = 0.0
+
+    @property
+    def facade_azimuths(self) -> tuple[float, float, float, float]:
+        """Azimuths [deg] of the facades whose irradiance are v's solar columns (E, S, W,
+        N of the building)."""
+        return tuple((a + self.facade_rotation) % 360.0 for a in (90.0, 180.0, 270.0, 0.0))
 
     @property
     def n(self) -> int:
@@ -435,6 +471,10 @@ def build_structure(
 
     asm = _Assembler()
     notes: list[str] = []
+    rotation = facade_rotation(building) if opts.facades == "building" else 0.0
+    if rotation:
+        notes.append(f"facades rotated {rotation:+.1f} deg from E/S/W/N: the solar columns are "
+                     "the irradiances on the building's own facades")
     # room air states first: rooms of model zones in zone order, then unmeasured rooms
     rooms = [r for rs in zone_rooms.values() for r in rs]
     rooms += [r for r in building.zones if r not in seen]
@@ -506,7 +546,7 @@ def build_structure(
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
             face(s, s.zone, nodes[-1])
             asm.to_temperature(nodes[0], 0, s.area, EW)  # paper eq:q_bh, convection
-            for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar).items():
+            for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
                 asm.source(nodes[0], DISTURBANCES.index(col), w * s.area, ABSORP)
             area_ext += s.area
         else:
@@ -534,7 +574,7 @@ def build_structure(
             asm.to_temperature(r, 0, w.area, UWIN)  # paper eq:q_bh, window transmission
             targets = _solar_targets(opts, floor_faces.get(w.zone, []),
                                      other_faces.get(w.zone, []), r)
-            for col, wt in facade_of(parent.tilt, parent.azimuth, opts.roof_solar).items():
+            for col, wt in facade_of(parent.tilt, parent.azimuth, opts.roof_solar, rotation).items():
                 seen_area = window_area.setdefault(w.zone, np.zeros(4))
                 seen_area[DISTURBANCES.index(col) - 2] += wt * w.area
                 for node, share in targets:
@@ -583,4 +623,5 @@ def build_structure(
         areas={"exterior_opaque": area_ext, "windows": area_win},
         window_area=window_area,
         options=opts,
+        facade_rotation=rotation,
     )

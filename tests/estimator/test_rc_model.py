@@ -383,3 +383,33 @@ def test_infiltration_read_and_modelled_as_outdoor_air_conductance(fields, flow)
     assert all((p - q).nnz == 0 for p, q in zip(leaky.A_p, plain.A_p))
     with pytest.raises(ModelDefinitionError, match="infiltration"):
         ModelOptions(infiltration="wind")
+
+
+def test_facade_rotation_follows_the_plan():
+    """A plan turned by its north axis keeps its own four facades as the solar columns:
+    the south wall of a building turned 30 deg faces 210 deg and takes solS, the
+    irradiance on a 210-deg facade; 'cardinal' is the paper's E/S/W/N with nearest mapping."""
+    from zonecast.estimator.rc.network import facade_rotation
+    plain = _wall_building(LAYERS)
+    turned = _wall_building(LAYERS, extra={"Building": {"B": {"north_axis": 30.0}}})
+    assert facade_rotation(plain) == 0.0
+    assert facade_rotation(turned) == pytest.approx(30.0)
+    assert turned.surfaces["South"].azimuth == pytest.approx(210.0)
+    st = build_structure(turned, {"Z": ["room"]}, {})
+    assert st.facade_azimuths == pytest.approx((120.0, 210.0, 300.0, 30.0))
+    assert facade_of(90.0, 210.0, rotation=30.0) == {"solS": 1.0}
+    assert facade_of(90.0, 210.0) == {"solS": 1.0} and facade_of(90.0, 230.0) == {"solW": 1.0}
+    assert facade_of(90.0, 250.0, rotation=30.0) == {"solS": 1.0}
+    card = build_structure(turned, {"Z": ["room"]}, {}, ModelOptions(facades="cardinal"))
+    assert card.facade_azimuths == (90.0, 180.0, 270.0, 0.0)
+    with pytest.raises(ModelDefinitionError, match="facades"):
+        ModelOptions(facades="octagonal")
+
+
+def test_structure_file_keeps_the_facade_rotation(tmp_path):
+    from zonecast.estimator.artifact import load_structure, save_structure
+    turned = _wall_building(LAYERS, extra={"Building": {"B": {"north_axis": 30.0}}})
+    st = build_structure(turned, {"Z": ["room"]}, {})
+    back, _ = load_structure(save_structure(tmp_path / "s.npz", st, {"Room": 60.0}))
+    assert back.facade_rotation == st.facade_rotation == pytest.approx(30.0)
+    assert back.options == st.options

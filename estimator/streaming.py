@@ -54,6 +54,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from zonecast.estimator.artifact import ModelBundle, load_model_file
+from zonecast.estimator.calibration import IntervalCalibrator
 from zonecast.estimator.constants import (
     DAYAHEAD_TAU,
     DAYAHEAD_WINDOW,
@@ -70,6 +71,11 @@ from zonecast.estimator.gains import (
     estimate_gains_step,
     time_of_week_bin,
 )
+from zonecast.estimator.inputs_forecast import (
+    INPUT_FORECAST_DEFAULTS,
+    DayCalendar,
+    HvacInputForecaster,
+)
 from zonecast.estimator.integrate import StepperLadder
 from zonecast.estimator.kalman import (
     SteadyStateFilter,
@@ -82,6 +88,7 @@ from zonecast.estimator.kalman import (
 from zonecast.estimator.solar import FACADE_AZIMUTHS, SKY_MODELS, SolarGeometryCache, transpose
 from zonecast.estimator.telemetry import Telemetry, load_telemetry, segments_of
 from zonecast.estimator.units import to_si
+from zonecast.estimator.weather_forecast import WEATHER_DEFAULTS, DiurnalWeather, WeatherForecast
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
            "StepReport", "checkpoint_header", "offline_forecasts", "rows_from_frame",
@@ -191,6 +198,7 @@ class OnlineEstimator:
         self._bin_days: dict[int, np.ndarray] = {}
         self._gig_cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         self._names = _input_names(bundle)
+        self._init_input_forecasts()
         self.reset()
         self.steps = 0
         self.resets = 0
@@ -289,6 +297,7 @@ class OnlineEstimator:
         self._pending = self._held.copy()
         self._inputs.append((t, self._pending.copy()))
         self.last_y = y.copy()
+        self._learn_inputs(t, inputs, y)
         held = [n for n, good in zip(self._names, ok) if not good]
         missing = [z for z, val in zip(self.bundle.zones, y) if not np.isfinite(val)]
         return StepReport(t, nis, dof, reset, missing, held)
@@ -358,35 +367,162 @@ class OnlineEstimator:
         inputs : ndarray (96, n_boxes + 6), optional
             u and v over the 96 forecast intervals (airflows [kg/s], then Ta, Ts [degC],
             solE, solS, solW, solN [W/m2]) when a site has forecasts of them (or, for an
-            evaluation, the measured ones); default: persistence inputs.
+            evaluation, the measured ones); default: :meth:`forecast_inputs` (weather
+            forecast or its fallback, learned HVAC inputs).
         """
         if not self.started:
             raise ValueError("no forecast yet: the filter has not received a measurement")
-        m = self.bundle.model
         t = self.time
         f_ig = self.dayahead_gains()
-        # persistence inputs: row t for interval t, the row 24 h earlier for t + h
-        # (integer nanosecond keys: Timestamp arithmetic per lookup costs ~1 ms a forecast)
-        past = {s.value: row for s, row in self._inputs}
-        current = past[t.value]
-        day_ago = t.value - pd.Timedelta("1D").value
         if inputs is None:
-            ins = np.empty((HORIZON, self._nin))
-            ins[0] = current
-            for h in range(1, HORIZON):
-                ins[h] = past.get(day_ago + h * STEP.value, current)
+            ins = self.forecast_inputs()
         else:
             ins = np.asarray(inputs, dtype=float)
             if ins.shape != (HORIZON, self._nin) or not np.isfinite(ins).all():
                 raise ValueError(f"inputs must be finite with shape ({HORIZON}, {self._nin}): "
                                  "u per box, then Ta, Ts, solE, solS, solW, solN per interval")
+        mean = self._run_forecast(ins, f_ig)
+        std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
+        times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
+        return Forecast(t, times, mean, std, f_ig, self.bundle.zones, self.bundle.version,
+                        halfwidth=self.calibrator.halfwidth(t.value // STEP.value, std))
+
+    def _run_forecast(self, ins: np.ndarray, f_ig: np.ndarray) -> np.ndarray:
+        """Zone temperatures (HORIZON, n_zones) [degC] from the current state with the
+        inputs ``ins`` and gains ``f_ig`` over the horizon."""
+        m = self.bundle.model
         u, v = ins[:, :m.n_boxes], ins[:, m.n_boxes:]
         forcing = v @ m.Bv.T + (f_ig + m.params.c_ig) @ m.B_ig.T
         xs = self._ladder.for_airflows(u).run(self._x, u, forcing, v[:, 1])
+        return xs[1:] @ m.C.T
+
+    # --- input forecasts (docs/forecasts.md "Served forecast") ---------------------------
+    def _init_input_forecasts(self) -> None:
+        """The learners that live across filter restarts: HVAC inputs by time of week,
+        the weather fallback, the interval calibration; and the weather forecast in use."""
+        site, nb = self.bundle.site, self.bundle.model.n_boxes
+        self.calendar = DayCalendar.for_site(site)
+        d = INPUT_FORECAST_DEFAULTS
+        self.inputs_fc = HvacInputForecaster(self.calendar, nb + 1, n_regressors=2,
+                                             shrink=[d["sigma0"], d["sigma0_solar"]],
+                                             nonnegative=[True] * nb + [False])
+        self.weather_fb = DiurnalWeather(self.calendar.per_day)
+        self.calibrator = IntervalCalibrator(self._nz, HORIZON, self.calendar.per_day,
+                                             step_ns=STEP.value)
+        self.weather_max_age = pd.Timedelta(hours=WEATHER_DEFAULTS["max_age_h"])
+        self._experiments = [(pd.Timestamp(e.start).value, pd.Timestamp(e.end).value)
+                             for e in site.experiments]
+        loc = site.location
+        self._fc_solar = SolarGeometryCache(loc.latitude, loc.longitude, loc.elevation,
+                                            site.step, max_days=4)
+        self.weather: WeatherForecast | None = None
+        self._wx: tuple[int, np.ndarray] | None = None  # (first grid ns, (N, 5) Ta, sol x 4)
+
+    def _learn_inputs(self, t: pd.Timestamp, inputs: np.ndarray, y: np.ndarray) -> None:
+        """Online learning of row t (after the filter step): HVAC-input and weather
+        learners (not inside the site's experiments), then the interval calibration:
+        score the kept calibration forecasts against y(t), and keep a new one when due."""
+        nb = self.bundle.model.n_boxes
+        tn = t.value
+        if not any(a <= tn < b for a, b in self._experiments):
+            self.inputs_fc.update(tn, [inputs[nb], inputs[nb + 2:].sum()],
+                                  np.append(inputs[:nb], inputs[nb + 1]))
+            tod = int(self.calendar.slots([tn])[0]) % self.calendar.per_day
+            self.weather_fb.update(tod, inputs[nb], inputs[nb + 2:])
+        k = tn // STEP.value
         std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
-        times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
-        return Forecast(t, times, xs[1:] @ m.C.T, std, f_ig, self.bundle.zones,
-                        self.bundle.version)
+        self.calibrator.resolve(k, y, std)
+        if self.started and self.time == t and self.calibrator.due(k):
+            ins = self.forecast_inputs()
+            if np.isfinite(ins).all():
+                self.calibrator.add_forecast(k, self._run_forecast(ins, self.dayahead_gains()))
+
+    def set_weather_forecast(self, wf: WeatherForecast | None) -> None:
+        """Use ``wf`` for forecasts issued at or after ``wf.issued`` (until it is older
+        than :attr:`weather_max_age`); None forgets it. Its values are interpolated to
+        the middle of each model interval and transposed onto the facades once here."""
+        self.weather, self._wx = wf, None
+        if wf is None:
+            return
+        step = STEP.value
+        first = -(-wf.times.asi8[0] // step) * step
+        grid = np.arange(first, wf.times.asi8[-1] + 1, step, dtype=np.int64)
+        if len(grid) == 0:
+            return
+        vals = wf.values_at(grid + step // 2)  # Ta, GHI, DNI, DHI at interval middles
+        sol = np.full((len(grid), 4), np.nan)
+        ok = np.isfinite(vals).all(axis=1)
+        if ok.any():
+            geom = self._fc_solar.geometry(grid[ok])
+            sol[ok] = transpose(geom, vals[ok, 1], vals[ok, 2], vals[ok, 3],
+                                np.array([(90.0, az) for az in FACADE_AZIMUTHS]),
+                                total=True)["poa_global"]
+        self._wx = (int(first), np.column_stack([vals[:, 0], sol]))
+
+    def persistence_inputs(self) -> np.ndarray:
+        """(HORIZON, n_boxes + 6) persistence inputs: row t for interval t, the row 24 h
+        earlier for t + h (the current row where none): the served inputs before input
+        forecasts, kept as a reference."""
+        t = self.time
+        # integer nanosecond keys: Timestamp arithmetic per lookup costs ~1 ms a forecast
+        past = {s.value: row for s, row in self._inputs}
+        current = past[t.value]
+        day_ago = t.value - pd.Timedelta("1D").value
+        ins = np.empty((HORIZON, self._nin))
+        ins[0] = current
+        for h in range(1, HORIZON):
+            ins[h] = past.get(day_ago + h * STEP.value, current)
+        return ins
+
+    def weather_inputs(self) -> tuple[np.ndarray, np.ndarray]:
+        """(HORIZON, 5) outdoor temperature [degC] and facade irradiance E, S, W, N
+        [W/m2] over the forecast intervals, and a (HORIZON,) mask of the intervals taken
+        from the weather forecast. Interval t is the measured row; later ones come from
+        the weather forecast in use when it is fresh and covers them, else from the
+        diurnal fallback, else persistence."""
+        t = self.time.value
+        nb = self.bundle.model.n_boxes
+        pers = self.persistence_inputs()
+        cols = [nb] + list(range(nb + 2, self._nin))
+        out = pers[:, cols].copy()
+        times = t + STEP.value * np.arange(HORIZON, dtype=np.int64)
+        tods = self.calendar.slots(times) % self.calendar.per_day
+        lead_h = np.arange(HORIZON) * (STEP.value / 3.6e12)
+        fb = self.weather_fb.forecast(tods, lead_h, pers[0, cols])
+        use = np.isfinite(fb)
+        out[1:][use[1:]] = fb[1:][use[1:]]
+        from_wf = np.zeros(HORIZON, dtype=bool)
+        wf = self.weather
+        if (self._wx is not None and wf is not None and wf.issued.value <= t
+                and t - wf.issued.value <= self.weather_max_age.value):
+            first, vals = self._wx
+            idx = (times - first) // STEP.value
+            inside = (idx >= 0) & (idx < len(vals))
+            inside[0] = False
+            rows = np.where(inside, idx, 0)
+            good = inside & np.isfinite(vals[rows]).all(axis=1)
+            out[good] = vals[rows[good]]
+            from_wf = good
+        return out, from_wf
+
+    def forecast_inputs(self) -> np.ndarray:
+        """(HORIZON, n_boxes + 6) served inputs: weather from :meth:`weather_inputs`,
+        airflows and supply-air temperature from the HVAC-input forecaster
+        (:mod:`zonecast.estimator.inputs_forecast`) at the forecast outdoor temperature,
+        persistence where it has not learned a slot."""
+        nb = self.bundle.model.n_boxes
+        pers = self.persistence_inputs()
+        wx, _ = self.weather_inputs()
+        times = self.time.value + STEP.value * np.arange(HORIZON, dtype=np.int64)
+        hv_cols = list(range(nb)) + [nb + 1]
+        x = np.column_stack([wx[:, 0], wx[:, 1:].sum(axis=1)])
+        hv = self.inputs_fc.forecast(times, x, pers[0, hv_cols], pers[:, hv_cols])
+        ins = np.empty((HORIZON, self._nin))
+        ins[:, :nb] = hv[:, :nb]
+        ins[:, nb] = wx[:, 0]
+        ins[:, nb + 1] = hv[:, nb]
+        ins[:, nb + 2:] = wx[:, 1:]
+        return ins
 
     def _bins(self, times_ns: np.ndarray) -> np.ndarray:
         """Time-of-week bin of the profile for UTC grid times (ns since the epoch)."""
@@ -447,6 +583,9 @@ class OnlineEstimator:
                   "inputs": np.array([r for _, r in self._inputs]).reshape(-1, self._nin)}
         if self.started:
             arrays["x"] = self._x
+        arrays.update(self.inputs_fc.state_arrays())
+        arrays.update(self.weather_fb.state_arrays())
+        arrays.update(self.calibrator.state_arrays())
         parts, layout, offset = [], {}, 0
         for name, a in arrays.items():
             a = np.ascontiguousarray(a)
@@ -489,6 +628,11 @@ class OnlineEstimator:
             self._observed = arr["observed"].astype(bool)
         if meta["started"]:
             self._x = arr["x"]
+        # the input learners (absent from checkpoints before them: they start afresh)
+        self._init_input_forecasts()
+        self.inputs_fc.load_state_arrays(arr)
+        self.weather_fb.load_state_arrays(arr)
+        self.calibrator.load_state_arrays(arr)
 
 
 def checkpoint_header(data: bytes) -> dict:
@@ -612,7 +756,9 @@ def telemetry_frame(telemetry: Telemetry | str | Path | pd.DataFrame,
 def offline_forecasts(model_file: ModelBundle | str | Path,
                       telemetry: Telemetry | str | Path | pd.DataFrame, times: Iterable, *,
                       max_gap: pd.Timedelta = MAX_GAP,
-                      inputs: Mapping | None = None) -> dict[pd.Timestamp, Forecast]:
+                      inputs: Mapping | None = None,
+                      weather: Iterable[WeatherForecast] | None = None,
+                      persistence: bool = False) -> dict[pd.Timestamp, Forecast]:
     """Forecasts issued at ``times`` by the online estimator run over ``telemetry``.
 
     Feeds every row of recorded telemetry that holds any data, in time order, to the
@@ -632,7 +778,14 @@ def offline_forecasts(model_file: ModelBundle | str | Path,
         As for :class:`OnlineEstimator`.
     inputs : mapping, optional
         UTC issue time -> (96, n_boxes + 6) inputs over the horizon for
-        :meth:`OnlineEstimator.forecast` (default persistence inputs).
+        :meth:`OnlineEstimator.forecast` (default the served input forecasts).
+    weather : iterable of WeatherForecast, optional
+        Weather forecasts; each is handed to the estimator
+        (:meth:`OnlineEstimator.set_weather_forecast`) before the first row at or after
+        its ``issued`` time, as the service's runner does.
+    persistence : bool
+        Forecast with :meth:`OnlineEstimator.persistence_inputs` (the inputs served
+        before input forecasts; a reference) where ``inputs`` gives none.
 
     Returns
     -------
@@ -652,12 +805,22 @@ def offline_forecasts(model_file: ModelBundle | str | Path,
     out: dict[pd.Timestamp, Forecast] = {}
     last = max(wanted) if wanted else None
     tt, u, v, y = rows_from_frame(bundle, frame)
+    wfs = sorted(weather or (), key=lambda w: w.issued)
+    j = 0
     for k, t in enumerate(tt):
         if last is not None and t > last:
             break
+        newest = None
+        while j < len(wfs) and wfs[j].issued <= t:
+            newest, j = wfs[j], j + 1
+        if newest is not None:
+            est.set_weather_forecast(newest)
         est.advance(t, u[k], v[k], y[k])
         if t in wanted and est.started:
-            out[t] = est.forecast(None if inputs is None else inputs.get(t))
+            given = None if inputs is None else inputs.get(t)
+            if given is None and persistence:
+                given = est.persistence_inputs()
+            out[t] = est.forecast(given)
     missing = sorted(wanted - set(out))
     if missing:
         raise ValueError(f"no forecast at {len(missing)} requested times (first "

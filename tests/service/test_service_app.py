@@ -235,8 +235,9 @@ def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemet
 
 
 def test_forecast_with_supplied_inputs(bundle, telemetry, tmp_path):
-    """Supplied horizon inputs replace persistence; the persistence inputs passed
-    explicitly give the default forecast bitwise; bad shapes are refused."""
+    """Supplied horizon inputs replace the served input forecasts; the default forecast
+    is that of :meth:`forecast_inputs` bitwise, the persistence reference that of the
+    measured rows 24 h earlier; bad shapes are refused."""
     from zonecast.estimator.streaming import OnlineEstimator, offline_forecasts, rows_from_frame
 
     frame = telemetry_si(bundle, telemetry.iloc[:2 * DAY + 10])
@@ -247,7 +248,11 @@ def test_forecast_with_supplied_inputs(bundle, telemetry, tmp_path):
     k = len(tt) - 1
     persistence = np.vstack([np.hstack([u[k], v[k]])]
                             + [np.hstack([u[k - DAY + h], v[k - DAY + h]]) for h in range(1, DAY)])
-    a, b = est.forecast(), est.forecast(persistence)
+    assert np.array_equal(est.persistence_inputs(), persistence)
+    served = est.forecast()
+    again = est.forecast(est.forecast_inputs())
+    assert np.array_equal(served.mean, again.mean) and np.array_equal(served.std, again.std)
+    a, b = est.forecast(est.persistence_inputs()), est.forecast(persistence)
     assert np.array_equal(a.mean, b.mean) and np.array_equal(a.std, b.std)
     warmer = persistence.copy()
     warmer[:, bundle.model.n_boxes] += 5.0  # outdoor air 5 K warmer all day

@@ -586,6 +586,12 @@ class OnlineEstimator:
         arrays.update(self.inputs_fc.state_arrays())
         arrays.update(self.weather_fb.state_arrays())
         arrays.update(self.calibrator.state_arrays())
+        if self.weather is not None:  # the weather forecast in use, raw
+            wf = self.weather
+            arrays["wf_issued"] = np.array([wf.issued.value], dtype=np.int64)
+            arrays["wf_times"] = wf.times.asi8.astype(np.int64)
+            arrays["wf_values"] = np.column_stack([wf.temperature, wf.ghi, wf.dni, wf.dhi])
+            meta["weather_source"] = wf.source
         parts, layout, offset = [], {}, 0
         for name, a in arrays.items():
             a = np.ascontiguousarray(a)
@@ -633,6 +639,12 @@ class OnlineEstimator:
         self.inputs_fc.load_state_arrays(arr)
         self.weather_fb.load_state_arrays(arr)
         self.calibrator.load_state_arrays(arr)
+        if "wf_times" in arr:
+            vals = arr["wf_values"]
+            self.set_weather_forecast(WeatherForecast(
+                pd.Timestamp(int(arr["wf_issued"][0]), tz="UTC"),
+                pd.DatetimeIndex(arr["wf_times"].astype("datetime64[ns]")).tz_localize("UTC"),
+                vals[:, 0], vals[:, 1], vals[:, 2], vals[:, 3], meta.get("weather_source", "")))
 
 
 def checkpoint_header(data: bytes) -> dict:

@@ -25,6 +25,7 @@ from zonecast.service.api.routes import (
     metrics,
     state,
     telemetry,
+    weather,
 )
 from zonecast.service.context import ServiceContext
 from zonecast.service.settings import ServiceSettings, load_settings
@@ -82,7 +83,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     async def _invalid(request: Request, exc: RequestValidationError):
         return JSONResponse({"detail": _message(exc)}, status_code=422)
 
-    for module in (buildings, state, internal_gains, forecast, telemetry):
+    for module in (buildings, state, internal_gains, forecast, telemetry, weather):
         app.include_router(module.router, prefix=API)
     app.include_router(health.router)
     app.include_router(metrics.router)

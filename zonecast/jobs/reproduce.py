@@ -21,7 +21,7 @@ from zonecast.estimator.artifact import model_options_dict
 from zonecast.estimator.constants import HORIZON
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
-from zonecast.estimator.forecast import coverage, issue_rows, week_split
+from zonecast.estimator.forecast import issue_rows, week_split
 from zonecast.estimator.identify import weekend_simulations
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.rc.network import ModelOptions
@@ -228,42 +228,97 @@ def plot_week(week: dict, zones: list[str], methods: list[str], title: str, path
     fig.savefig(path, dpi=110)
 
 
-def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int) -> dict:
+def _interval_coverage(lower: np.ndarray, upper: np.ndarray, meas: np.ndarray,
+                       zones: list[str]) -> dict[str, float]:
+    """Fraction of measurements inside [lower, upper], per zone and over all (``all``)."""
+    ok = np.isfinite(meas) & np.isfinite(lower) & np.isfinite(upper)
+    inside = (meas >= lower) & (meas <= upper)
+    out = {z: float(inside[..., j][ok[..., j]].mean()) for j, z in enumerate(zones)}
+    out["all"] = float(inside[ok].mean())
+    return out
+
+
+def _weather_forecasts(campaign: Path, seed: int) -> list:
+    """The campaign's weather forecasts (``weather_forecasts.json``; written by the
+    testbed's error model when absent: the weather file plus seeded error growing with
+    lead time, docs/testbed.md), validated like those the service receives."""
+    from zonecast.estimator.weather_forecast import parse_weather_forecast
+
+    path = campaign / "weather_forecasts.json"
+    if not path.is_file():
+        from zonecast.testbed.forecasts import write_weather_forecasts  # testbed extra
+        write_weather_forecasts(campaign, seed=seed)
+    return [parse_weather_forecast(b) for b in json.loads(path.read_text())["forecasts"]]
+
+
+def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
+                  weather: list | None = None) -> dict:
     """The service's day-ahead forecast (:class:`~zonecast.estimator.streaming.OnlineEstimator`:
-    steady-state filter, online f_IG, persistence inputs) issued at the same validation
-    midnights as Table 3, computed offline from the telemetry file exactly as
-    ``zonecast forecast`` does, and the same with the measured inputs over the horizon
-    (``service_known_inputs``, comparable with Table 3's rows); RMS per zone, per horizon
-    and interval coverage."""
+    steady-state filter, online f_IG, input forecasts, calibrated intervals) issued at the
+    same validation midnights as Table 3, computed offline from the telemetry file exactly
+    as ``zonecast forecast`` does. Rows:
+
+    - ``service``: the served forecast with the weather forecasts ``weather``
+      (:class:`~zonecast.estimator.weather_forecast.WeatherForecast`; the testbed's, with
+      error growing with lead time) and the learned HVAC inputs;
+    - ``service_no_weather_forecast``: the same without weather forecasts (the diurnal
+      fallback);
+    - ``service_persistence``: the inputs measured 24 h earlier (the service before
+      input forecasts);
+    - ``service_known_inputs``: the measured u and v over the horizon (comparable with
+      Table 3's rows);
+    - ``attribution``: the known inputs with one group (airflows, outdoor temperature,
+      supply-air temperature, facade solar) replaced by persistence: which input's
+      persistence costs most.
+
+    RMS per zone, per horizon, and coverage of the served 90 % intervals (``lower``,
+    ``upper``: calibrated on the building's own recent errors) per zone and overall."""
     split = week_split(data, seed)
     issues = [(r, split["weeks"][i]["rows"][1]) for i in split["validation"]
               for r in issue_rows(data, split["weeks"][i]["rows"])]
     t0 = time.perf_counter()
     times = [data.times[r] for r, _ in issues]
-    # the same forecasts with the measured u and v over the horizon (as Table 3's): what the
-    # steady-state filter and online gains give when the inputs are known
-    measured = {}
+    nb = data.u.shape[1]
+    measured, persisted = {}, {}
     for r, _ in issues:
         ins = np.hstack([data.u[r:r + HORIZON], data.v[r:r + HORIZON]])
-        if len(ins) == HORIZON and np.isfinite(ins).all():
+        if len(ins) == HORIZON and np.isfinite(ins).all() and r >= HORIZON:
             measured[data.times[r]] = ins
+            persisted[data.times[r]] = np.vstack(
+                [ins[:1], np.hstack([data.u[r + 1 - HORIZON:r], data.v[r + 1 - HORIZON:r]])])
     served = Pipeline.from_model_file(model_file)
-    runs = {"service": served.forecast(telemetry, times),
+    runs = {"service": served.forecast(telemetry, times, weather=weather or []),
+            "service_no_weather_forecast": served.forecast(telemetry, times),
+            "service_persistence": served.forecast(telemetry, times, persistence=True),
             "service_known_inputs": served.forecast(telemetry, times, inputs=measured)}
+    groups = {"airflows": list(range(nb)), "outdoor_temperature": [nb],
+              "supply_temperature": [nb + 1], "solar": list(range(nb + 2, nb + 6))}
+    for g, cols in groups.items():
+        mixed = {}
+        for t, ins in measured.items():
+            a = ins.copy()
+            a[:, cols] = persisted[t][:, cols]
+            mixed[t] = a
+        runs[f"known_but_persisted_{g}"] = served.forecast(telemetry, times, inputs=mixed)
     nz = len(data.zones)
-    out: dict = {"table3": {}, "horizon_rms": {}, "coverage_90": {}}
+    out: dict = {"table3": {}, "horizon_rms": {}, "coverage_90": {}, "attribution": {}}
     for name, fcs in runs.items():
-        pred, std, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(3))
+        pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
         for k, (r, stop) in enumerate(issues):
-            if name == "service_known_inputs" and data.times[r] not in measured:
+            needs_measured = name == "service_known_inputs" or name.startswith("known_but")
+            if needs_measured and data.times[r] not in measured:
                 continue
             fc = fcs[data.times[r]]
             n = min(HORIZON, stop - r - 1)
-            pred[k], std[k] = fc.mean, fc.std
+            pred[k], lo[k], hi[k] = fc.mean, fc.lower, fc.upper
             meas[k, :n] = data.y[r + 1:r + 1 + n]
-        out["table3"][name] = rms_by_zone(pred.reshape(-1, nz), meas.reshape(-1, nz), data.zones)
+        rms = rms_by_zone(pred.reshape(-1, nz), meas.reshape(-1, nz), data.zones)
+        if name.startswith("known_but"):
+            out["attribution"][name] = rms
+            continue
+        out["table3"][name] = rms
         out["horizon_rms"][name] = horizon_rms(pred, meas, data.zones)
-        out["coverage_90"][name] = coverage(pred, std, meas, data.zones)
+        out["coverage_90"][name] = _interval_coverage(lo, hi, meas, data.zones)
     out["n_forecasts"] = len(issues)
     out["seconds"] = time.perf_counter() - t0
     return out
@@ -316,10 +371,14 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
         extra={"profile_weeks": study["split"]["train_starts"]})
     t = time.perf_counter()
     progress("service check: the online estimator's day-ahead forecasts")
-    svc = service_check(model_file, campaign / "telemetry.csv", data, seed)
+    weather = _weather_forecasts(campaign, seed)
+    svc = service_check(model_file, campaign / "telemetry.csv", data, seed,
+                        weather=weather)
     study["table3"].update(svc["table3"])
     study["horizon_rms"].update(svc["horizon_rms"])
-    study.setdefault("coverage_90", {}).update(svc["coverage_90"])
+    study.setdefault("coverage_90", {}).update(
+        {f"{k}_calibrated": v for k, v in svc["coverage_90"].items()})
+    study["service_input_attribution"] = svc["attribution"]
     timings["service_check"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     pinned = set(ident.at_bounds())

@@ -206,12 +206,14 @@ class Ingester:
         ``readings_stored``, ``readings_duplicate``, ``readings_conflict``,
         ``readings_rejected``, ``dead_letters``, ``storage_errors``,
         ``worker_errors`` (unexpected errors of the worker; that batch stays
-        unacknowledged), ``connects`` and ``rejected`` (reason code -> count of
-        messages or readings rejected for it).
+        unacknowledged), ``connects``, ``weather_forecasts`` (accepted weather
+        forecasts) and ``rejected`` (reason code -> count of messages or readings
+        rejected for it).
         """
         keys = ("messages_in", "messages_stored", "messages_rejected", "readings_stored",
                 "readings_duplicate", "readings_conflict", "readings_rejected",
-                "dead_letters", "storage_errors", "worker_errors", "connects")
+                "dead_letters", "storage_errors", "worker_errors", "connects",
+                "weather_forecasts")
         with self._count_lock:
             out: dict[str, int | dict[str, int]] = {k: self._counts[k] for k in keys}
             out["rejected"] = dict(self._rejected)

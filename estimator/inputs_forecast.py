@@ -87,7 +87,7 @@ class DayCalendar:
         th = site.thermostat
         if th is None:
             return cls(site.timezone, site.step)
-        return cls(site.timezone, site.step, th.working_days, getattr(th, "holidays", ()))
+        return cls(site.timezone, site.step, th.working_days, th.holidays)
 
     def _compute(self, times: pd.DatetimeIndex) -> np.ndarray:
         local = times.tz_convert(self.timezone)

@@ -191,3 +191,16 @@ def test_adaptive_level_widens_after_misses():
     cal.add_forecast(0, np.zeros((96, 1)))
     cal.resolve(1, np.array([100.0]), std)  # far outside: a miss
     assert cal.level[0] > before[0]
+
+
+
+def test_site_thermostat_holidays_reach_the_calendar(site_dict, tmp_path):
+    from zonecast.estimator.site import load_site
+
+    from tests.conftest import write_site
+
+    site_dict["thermostat"] = {"heating_occupied": 21, "heating_unoccupied": 17,
+                               "holidays": ["2015-05-25"]}
+    cal = DayCalendar.for_site(load_site(write_site(tmp_path, site_dict)))
+    monday, tuesday = _grid("2015-05-25", 2)[[40, 136]]
+    assert cal.slots([monday])[0] == 96 + 40 and cal.slots([tuesday])[0] == 40

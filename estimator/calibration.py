@@ -15,6 +15,7 @@ rescales it by lead time from the errors the building's own served forecasts mad
   forecast issued at any time of day must get intervals that fit it;
 - the histograms decay by ``lam`` per step (an effective window of 1 / (1 - lam) steps of
   data, ~``window_days``), so the calibration follows the recent days, O(1) per step;
+  scores inside the site's experiments are not kept (the streaming estimator skips them);
 - the served half-width is q(bin, zone) x std(h): split-conformal scaling of the model
   std with the empirical quantile of recent scores;
 - the quantile's level per zone follows adaptive conformal inference (Gibbs and Candès
@@ -35,8 +36,8 @@ import numpy as np
 __all__ = ["CALIBRATION_DEFAULTS", "IntervalCalibrator"]
 
 #: chosen on the training weeks (docs/forecasts.md "Served forecast")
-CALIBRATION_DEFAULTS = {"window_days": 14.0, "cadence": 8, "tod_bins": 12, "level": 0.9,
-                        "min_weight": 30.0, "gamma": 0.001}
+CALIBRATION_DEFAULTS = {"window_days": 7.0, "cadence": 8, "tod_bins": 12, "level": 0.9,
+                        "min_weight": 30.0, "gamma": 0.0005}
 
 _EDGES = np.geomspace(1e-2, 1e2, 51)  # score bins; below/above go to the first/last
 _DAY_NS = 86_400 * 10**9

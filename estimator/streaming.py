@@ -420,19 +420,21 @@ class OnlineEstimator:
 
     def _learn_inputs(self, t: pd.Timestamp, inputs: np.ndarray, y: np.ndarray) -> None:
         """Online learning of row t (after the filter step): HVAC-input and weather
-        learners (not inside the site's experiments), then the interval calibration:
-        score the kept calibration forecasts against y(t), and keep a new one when due."""
+        learners, then the interval calibration: score the kept calibration forecasts
+        against y(t), and keep a new one when due. Rows inside the site's experiments
+        teach nothing (their airflows and errors are the experiment's, not operation's)."""
         nb = self.bundle.model.n_boxes
         tn = t.value
-        if not any(a <= tn < b for a, b in self._experiments):
+        operating = not any(a <= tn < b for a, b in self._experiments)
+        if operating:
             self.inputs_fc.update(tn, [inputs[nb], inputs[nb + 2:].sum()],
                                   np.append(inputs[:nb], inputs[nb + 1]))
             tod = int(self.calendar.slots([tn])[0]) % self.calendar.per_day
             self.weather_fb.update(tod, inputs[nb], inputs[nb + 2:])
         k = tn // STEP.value
         std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
-        self.calibrator.resolve(k, y, std)
-        if self.started and self.time == t and self.calibrator.due(k):
+        self.calibrator.resolve(k, y if operating else np.full(self._nz, np.nan), std)
+        if operating and self.started and self.time == t and self.calibrator.due(k):
             ins = self.forecast_inputs()
             if np.isfinite(ins).all():
                 self.calibrator.add_forecast(k, self._run_forecast(ins, self.dayahead_gains()))

@@ -32,13 +32,19 @@ docs/benchmarks.md has the accuracy comparison).
 
 A forecast issued at t starts from the filtered x(t|t) and runs the model 96 steps with
 the internal gains of :class:`~zonecast.estimator.gains.DayAheadGains` (weekly profile
-plus the decaying recent offset) and *persistence inputs*: u and v of interval t are the
-measured row t, those of t + h (h >= 1) are the values measured 24 h earlier (no weather
-or HVAC forecast enters; see docs/service.md). The 90 % interval of a zone is
-``C x +- 1.645 sqrt(v_h)`` with ``v_h`` the variance of ``C x`` after h steps of the
-nominal model from the steady-state posterior covariance (state uncertainty; measurement
-noise not added); the same table gives the state's standard deviation after steps
-without measurements.
+plus the decaying recent offset) and *input forecasts* (:meth:`OnlineEstimator.forecast_inputs`,
+issue 15): u and v of interval t are the measured row t; later ones take the outdoor
+temperature and facade irradiance from the weather forecast in use
+(:meth:`OnlineEstimator.set_weather_forecast`) or the diurnal fallback
+(:mod:`zonecast.estimator.weather_forecast`), the airflows and supply-air temperature from
+:class:`~zonecast.estimator.inputs_forecast.HvacInputForecaster`, learned online per row.
+:meth:`OnlineEstimator.persistence_inputs` (the values measured 24 h earlier) is the
+earlier reference. ``std`` is the model's: ``sqrt(v_h)``, with ``v_h`` the variance of
+``C x`` after h steps of the nominal model from the steady-state posterior covariance
+(state uncertainty; measurement noise not added; the same table gives the state's standard
+deviation after steps without measurements); the served 90 % interval (``lower``,
+``upper``) is calibrated on the building's recent errors
+(:class:`~zonecast.estimator.calibration.IntervalCalibrator`, scored each row).
 """
 
 from __future__ import annotations

@@ -397,7 +397,7 @@ class OnlineEstimator:
         """Zone temperatures (HORIZON, n_zones) [degC] from the current state with the
         inputs ``ins`` and gains ``f_ig`` over the horizon."""
         m = self.bundle.model
-        u, v = ins[:, :m.n_boxes], ins[:, m.n_boxes:]
+        u, v = ins[:, :m.n_boxes], ins[:, m.n_boxes:m.n_boxes + 6]
         forcing = v @ m.Bv.T + (f_ig + m.params.c_ig) @ m.B_ig.T
         xs = self._ladder.for_airflows(u).run(self._x, u, forcing, v[:, 1])
         return xs[1:] @ m.C.T
@@ -409,9 +409,14 @@ class OnlineEstimator:
         site, nb = self.bundle.site, self.bundle.model.n_boxes
         self.calendar = DayCalendar.for_site(site)
         d = INPUT_FORECAST_DEFAULTS
-        self.inputs_fc = HvacInputForecaster(self.calendar, nb + 1, n_regressors=2,
+        # HVAC channels: every input but the weather (Ta at nb, facade solar at nb + 2 ...
+        # nb + 5): the airflows, the supply-air temperature, and any per-box input after
+        # the six disturbances (e.g. a discharge-air rise); all but T_s are >= 0
+        self._hv_cols = np.array(list(range(nb)) + [nb + 1] + list(range(nb + 6, self._nin)))
+        nonneg = [c != nb + 1 for c in self._hv_cols]
+        self.inputs_fc = HvacInputForecaster(self.calendar, len(self._hv_cols), n_regressors=2,
                                              shrink=[d["sigma0"], d["sigma0_solar"]],
-                                             nonnegative=[True] * nb + [False])
+                                             nonnegative=nonneg)
         self.weather_fb = DiurnalWeather(self.calendar.per_day)
         self.calibrator = IntervalCalibrator(self._nz, HORIZON, self.calendar.per_day,
                                              step_ns=STEP.value)
@@ -433,10 +438,10 @@ class OnlineEstimator:
         tn = t.value
         operating = not any(a <= tn < b for a, b in self._experiments)
         if operating:
-            self.inputs_fc.update(tn, [inputs[nb], inputs[nb + 2:].sum()],
-                                  np.append(inputs[:nb], inputs[nb + 1]))
+            self.inputs_fc.update(tn, [inputs[nb], inputs[nb + 2:nb + 6].sum()],
+                                  inputs[self._hv_cols])
             tod = int(self.calendar.slots([tn])[0]) % self.calendar.per_day
-            self.weather_fb.update(tod, inputs[nb], inputs[nb + 2:])
+            self.weather_fb.update(tod, inputs[nb], inputs[nb + 2:nb + 6])
         k = tn // STEP.value
         std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
         self.calibrator.resolve(k, y if operating else np.full(self._nz, np.nan), std)
@@ -480,6 +485,8 @@ class OnlineEstimator:
         ins[0] = current
         for h in range(1, HORIZON):
             ins[h] = past.get(day_ago + h * STEP.value, current)
+        nb = self.bundle.model.n_boxes
+        ins[:, nb + 6:] = np.nan_to_num(ins[:, nb + 6:])  # per-box extras never heard: 0
         return ins
 
     def weather_inputs(self) -> tuple[np.ndarray, np.ndarray]:
@@ -491,7 +498,7 @@ class OnlineEstimator:
         t = self.time.value
         nb = self.bundle.model.n_boxes
         pers = self.persistence_inputs()
-        cols = [nb] + list(range(nb + 2, self._nin))
+        cols = [nb] + list(range(nb + 2, nb + 6))
         out = pers[:, cols].copy()
         times = t + STEP.value * np.arange(HORIZON, dtype=np.int64)
         tods = self.calendar.slots(times) % self.calendar.per_day
@@ -522,14 +529,13 @@ class OnlineEstimator:
         pers = self.persistence_inputs()
         wx, _ = self.weather_inputs()
         times = self.time.value + STEP.value * np.arange(HORIZON, dtype=np.int64)
-        hv_cols = list(range(nb)) + [nb + 1]
+        hv_cols = self._hv_cols
         x = np.column_stack([wx[:, 0], wx[:, 1:].sum(axis=1)])
         hv = self.inputs_fc.forecast(times, x, pers[0, hv_cols], pers[:, hv_cols])
         ins = np.empty((HORIZON, self._nin))
-        ins[:, :nb] = hv[:, :nb]
+        ins[:, hv_cols] = hv
         ins[:, nb] = wx[:, 0]
-        ins[:, nb + 1] = hv[:, nb]
-        ins[:, nb + 2:] = wx[:, 1:]
+        ins[:, nb + 2:nb + 6] = wx[:, 1:]
         return ins
 
     def _bins(self, times_ns: np.ndarray) -> np.ndarray:

@@ -129,6 +129,11 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                          for k, v in results.table2_window_solar_air.items()}, zones)
     lines += ["", "## Table 3: 24-hour prediction RMS [°C]", ""]
     lines += _table(results.table3, zones, PAPER["table3"])
+    attribution = getattr(results, "service_input_attribution", None)
+    if attribution:
+        lines += ["", ("Served forecast, which input's persistence costs most (known inputs "
+                       "with one group persisted):"), ""]
+        lines += _table(attribution, zones)
     lines += ["", f"Coverage of the 90 % intervals: {json.dumps(results.coverage_90)}", "",
               "## Internal gains against the truth (r per zone)", "",
               "```", json.dumps(results.gains_truth, indent=1)[:4000], "```", ""]
@@ -395,6 +400,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
                   table3=study["table3"], horizon_rms=study["horizon_rms"],
                   gains_truth=study.get("gains_truth") or {},
                   coverage_90=study.get("coverage_90"),
+                  service_input_attribution=study.get("service_input_attribution"),
                   split={"identification": {"train": ident.train_weekends,
                                             "validation": ident.validation_weekends},
                          "gains": study.get("split")},

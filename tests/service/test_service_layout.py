@@ -64,6 +64,12 @@ OPERATIONS = {
     ("post", "/api/v1/buildings/{building_id}/telemetry"): (
         "post_telemetry_api_v1_buildings__building_id__telemetry_post", ["telemetry"],
         [("building_id", "path")], ["200", "401", "404", "413", "422"]),
+    ("post", "/api/v1/buildings/{building_id}/weather_forecast"): (
+        "post_weather_forecast_api_v1_buildings__building_id__weather_forecast_post",
+        ["weather"], [("building_id", "path")], ["200", "401", "404", "413", "422"]),
+    ("get", "/api/v1/buildings/{building_id}/weather_forecast"): (
+        "get_weather_forecast_api_v1_buildings__building_id__weather_forecast_get",
+        ["weather"], [("building_id", "path")], ["200", "401", "404", "422"]),
     ("get", "/healthz"): ("healthz_healthz_get", ["health"], [], ["200"]),
     ("get", "/readyz"): ("readyz_readyz_get", ["health"], [], ["200", "503"]),
     ("get", "/metrics"): ("get_metrics_metrics_get", ["metrics"], [], ["200", "401"]),

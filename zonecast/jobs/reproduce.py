@@ -26,6 +26,7 @@ from zonecast.estimator.identify import weekend_simulations
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.rc.network import ModelOptions
 from zonecast.estimator.study import forecast_study
+from zonecast.estimator.weather_forecast import parse_weather_forecast
 
 RESULTS_SCHEMA_VERSION = 1
 
@@ -247,8 +248,6 @@ def _weather_forecasts(campaign: Path, seed: int) -> list:
     """The campaign's weather forecasts (``weather_forecasts.json``; written by the
     testbed's error model when absent: the weather file plus seeded error growing with
     lead time, docs/testbed.md), validated like those the service receives."""
-    from zonecast.estimator.weather_forecast import parse_weather_forecast
-
     path = campaign / "weather_forecasts.json"
     if not path.is_file():
         from zonecast.testbed.forecasts import write_weather_forecasts  # testbed extra

@@ -19,8 +19,7 @@ from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, RunnerDep
 from zonecast.service.weather import WEATHER_SUFFIX, accept_weather
 
 router = APIRouter(prefix="/buildings", tags=["weather"], dependencies=AUTH,
-                   responses={**ERRORS, 413: {"model": S.ErrorBody},
-                              422: {"model": S.ErrorBody}})
+                   responses={**ERRORS})
 
 _body = {"requestBody": {"required": True, "content": {"application/json": {"schema": {
     "type": "object", "description": "a 24-48 h weather forecast (docs/data.md): issued and "
@@ -42,7 +41,8 @@ def _summary(building: str, wf, in_use: bool) -> dict:
 
 
 @router.post("/{building_id}/weather_forecast", summary="Receive a weather forecast",
-             openapi_extra=_body)
+             openapi_extra=_body, responses={413: {"model": S.ErrorBody},
+                                             422: {"model": S.ErrorBody}})
 async def post_weather_forecast(ctx: Ctx, building_id: BuildingId, runner: RunnerDep,
                                 request: Request):
     limit = ctx.settings.max_body_bytes

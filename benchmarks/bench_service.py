@@ -12,7 +12,10 @@
    conversion ``rows_from_frame`` applied to one row.
 2. **Forecast endpoint**: ``zonecast serve`` in its own process (MQTT off, SQLite),
    50 concurrent clients each requesting the cached forecast; reference: ``/healthz``
-   under the same load (the HTTP stack alone). Closed-loop load comes from ``wrk`` (C,
+   under the same load (the HTTP stack alone). With input forecasts on (the default
+   since issue 15) a weather forecast is POSTed first (the testbed's, error growing with
+   lead time) and the served forecast uses it with the learned HVAC inputs; on a version
+   without the endpoint (``--no-weather`` or a 404) the step is skipped and said so. Closed-loop load comes from ``wrk`` (C,
    one thread) when it is on PATH, else from raw asyncio keep-alive connections in this
    process, which share the two cores with the server; paced load always from the
    asyncio clients. The output says which generator ran.
@@ -246,8 +249,26 @@ def _summary(lat: list[float], rate: float) -> dict:
             "p99": float(np.percentile(a, 99))}
 
 
+def _weather_body(data: Path, tel: pd.DataFrame) -> dict | None:
+    """The testbed's synthetic weather forecast issued at the first telemetry row."""
+    try:
+        from zonecast.estimator.telemetry import load_telemetry
+        from zonecast.testbed.forecasts import weather_forecasts
+    except ImportError:  # a version without weather forecasts
+        return None
+    from zonecast.estimator.site import load_site
+
+    site = load_site(data / "site.yaml")
+    frame = load_telemetry(data / "telemetry.csv", site).frame
+    first = pd.Timestamp(tel.iloc[0]["time"]).tz_convert("UTC")
+    bodies = weather_forecasts(site, frame.loc[:first + pd.Timedelta("2D")], every="1h",
+                               hours=36)
+    return bodies[0] if bodies else None
+
+
 def bench_endpoint(data: Path, work: Path, clients: int, requests: int,
-                   generator: str = "auto", seconds: float = 10.0) -> tuple[dict, str]:
+                   generator: str = "auto", seconds: float = 10.0,
+                   weather: bool = True) -> tuple[dict, str]:
     import shutil
 
     import httpx
@@ -284,6 +305,13 @@ def bench_endpoint(data: Path, work: Path, clients: int, requests: int,
             body = {"time": row["time"], "readings": {k: float(x) for k, x in row.items()
                                                       if k != "time" and pd.notna(x)}}
             httpx.post(base + "/api/v1/buildings/office6/telemetry", json=body, headers=h)
+        wbody = _weather_body(data, tel) if weather else None
+        status = "not sent"
+        if wbody is not None:
+            r = httpx.post(base + "/api/v1/buildings/office6/weather_forecast", json=wbody,
+                           headers=h)
+            status = f"POST weather_forecast -> {r.status_code}"
+        print(f"   weather forecast: {status}", flush=True)
         while httpx.get(base + "/api/v1/buildings/office6/forecast", headers=h).status_code != 200:
             time.sleep(0.2)
         asyncio.run(_load(port, "/healthz", clients, 2))  # warm up
@@ -355,6 +383,8 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=10.0, help="wrk run length per endpoint")
     ap.add_argument("--skip-steps", action="store_true", help="only the endpoint benchmark")
     ap.add_argument("--skip-endpoint", action="store_true", help="only the step benchmark")
+    ap.add_argument("--no-weather", action="store_true",
+                    help="do not POST a weather forecast before the endpoint benchmark")
     args = ap.parse_args()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
           f"{platform.python_version()}, OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}")
@@ -366,7 +396,7 @@ def main() -> None:
         if args.skip_endpoint:
             return
         e, closed = bench_endpoint(data, work, args.clients, args.requests, args.generator,
-                                   args.seconds)
+                                   args.seconds, weather=not args.no_weather)
         print(f"\n2. REST under {args.clients} concurrent keep-alive clients (server: one "
               "uvicorn process, on the same 2 cores as the load)")
         print(f"   closed-loop load generator: {closed}; paced load: Python asyncio clients")

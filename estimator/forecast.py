@@ -263,6 +263,9 @@ class Forecast:
     issue_row : int or None
         Row of the data at the issue time, for forecasts issued on a data set (y is read
         up to this row only).
+    halfwidth : ndarray (H, n_zones) or None
+        Half-width of the 90 % interval [K] when it is calibrated on recent errors
+        (:mod:`zonecast.estimator.calibration`); None: ``Z90 * std``.
     """
 
     issued: pd.Timestamp
@@ -273,6 +276,7 @@ class Forecast:
     zones: list[str]
     model_version: str = ""
     issue_row: int | None = None
+    halfwidth: np.ndarray | None = None
 
     def interval(self, z: float = Z90) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) ends of the interval mean -+ z std [degC]; default 90 %."""
@@ -281,13 +285,13 @@ class Forecast:
 
     @property
     def lower(self) -> np.ndarray:
-        """Lower end of the 90 % interval [degC]."""
-        return self.mean - Z90 * self.std
+        """Lower end of the 90 % interval [degC] (calibrated when ``halfwidth`` is set)."""
+        return self.mean - (Z90 * self.std if self.halfwidth is None else self.halfwidth)
 
     @property
     def upper(self) -> np.ndarray:
-        """Upper end of the 90 % interval [degC]."""
-        return self.mean + Z90 * self.std
+        """Upper end of the 90 % interval [degC] (calibrated when ``halfwidth`` is set)."""
+        return self.mean + (Z90 * self.std if self.halfwidth is None else self.halfwidth)
 
 
 def _gains(method: str, data: ModelData, issue: int, horizon: int, profile: WeeklyProfile,

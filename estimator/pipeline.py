@@ -273,9 +273,12 @@ class Pipeline:
         return self._bundle
 
     def forecast(self, telemetry: Telemetry | str | os.PathLike | pd.DataFrame,
-                 times: Iterable, *, inputs: Mapping | None = None
+                 times: Iterable, *, inputs: Mapping | None = None,
+                 weather: Iterable | None = None, persistence: bool = False
                  ) -> dict[pd.Timestamp, Forecast]:
         """Day-ahead forecasts issued at ``times`` by the streaming estimator run over
-        ``telemetry`` (:func:`~zonecast.estimator.streaming.offline_forecasts`): the same
-        numbers the service serves."""
-        return offline_forecasts(self.bundle, telemetry, times, inputs=inputs)
+        ``telemetry`` (:func:`~zonecast.estimator.streaming.offline_forecasts`, with its
+        ``inputs``, ``weather`` forecasts and ``persistence``): the same numbers the
+        service serves."""
+        return offline_forecasts(self.bundle, telemetry, times, inputs=inputs,
+                                 weather=weather, persistence=persistence)

@@ -169,6 +169,9 @@ class Thermostat(_Strict):
     cooling_unoccupied: float | None = Field(None, ge=0, le=50)
     occupied_hours: tuple[float, float] = (7.0, 19.0)
     working_days: list[int] = Field(default_factory=lambda: [0, 1, 2, 3, 4])
+    holidays: list[dt.date] = Field(
+        default_factory=list, description="local dates that are not working days (the "
+        "served forecast's HVAC-input learner treats them as weekend days)")
     experiment_heating: float | None = Field(
         None, ge=0, le=40, description="heating set point during the site's experiments")
 

@@ -32,13 +32,19 @@ docs/benchmarks.md has the accuracy comparison).
 
 A forecast issued at t starts from the filtered x(t|t) and runs the model 96 steps with
 the internal gains of :class:`~zonecast.estimator.gains.DayAheadGains` (weekly profile
-plus the decaying recent offset) and *persistence inputs*: u and v of interval t are the
-measured row t, those of t + h (h >= 1) are the values measured 24 h earlier (no weather
-or HVAC forecast enters; see docs/service.md). The 90 % interval of a zone is
-``C x +- 1.645 sqrt(v_h)`` with ``v_h`` the variance of ``C x`` after h steps of the
-nominal model from the steady-state posterior covariance (state uncertainty; measurement
-noise not added); the same table gives the state's standard deviation after steps
-without measurements.
+plus the decaying recent offset) and *input forecasts* (:meth:`OnlineEstimator.forecast_inputs`,
+issue 15): u and v of interval t are the measured row t; later ones take the outdoor
+temperature and facade irradiance from the weather forecast in use
+(:meth:`OnlineEstimator.set_weather_forecast`) or the diurnal fallback
+(:mod:`zonecast.estimator.weather_forecast`), the airflows and supply-air temperature from
+:class:`~zonecast.estimator.inputs_forecast.HvacInputForecaster`, learned online per row.
+:meth:`OnlineEstimator.persistence_inputs` (the values measured 24 h earlier) is the
+earlier reference. ``std`` is the model's: ``sqrt(v_h)``, with ``v_h`` the variance of
+``C x`` after h steps of the nominal model from the steady-state posterior covariance
+(state uncertainty; measurement noise not added; the same table gives the state's standard
+deviation after steps without measurements); the served 90 % interval (``lower``,
+``upper``) is calibrated on the building's recent errors
+(:class:`~zonecast.estimator.calibration.IntervalCalibrator`, scored each row).
 """
 
 from __future__ import annotations
@@ -54,6 +60,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from zonecast.estimator.artifact import ModelBundle, load_model_file
+from zonecast.estimator.calibration import IntervalCalibrator
 from zonecast.estimator.constants import (
     DAYAHEAD_TAU,
     DAYAHEAD_WINDOW,
@@ -70,6 +77,11 @@ from zonecast.estimator.gains import (
     estimate_gains_step,
     time_of_week_bin,
 )
+from zonecast.estimator.inputs_forecast import (
+    INPUT_FORECAST_DEFAULTS,
+    DayCalendar,
+    HvacInputForecaster,
+)
 from zonecast.estimator.integrate import StepperLadder
 from zonecast.estimator.kalman import (
     SteadyStateFilter,
@@ -82,6 +94,7 @@ from zonecast.estimator.kalman import (
 from zonecast.estimator.solar import SKY_MODELS, SolarGeometryCache, transpose
 from zonecast.estimator.telemetry import Telemetry, load_telemetry, segments_of
 from zonecast.estimator.units import to_si
+from zonecast.estimator.weather_forecast import WEATHER_DEFAULTS, DiurnalWeather, WeatherForecast
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
            "StepReport", "checkpoint_header", "has_discharge", "model_rows", "offline_forecasts",
@@ -213,6 +226,7 @@ class OnlineEstimator:
         self._bin_days: dict[int, np.ndarray] = {}
         self._gig_cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         self._names = _input_names(bundle)
+        self._init_input_forecasts()
         self.reset()
         self.steps = 0
         self.resets = 0
@@ -319,6 +333,7 @@ class OnlineEstimator:
         self._pending = self._held.copy()
         self._inputs.append((t, self._pending.copy()))
         self.last_y = y.copy()
+        self._learn_inputs(t, inputs, y)
         held = [n for n, good in zip(self._names, ok) if not good]
         missing = [z for z, val in zip(self.bundle.zones, y) if not np.isfinite(val)]
         return StepReport(t, nis, dof, reset, missing, held, self._innovation)
@@ -395,41 +410,174 @@ class OnlineEstimator:
             u and v over the 96 forecast intervals (airflows [kg/s], then Ta, Ts [degC],
             solE, solS, solW, solN [W/m2], then, for a site with discharge-air points, each
             box's discharge-air rise [K]) when a site has forecasts of them (or, for an
-            evaluation, the measured ones); default: persistence inputs.
+            evaluation, the measured ones); default: :meth:`forecast_inputs` (weather
+            forecast or its fallback, learned HVAC inputs).
         """
         if not self.started:
             raise ValueError("no forecast yet: the filter has not received a measurement")
-        m = self.bundle.model
         t = self.time
         f_ig = self.dayahead_gains()
-        # persistence inputs: row t for interval t, the row 24 h earlier for t + h
-        # (integer nanosecond keys: Timestamp arithmetic per lookup costs ~1 ms a forecast)
-        past = {s.value: row for s, row in self._inputs}
-        current = past[t.value]
-        day_ago = t.value - pd.Timedelta("1D").value
         if inputs is None:
-            ins = np.empty((HORIZON, self._nin))
-            ins[0] = current
-            for h in range(1, HORIZON):
-                ins[h] = past.get(day_ago + h * STEP.value, current)
-            if self._rh:
-                ins[:, m.n_boxes + 6:] = np.nan_to_num(ins[:, m.n_boxes + 6:])
+            ins = self.forecast_inputs()
         else:
             ins = np.asarray(inputs, dtype=float)
             if ins.shape != (HORIZON, self._nin) or not np.isfinite(ins).all():
                 raise ValueError(f"inputs must be finite with shape ({HORIZON}, {self._nin}): "
                                  "u per box, then Ta, Ts, solE, solS, solW, solN per interval"
                                  + (", then the discharge-air rise per box" if self._rh else ""))
+        mean = self._run_forecast(ins, f_ig)
+        std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
+        times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
+        return Forecast(t, times, mean, std, f_ig, self.bundle.zones, self.bundle.version,
+                        halfwidth=self.calibrator.halfwidth(t.value // STEP.value, std))
+
+    def _run_forecast(self, ins: np.ndarray, f_ig: np.ndarray) -> np.ndarray:
+        """Zone temperatures (HORIZON, n_zones) [degC] from the current state with the
+        inputs ``ins`` and gains ``f_ig`` over the horizon."""
+        m = self.bundle.model
         nb = m.n_boxes
         u, v = ins[:, :nb], ins[:, nb:nb + 6]
         forcing = v @ m.Bv.T + (f_ig + m.params.c_ig) @ m.B_ig.T
-        if self._rh:
+        if self._rh:  # the boxes' discharge-air rise (docs/model.md "Discharge air")
             forcing = forcing + m.reheat_forcing(u, ins[:, nb + 6:])
         xs = self._ladder.for_airflows(u).run(self._x, u, forcing, v[:, 1])
+        return xs[1:] @ m.C.T
+
+    # --- input forecasts (docs/forecasts.md "Served forecast") ---------------------------
+    def _init_input_forecasts(self) -> None:
+        """The learners that live across filter restarts: HVAC inputs by time of week,
+        the weather fallback, the interval calibration; and the weather forecast in use."""
+        site, nb = self.bundle.site, self.bundle.model.n_boxes
+        self.calendar = DayCalendar.for_site(site)
+        d = INPUT_FORECAST_DEFAULTS
+        # HVAC channels: every input but the weather (Ta at nb, facade solar at nb + 2 ...
+        # nb + 5): the airflows, the supply-air temperature, and any per-box input after
+        # the six disturbances (e.g. a discharge-air rise); all but T_s are >= 0
+        self._hv_cols = np.array(list(range(nb)) + [nb + 1] + list(range(nb + 6, self._nin)))
+        nonneg = [c != nb + 1 for c in self._hv_cols]
+        self.inputs_fc = HvacInputForecaster(self.calendar, len(self._hv_cols), n_regressors=2,
+                                             shrink=[d["sigma0"], d["sigma0_solar"]],
+                                             nonnegative=nonneg)
+        self.weather_fb = DiurnalWeather(self.calendar.per_day)
+        self.calibrator = IntervalCalibrator(self._nz, HORIZON, self.calendar.per_day,
+                                             step_ns=STEP.value)
+        self.weather_max_age = pd.Timedelta(hours=WEATHER_DEFAULTS["max_age_h"])
+        self._experiments = [(pd.Timestamp(e.start).value, pd.Timestamp(e.end).value)
+                             for e in site.experiments]
+        loc = site.location
+        self._fc_solar = SolarGeometryCache(loc.latitude, loc.longitude, loc.elevation,
+                                            site.step, max_days=4)
+        self.weather: WeatherForecast | None = None
+        self._wx: tuple[int, np.ndarray] | None = None  # (first grid ns, (N, 5) Ta, sol x 4)
+
+    def _learn_inputs(self, t: pd.Timestamp, inputs: np.ndarray, y: np.ndarray) -> None:
+        """Online learning of row t (after the filter step): HVAC-input and weather
+        learners, then the interval calibration: score the kept calibration forecasts
+        against y(t), and keep a new one when due. Rows inside the site's experiments
+        teach nothing (their airflows and errors are the experiment's, not operation's)."""
+        nb = self.bundle.model.n_boxes
+        tn = t.value
+        operating = not any(a <= tn < b for a, b in self._experiments)
+        if operating:
+            self.inputs_fc.update(tn, [inputs[nb], inputs[nb + 2:nb + 6].sum()],
+                                  inputs[self._hv_cols])
+            tod = int(self.calendar.slots([tn])[0]) % self.calendar.per_day
+            self.weather_fb.update(tod, inputs[nb], inputs[nb + 2:nb + 6])
+        k = tn // STEP.value
         std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
-        times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
-        return Forecast(t, times, xs[1:] @ m.C.T, std, f_ig, self.bundle.zones,
-                        self.bundle.version)
+        self.calibrator.resolve(k, y if operating else np.full(self._nz, np.nan), std)
+        if operating and self.started and self.time == t and self.calibrator.due(k):
+            ins = self.forecast_inputs()
+            if np.isfinite(ins).all():
+                self.calibrator.add_forecast(k, self._run_forecast(ins, self.dayahead_gains()))
+
+    def set_weather_forecast(self, wf: WeatherForecast | None) -> None:
+        """Use ``wf`` for forecasts issued at or after ``wf.issued`` (until it is older
+        than :attr:`weather_max_age`); None forgets it. Its values are interpolated to
+        the middle of each model interval and transposed onto the facades once here."""
+        self.weather, self._wx = wf, None
+        if wf is None:
+            return
+        step = STEP.value
+        first = -(-wf.times.asi8[0] // step) * step
+        grid = np.arange(first, wf.times.asi8[-1] + 1, step, dtype=np.int64)
+        if len(grid) == 0:
+            return
+        vals = wf.values_at(grid + step // 2)  # Ta, GHI, DNI, DHI at interval middles
+        sol = np.full((len(grid), 4), np.nan)
+        ok = np.isfinite(vals).all(axis=1)
+        if ok.any():
+            geom = self._fc_solar.geometry(grid[ok])
+            facades = [(90.0, az) for az in self.bundle.model.structure.facade_azimuths]
+            sol[ok] = transpose(geom, vals[ok, 1], vals[ok, 2], vals[ok, 3], np.array(facades),
+                                total=True)["poa_global"]
+        self._wx = (int(first), np.column_stack([vals[:, 0], sol]))
+
+    def persistence_inputs(self) -> np.ndarray:
+        """(HORIZON, n_boxes + 6) persistence inputs: row t for interval t, the row 24 h
+        earlier for t + h (the current row where none): the served inputs before input
+        forecasts, kept as a reference."""
+        t = self.time
+        # integer nanosecond keys: Timestamp arithmetic per lookup costs ~1 ms a forecast
+        past = {s.value: row for s, row in self._inputs}
+        current = past[t.value]
+        day_ago = t.value - pd.Timedelta("1D").value
+        ins = np.empty((HORIZON, self._nin))
+        ins[0] = current
+        for h in range(1, HORIZON):
+            ins[h] = past.get(day_ago + h * STEP.value, current)
+        nb = self.bundle.model.n_boxes
+        ins[:, nb + 6:] = np.nan_to_num(ins[:, nb + 6:])  # per-box extras never heard: 0
+        return ins
+
+    def weather_inputs(self) -> tuple[np.ndarray, np.ndarray]:
+        """(HORIZON, 5) outdoor temperature [degC] and facade irradiance E, S, W, N
+        [W/m2] over the forecast intervals, and a (HORIZON,) mask of the intervals taken
+        from the weather forecast. Interval t is the measured row; later ones come from
+        the weather forecast in use when it is fresh and covers them, else from the
+        diurnal fallback, else persistence."""
+        t = self.time.value
+        nb = self.bundle.model.n_boxes
+        pers = self.persistence_inputs()
+        cols = [nb] + list(range(nb + 2, nb + 6))
+        out = pers[:, cols].copy()
+        times = t + STEP.value * np.arange(HORIZON, dtype=np.int64)
+        tods = self.calendar.slots(times) % self.calendar.per_day
+        lead_h = np.arange(HORIZON) * (STEP.value / 3.6e12)
+        fb = self.weather_fb.forecast(tods, lead_h, pers[0, cols])
+        use = np.isfinite(fb)
+        out[1:][use[1:]] = fb[1:][use[1:]]
+        from_wf = np.zeros(HORIZON, dtype=bool)
+        wf = self.weather
+        if (self._wx is not None and wf is not None and wf.issued.value <= t
+                and t - wf.issued.value <= self.weather_max_age.value):
+            first, vals = self._wx
+            idx = (times - first) // STEP.value
+            inside = (idx >= 0) & (idx < len(vals))
+            inside[0] = False
+            rows = np.where(inside, idx, 0)
+            good = inside & np.isfinite(vals[rows]).all(axis=1)
+            out[good] = vals[rows[good]]
+            from_wf = good
+        return out, from_wf
+
+    def forecast_inputs(self) -> np.ndarray:
+        """(HORIZON, n_boxes + 6) served inputs: weather from :meth:`weather_inputs`,
+        airflows and supply-air temperature from the HVAC-input forecaster
+        (:mod:`zonecast.estimator.inputs_forecast`) at the forecast outdoor temperature,
+        persistence where it has not learned a slot."""
+        nb = self.bundle.model.n_boxes
+        pers = self.persistence_inputs()
+        wx, _ = self.weather_inputs()
+        times = self.time.value + STEP.value * np.arange(HORIZON, dtype=np.int64)
+        hv_cols = self._hv_cols
+        x = np.column_stack([wx[:, 0], wx[:, 1:].sum(axis=1)])
+        hv = self.inputs_fc.forecast(times, x, pers[0, hv_cols], pers[:, hv_cols])
+        ins = np.empty((HORIZON, self._nin))
+        ins[:, hv_cols] = hv
+        ins[:, nb] = wx[:, 0]
+        ins[:, nb + 2:nb + 6] = wx[:, 1:]
+        return ins
 
     def _bins(self, times_ns: np.ndarray) -> np.ndarray:
         """Time-of-week bin of the profile for UTC grid times (ns since the epoch)."""
@@ -490,6 +638,15 @@ class OnlineEstimator:
                   "inputs": np.array([r for _, r in self._inputs]).reshape(-1, self._nin)}
         if self.started:
             arrays["x"] = self._x
+        arrays.update(self.inputs_fc.state_arrays())
+        arrays.update(self.weather_fb.state_arrays())
+        arrays.update(self.calibrator.state_arrays())
+        if self.weather is not None:  # the weather forecast in use, raw
+            wf = self.weather
+            arrays["wf_issued"] = np.array([wf.issued.value], dtype=np.int64)
+            arrays["wf_times"] = wf.times.asi8.astype(np.int64)
+            arrays["wf_values"] = np.column_stack([wf.temperature, wf.ghi, wf.dni, wf.dhi])
+            meta["weather_source"] = wf.source
         parts, layout, offset = [], {}, 0
         for name, a in arrays.items():
             a = np.ascontiguousarray(a)
@@ -532,6 +689,17 @@ class OnlineEstimator:
             self._observed = arr["observed"].astype(bool)
         if meta["started"]:
             self._x = arr["x"]
+        # the input learners (absent from checkpoints before them: they start afresh)
+        self._init_input_forecasts()
+        self.inputs_fc.load_state_arrays(arr)
+        self.weather_fb.load_state_arrays(arr)
+        self.calibrator.load_state_arrays(arr)
+        if "wf_times" in arr:
+            vals = arr["wf_values"]
+            self.set_weather_forecast(WeatherForecast(
+                pd.Timestamp(int(arr["wf_issued"][0]), tz="UTC"),
+                pd.DatetimeIndex(arr["wf_times"].astype("datetime64[ns]")).tz_localize("UTC"),
+                vals[:, 0], vals[:, 1], vals[:, 2], vals[:, 3], meta.get("weather_source", "")))
 
 
 def checkpoint_header(data: bytes) -> dict:
@@ -699,7 +867,9 @@ def telemetry_frame(telemetry: Telemetry | str | Path | pd.DataFrame,
 def offline_forecasts(model_file: ModelBundle | str | Path,
                       telemetry: Telemetry | str | Path | pd.DataFrame, times: Iterable, *,
                       max_gap: pd.Timedelta = MAX_GAP,
-                      inputs: Mapping | None = None) -> dict[pd.Timestamp, Forecast]:
+                      inputs: Mapping | None = None,
+                      weather: Iterable[WeatherForecast] | None = None,
+                      persistence: bool = False) -> dict[pd.Timestamp, Forecast]:
     """Forecasts issued at ``times`` by the online estimator run over ``telemetry``.
 
     Feeds every row of recorded telemetry that holds any data, in time order, to the
@@ -719,7 +889,14 @@ def offline_forecasts(model_file: ModelBundle | str | Path,
         As for :class:`OnlineEstimator`.
     inputs : mapping, optional
         UTC issue time -> (96, n_boxes + 6) inputs over the horizon for
-        :meth:`OnlineEstimator.forecast` (default persistence inputs).
+        :meth:`OnlineEstimator.forecast` (default the served input forecasts).
+    weather : iterable of WeatherForecast, optional
+        Weather forecasts; each is handed to the estimator
+        (:meth:`OnlineEstimator.set_weather_forecast`) before the first row at or after
+        its ``issued`` time, as the service's runner does.
+    persistence : bool
+        Forecast with :meth:`OnlineEstimator.persistence_inputs` (the inputs served
+        before input forecasts; a reference) where ``inputs`` gives none.
 
     Returns
     -------
@@ -740,12 +917,22 @@ def offline_forecasts(model_file: ModelBundle | str | Path,
     last = max(wanted) if wanted else None
     rows = model_rows(bundle, frame)
     tt, u, v, y, rh = rows.times, rows.u, rows.v, rows.y, rows.reheat
+    wfs = sorted(weather or (), key=lambda w: w.issued)
+    j = 0
     for k, t in enumerate(tt):
         if last is not None and t > last:
             break
+        newest = None
+        while j < len(wfs) and wfs[j].issued <= t:
+            newest, j = wfs[j], j + 1
+        if newest is not None:
+            est.set_weather_forecast(newest)
         est.advance(t, u[k], v[k], y[k], rh[k])
         if t in wanted and est.started:
-            out[t] = est.forecast(None if inputs is None else inputs.get(t))
+            given = None if inputs is None else inputs.get(t)
+            if given is None and persistence:
+                given = est.persistence_inputs()
+            out[t] = est.forecast(given)
     missing = sorted(wanted - set(out))
     if missing:
         raise ValueError(f"no forecast at {len(missing)} requested times (first "

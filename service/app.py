@@ -30,6 +30,7 @@ from zonecast.service.api.routes import (
     model_health,
     state,
     telemetry,
+    weather,
 )
 from zonecast.service.context import ServiceContext
 from zonecast.service.settings import ServiceSettings, load_settings
@@ -88,7 +89,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         return JSONResponse({"detail": _message(exc)}, status_code=422)
 
     for module in (buildings, state, internal_gains, forecast, telemetry, history,
-                   model_health, diagnosis):
+                   model_health, diagnosis, weather):
         app.include_router(module.router, prefix=API)
     app.include_router(health.router)
     app.include_router(metrics.router)

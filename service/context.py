@@ -106,7 +106,8 @@ class ServiceContext:
                 log.error("building %s: model not loaded: %s", bid, exc,
                           extra={"building": bid})
         if s.mqtt_enabled:
-            self.ingester = Ingester(s.mqtt, self.storage, self.catalogues).start()
+            self.ingester = Ingester(s.mqtt, self.storage, self.catalogues,
+                                     on_weather=self._weather_received).start()
             if s.runner.publish:
                 self.publisher = connect_publisher(s.mqtt, client_id=unique_client_id("pub"))
                 self.publisher.on_publish = _log_refused_publish
@@ -129,6 +130,12 @@ class ServiceContext:
             self.publisher.loop_stop()
         if self.storage is not None:
             self.storage.close()
+
+    def _weather_received(self, building: str, forecast) -> None:
+        """A weather forecast accepted by the MQTT ingester -> the building's runner."""
+        runner = self.runners.get(building)
+        if runner is not None:
+            runner.set_weather_forecast(forecast)
 
     def _published(self, kind: str, runner: Runner) -> None:
         if kind == "state" and runner.latencies:

@@ -104,6 +104,9 @@ class Reason(str, Enum):
     INTERNAL_ERROR = "internal_error"
     #: Passed validation but storage refused it (a bug: please report it).
     STORAGE_REJECTED = "storage_rejected"
+    #: a weather forecast (``<prefix>/<building>/weather_forecast``) failed its rules; the
+    #: detail starts with the rule's code (zonecast.service.weather)
+    BAD_WEATHER_FORECAST = "bad_weather_forecast"
 
     def __str__(self) -> str:  # "unknown_point", not "Reason.UNKNOWN_POINT"
         return self.value

@@ -34,7 +34,7 @@ import sqlite3
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
 from typing import Any, Self
 
@@ -48,6 +48,7 @@ from zonecast.service.ingest import (
     MessageRejected,
     PointCatalogue,
     Reason,
+    RejectedReading,
     accept,
     log_rejections,
     refuse,
@@ -55,6 +56,7 @@ from zonecast.service.ingest import (
 from zonecast.service.replay import unique_client_id
 from zonecast.service.settings import DEFAULT_PREFIX, MqttSettings
 from zonecast.service.storage import PutResult, Storage
+from zonecast.service.weather import WEATHER_SUFFIX, accept_weather, is_weather_topic
 
 __all__ = ["CLIENT_ID_KEY", "Ingester", "dead_letter_topic", "ingester_client_id"]
 
@@ -136,8 +138,11 @@ class Ingester:
     """
 
     def __init__(self, settings: MqttSettings, storage: Storage,
-                 catalogues: Mapping[str, PointCatalogue]):
+                 catalogues: Mapping[str, PointCatalogue], *,
+                 on_weather: Callable[[str, Any], None] | None = None):
         self.settings = settings
+        #: called with (building, WeatherForecast) for each accepted weather forecast
+        self.on_weather = on_weather
         self.storage = storage
         self.catalogues = catalogues
         self._limits = settings.limits
@@ -221,12 +226,14 @@ class Ingester:
         ``readings_stored``, ``readings_duplicate``, ``readings_conflict``,
         ``readings_rejected``, ``dead_letters``, ``storage_errors``,
         ``worker_errors`` (unexpected errors of the worker; that batch stays
-        unacknowledged), ``connects`` and ``rejected`` (reason code -> count of
-        messages or readings rejected for it).
+        unacknowledged), ``connects``, ``weather_forecasts`` (accepted weather
+        forecasts) and ``rejected`` (reason code -> count of messages or readings
+        rejected for it).
         """
         keys = ("messages_in", "messages_stored", "messages_rejected", "readings_stored",
                 "readings_duplicate", "readings_conflict", "readings_rejected",
-                "dead_letters", "storage_errors", "worker_errors", "connects")
+                "dead_letters", "storage_errors", "worker_errors", "connects",
+                "weather_forecasts")
         with self._count_lock:
             out: dict[str, int | dict[str, int]] = {k: self._counts[k] for k in keys}
             out["rejected"] = dict(self._rejected)
@@ -274,7 +281,7 @@ class Ingester:
 
     def _topics(self) -> list[str]:
         p = self.settings.topic_prefix
-        return [f"{p}/+/telemetry", f"{p}/+/points/#"]
+        return [f"{p}/+/telemetry", f"{p}/+/points/#", f"{p}/+/{WEATHER_SUFFIX}"]
 
     def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
         if reason_code.is_failure:
@@ -350,6 +357,8 @@ class Ingester:
     def _accept(self, message: mqtt.MQTTMessage, received: datetime) -> _Checked:
         """(message, what to store, dead-letter notice or None), counted. Never raises:
         whatever goes wrong with one message is that message's dead letter."""
+        if is_weather_topic(message.topic, self.settings.topic_prefix):
+            return self._accept_weather(message, received)
         try:
             props = getattr(message, "properties", None)
             user = dict(getattr(props, "UserProperty", []) or [])
@@ -363,6 +372,28 @@ class Ingester:
             return message, acc, None
         self._count_rejections(acc)
         log_rejections(acc, message.topic, "mqtt")
+        return message, acc, _notice(message, received, acc)
+
+    def _accept_weather(self, message: mqtt.MQTTMessage, received: datetime) -> _Checked:
+        """A weather forecast (:mod:`zonecast.service.weather`): handed to ``on_weather``
+        when valid, else a dead letter in the same transaction as the batch's."""
+        wa = accept_weather(message.topic, message.payload, received, self.catalogues,
+                            prefix=self.settings.topic_prefix,
+                            max_bytes=self._limits.max_payload_bytes)
+        if wa.forecast is not None:
+            self._count("weather_forecasts")
+            if self.on_weather is not None:
+                try:
+                    self.on_weather(wa.building, wa.forecast)
+                except Exception:  # the forecast is lost, ingest goes on
+                    log.exception("building %s: using a weather forecast failed", wa.building)
+            return message, Accepted(wa.building), None
+        rejection = RejectedReading(None, Reason.BAD_WEATHER_FORECAST,
+                                    f"{wa.reason}: {wa.detail}")
+        acc = Accepted(wa.building, (), (rejection,), wa.dead_letters,
+                       MessageRejected(Reason.BAD_WEATHER_FORECAST, f"{wa.reason}: {wa.detail}",
+                                       wa.building))
+        self._count_rejections(acc)
         return message, acc, _notice(message, received, acc)
 
     def _count_rejections(self, acc: Accepted) -> None:

@@ -196,6 +196,23 @@ class Runner:
         self.storage.save_checkpoint(self.building, self.est.time or self.next_time,
                                      self.est.to_bytes(extra), sync=False)
 
+    # --- weather forecasts ---------------------------------------------------------------
+    def set_weather_forecast(self, wf) -> bool:
+        """Use the weather forecast ``wf`` (:class:`~zonecast.estimator.weather_forecast.
+        WeatherForecast`) from the next processed row on, unless the one in use was issued
+        later; it is checkpointed at once. Returns whether it was taken."""
+        with self.lock:
+            cur = self.est.weather
+            if cur is not None and cur.issued > wf.issued:
+                return False
+            self.est.set_weather_forecast(wf)
+            if self.est.time is not None or self.next_time is not None:
+                self._checkpoint()
+        log.info("building %s: weather forecast issued %s (%s, %d values) in use",
+                 self.building, wf.issued.isoformat(), wf.source or "no source",
+                 len(wf.times), extra={"building": self.building})
+        return True
+
     # --- stepping ----------------------------------------------------------------------
     def poll(self) -> int:
         """Process every row that can be closed now; returns how many were processed."""

@@ -331,3 +331,27 @@ def test_settings_validate_and_build_limits():
         MqttSettings(port=0)
     with pytest.raises(ValueError):
         MqttSettings(protocol="4")
+
+
+def test_weather_forecast_topic_is_handed_over_or_dead_lettered(
+        broker, settings, building, publisher, tmp_path):
+    """``zonecast/<building>/weather_forecast``: a valid forecast reaches ``on_weather``;
+    an invalid one is dead-lettered with its reason and ingest goes on."""
+    store = open_storage(f"sqlite:///{tmp_path}/z.db")
+    got = []
+    times = [(T0 + timedelta(hours=h)).isoformat() for h in range(37)]
+    good = {"issued": times[0], "times": times, "temperature": [15.0] * 37,
+            "ghi": [0.0] * 37, "dni": [0.0] * 37, "dhi": [0.0] * 37}
+    with Ingester(settings, store, {building: catalogue()},
+                  on_weather=lambda b, wf: got.append((b, wf))) as ingester:
+        assert ingester.wait_ready(15)
+        publisher.send(f"zonecast/{building}/weather_forecast", good)
+        publisher.send(f"zonecast/{building}/weather_forecast", {**good, "dni": [-5.0] * 37})
+        publisher.send(f"zonecast/{building}/telemetry", telemetry(0))
+        wait_until(lambda: ingester.counters()["readings_stored"] == len(POINTS)
+                   and len(store.dead_letters(limit=10)) == 1, what="weather and readings")
+        assert ingester.counters()["weather_forecasts"] == 1
+    assert len(got) == 1 and got[0][0] == building and len(got[0][1].times) == 37
+    letter = store.dead_letters(limit=10)[0]
+    assert letter.reason.startswith("bad_weather_forecast: absurd_value")
+    store.close()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import time
+from datetime import UTC, datetime
 
 import numpy as np
 import pandas as pd
@@ -259,8 +260,9 @@ def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemet
 
 
 def test_forecast_with_supplied_inputs(bundle, telemetry, tmp_path):
-    """Supplied horizon inputs replace persistence; the persistence inputs passed
-    explicitly give the default forecast bitwise; bad shapes are refused."""
+    """Supplied horizon inputs replace the served input forecasts; the default forecast
+    is that of :meth:`forecast_inputs` bitwise, the persistence reference that of the
+    measured rows 24 h earlier; bad shapes are refused."""
     from zonecast.estimator.streaming import OnlineEstimator, model_rows, offline_forecasts
 
     frame = telemetry_si(bundle, telemetry.iloc[:2 * DAY + 10])
@@ -274,7 +276,11 @@ def test_forecast_with_supplied_inputs(bundle, telemetry, tmp_path):
     persistence = np.vstack([np.hstack([u[k], v[k], rh[k]])]
                             + [np.hstack([u[k - DAY + h], v[k - DAY + h], rh[k - DAY + h]])
                                for h in range(1, DAY)])
-    a, b = est.forecast(), est.forecast(persistence)
+    assert np.array_equal(est.persistence_inputs(), persistence)
+    served = est.forecast()
+    again = est.forecast(est.forecast_inputs())
+    assert np.array_equal(served.mean, again.mean) and np.array_equal(served.std, again.std)
+    a, b = est.forecast(est.persistence_inputs()), est.forecast(persistence)
     assert np.array_equal(a.mean, b.mean) and np.array_equal(a.std, b.std)
     warmer = persistence.copy()
     warmer[:, bundle.model.n_boxes] += 5.0  # outdoor air 5 K warmer all day
@@ -305,11 +311,13 @@ def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
                 assert "token" in r.json()["detail"]
         r = client.post("/api/v1/buildings/office6/telemetry", json={"readings": {}})
         assert r.status_code == 401
+        r = client.post("/api/v1/buildings/office6/weather_forecast", json={})
+        assert r.status_code == 401
         assert client.get("/healthz").json() == {"status": "ok"}
         assert client.get("/readyz").json()["ready"] is True
         spec = client.get("/openapi.json").json()
     ops = {(path, m): op for path, item in spec["paths"].items() for m, op in item.items()}
-    assert len(ops) == 12  # /ui and its files are not in the spec
+    assert len(ops) == 14  # /ui and its files are not in the spec
     for (path, method), op in ops.items():
         assert bool(op.get("security")) == (path not in ("/healthz", "/readyz")), path
 
@@ -502,3 +510,92 @@ def test_state_and_forecast_are_published_retained_over_mqtt(tmp_path, vb, bundl
     off = offline_forecasts(bundle, telemetry_si(bundle, telemetry.iloc[:n]), [issued])[issued]
     np.testing.assert_allclose(np.array([z["mean"] for z in rest["zones"]]).T, off.mean,
                                rtol=0, atol=1e-9)
+
+
+# --------------------------------------------------------------------------- weather forecasts
+def _body(issued: str, hours: int = 36, warm: float = 0.0) -> dict:
+    t = pd.date_range(pd.Timestamp(issued), periods=hours + 1, freq="1h")
+    hod = np.asarray(t.hour, float)
+    sun = np.clip(np.sin((hod - 14) / 24 * 2 * np.pi + np.pi / 2), 0, None)  # UTC noon ~ 20h
+    return {"issued": pd.Timestamp(issued).isoformat(), "source": "test",
+            "times": [x.isoformat() for x in t],
+            "temperature": (14.0 + warm + 3 * sun).tolist(), "ghi": (700 * sun).tolist(),
+            "dni": (600 * sun).tolist(), "dhi": (100 * sun).tolist()}
+
+
+def test_accept_weather_gives_reasons_and_dead_letters():
+    from zonecast.service.weather import accept_weather, is_weather_topic
+
+    now = datetime(2015, 4, 14, tzinfo=UTC)
+    ok = accept_weather("zc/office6/weather_forecast", json.dumps(_body("2015-04-14T06:00Z")),
+                        now, {"office6"}, prefix="zc")
+    assert ok.forecast is not None and ok.reason is None and not ok.dead_letters
+    assert is_weather_topic("zc/office6/weather_forecast", "zc")
+    assert not is_weather_topic("zc/office6/telemetry", "zc")
+    cases = {"unknown_building": ("zc/other/weather_forecast", json.dumps(_body("2015-04-14T06:00Z"))),
+             "bad_topic": ("zc/office6/weather", "{}"),
+             "malformed_json": ("zc/office6/weather_forecast", "{nope"),
+             "absurd_value": ("zc/office6/weather_forecast",
+                              json.dumps({**_body("2015-04-14T06:00Z"),
+                                          "temperature": [99.0] * 37})),
+             "future_time": ("zc/office6/weather_forecast", json.dumps(_body("2015-04-20T06:00Z")))}
+    for reason, (topic, payload) in cases.items():
+        acc = accept_weather(topic, payload, now, {"office6"}, prefix="zc")
+        assert acc.forecast is None and acc.reason == reason, (reason, acc)
+        assert len(acc.dead_letters) == 1
+        assert acc.dead_letters[0]["reason"].startswith(f"bad_weather_forecast: {reason}")
+
+
+def test_rest_weather_forecast_is_used_and_survives_a_restart(tmp_path, vb, bundle, telemetry):
+    """POST a forecast: 200, GET shows it, the served forecast differs from the fallback
+    one; a warmer forecast gives a warmer zone forecast; it survives a restart
+    (checkpoint); a bad one is 422 and dead-lettered."""
+    from fastapi.testclient import TestClient
+    from zonecast.service.app import create_app
+
+    n = 9
+    t_last = pd.Timestamp(telemetry.iloc[n - 1]["time"]).tz_convert("UTC")
+    issued = t_last.floor("6h")
+    settings = make_settings(tmp_path, vb, forecast_every=1)
+    app = create_app(settings)
+    with TestClient(app) as client:
+        for i in range(n):
+            r = client.post("/api/v1/buildings/office6/telemetry",
+                            json=body_of(telemetry.iloc[i]), headers=AUTH)
+            assert r.status_code == 200
+        wait_until(processed_through(app, telemetry.iloc[n - 1]["time"]), what="runner")
+        assert client.get("/api/v1/buildings/office6/weather_forecast",
+                          headers=AUTH).status_code == 404
+        runner = app.state.zc.runners["office6"]
+        with runner.lock:
+            fallback = runner.est.forecast()
+        r = client.post("/api/v1/buildings/office6/weather_forecast",
+                        json=_body(issued.isoformat()), headers=AUTH)
+        assert r.status_code == 200, r.text
+        assert r.json()["in_use"] is True and r.json()["points"] == 37
+        got = client.get("/api/v1/buildings/office6/weather_forecast", headers=AUTH).json()
+        assert got["issued"] == issued.isoformat() and got["source"] == "test"
+        with runner.lock:
+            ins, from_wf = runner.est.weather_inputs()
+            cool = runner.est.forecast()
+        assert from_wf[1:].all() and not np.array_equal(cool.mean, fallback.mean)
+        r = client.post("/api/v1/buildings/office6/weather_forecast",
+                        json=_body(issued.isoformat(), warm=8.0), headers=AUTH)
+        assert r.status_code == 200
+        with runner.lock:
+            warm_ins, _ = runner.est.weather_inputs()
+            warm = runner.est.forecast()
+        np.testing.assert_allclose(warm_ins[1:, 0] - ins[1:, 0], 8.0, atol=1e-9)
+        assert warm.mean[-1].mean() > cool.mean[-1].mean()  # the HVAC forecast reacts too
+        bad = client.post("/api/v1/buildings/office6/weather_forecast",
+                          json={**_body(issued.isoformat()), "ghi": [1.0]}, headers=AUTH)
+        assert bad.status_code == 422 and "length_mismatch" in bad.json()["detail"]
+        letters = app.state.zc.storage.dead_letters(building="office6")
+        assert any("bad_weather_forecast: length_mismatch" in d.reason for d in letters)
+    app = create_app(settings)
+    with TestClient(app) as client:
+        runner = app.state.zc.runners["office6"]
+        assert runner.est.weather is not None and runner.est.weather.issued == issued
+        with runner.lock:
+            again = runner.est.forecast()
+        np.testing.assert_array_equal(again.mean, warm.mean)

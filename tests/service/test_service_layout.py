@@ -73,6 +73,12 @@ OPERATIONS = {
     ("get", "/api/v1/buildings/{building_id}/diagnosis"): (
         "get_diagnosis_api_v1_buildings__building_id__diagnosis_get", ["diagnosis"],
         [("building_id", "path")], ["200", "401", "403", "404", "422"]),
+    ("post", "/api/v1/buildings/{building_id}/weather_forecast"): (
+        "post_weather_forecast_api_v1_buildings__building_id__weather_forecast_post",
+        ["weather"], [("building_id", "path")], ["200", "401", "403", "404", "413", "422"]),
+    ("get", "/api/v1/buildings/{building_id}/weather_forecast"): (
+        "get_weather_forecast_api_v1_buildings__building_id__weather_forecast_get",
+        ["weather"], [("building_id", "path")], ["200", "401", "403", "404", "422"]),
     ("get", "/healthz"): ("healthz_healthz_get", ["health"], [], ["200"]),
     ("get", "/readyz"): ("readyz_readyz_get", ["health"], [], ["200", "503"]),
     ("get", "/metrics"): ("get_metrics_metrics_get", ["metrics"], [], ["200", "401", "403"]),

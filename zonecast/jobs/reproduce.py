@@ -22,12 +22,13 @@ from zonecast.estimator.artifact import model_options_dict
 from zonecast.estimator.constants import HORIZON
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
-from zonecast.estimator.forecast import coverage, issue_rows, week_split
+from zonecast.estimator.forecast import issue_rows, week_split
 from zonecast.estimator.identify import weekend_simulations
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.rc.network import ModelOptions
 from zonecast.estimator.streaming import has_discharge
 from zonecast.estimator.study import forecast_study
+from zonecast.estimator.weather_forecast import parse_weather_forecast
 
 RESULTS_SCHEMA_VERSION = 1
 
@@ -131,6 +132,11 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                          for k, v in results.table2_window_solar_air.items()}, zones)
     lines += ["", "## Table 3: 24-hour prediction RMS [°C]", ""]
     lines += _table(results.table3, zones, PAPER["table3"])
+    attribution = getattr(results, "service_input_attribution", None)
+    if attribution:
+        lines += ["", ("Served forecast, which input's persistence costs most (known inputs "
+                       "with one group persisted):"), ""]
+        lines += _table(attribution, zones)
     lines += ["", f"Coverage of the 90 % intervals: {json.dumps(results.coverage_90)}", "",
               "## Internal gains against the truth (r per zone)", "",
               "```", json.dumps(results.gains_truth, indent=1)[:4000], "```", ""]
@@ -230,45 +236,101 @@ def plot_week(week: dict, zones: list[str], methods: list[str], title: str, path
     fig.savefig(path, dpi=110)
 
 
-def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int) -> dict:
+def _interval_coverage(lower: np.ndarray, upper: np.ndarray, meas: np.ndarray,
+                       zones: list[str]) -> dict[str, float]:
+    """Fraction of measurements inside [lower, upper], per zone and over all (``all``)."""
+    ok = np.isfinite(meas) & np.isfinite(lower) & np.isfinite(upper)
+    inside = (meas >= lower) & (meas <= upper)
+    out = {z: float(inside[..., j][ok[..., j]].mean()) for j, z in enumerate(zones)}
+    out["all"] = float(inside[ok].mean())
+    return out
+
+
+def _weather_forecasts(campaign: Path, seed: int) -> list:
+    """The campaign's weather forecasts (``weather_forecasts.json``; written by the
+    testbed's error model when absent: the weather file plus seeded error growing with
+    lead time, docs/testbed.md), validated like those the service receives."""
+    path = campaign / "weather_forecasts.json"
+    if not path.is_file():
+        from zonecast.testbed.forecasts import write_weather_forecasts  # testbed extra
+        write_weather_forecasts(campaign, seed=seed)
+    return [parse_weather_forecast(b) for b in json.loads(path.read_text())["forecasts"]]
+
+
+def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
+                  weather: list | None = None) -> dict:
     """The service's day-ahead forecast (:class:`~zonecast.estimator.streaming.OnlineEstimator`:
-    steady-state filter, online f_IG, persistence inputs) issued at the same validation
-    midnights as Table 3, computed offline from the telemetry file exactly as
-    ``zonecast forecast`` does, and the same with the measured inputs over the horizon
-    (``service_known_inputs``, comparable with Table 3's rows); RMS per zone, per horizon
-    and interval coverage."""
+    steady-state filter, online f_IG, input forecasts, calibrated intervals) issued at the
+    same validation midnights as Table 3, computed offline from the telemetry file exactly
+    as ``zonecast forecast`` does. Rows:
+
+    - ``service``: the served forecast with the weather forecasts ``weather``
+      (:class:`~zonecast.estimator.weather_forecast.WeatherForecast`; the testbed's, with
+      error growing with lead time) and the learned HVAC inputs;
+    - ``service_no_weather_forecast``: the same without weather forecasts (the diurnal
+      fallback);
+    - ``service_persistence``: the inputs measured 24 h earlier (the service before
+      input forecasts);
+    - ``service_known_inputs``: the measured u and v over the horizon (comparable with
+      Table 3's rows);
+    - ``attribution``: the known inputs with one group (airflows, outdoor temperature,
+      supply-air temperature, facade solar) replaced by persistence: which input's
+      persistence costs most.
+
+    RMS per zone, per horizon, and coverage of the served 90 % intervals (``lower``,
+    ``upper``: calibrated on the building's own recent errors) per zone and overall."""
     split = week_split(data, seed)
     issues = [(r, split["weeks"][i]["rows"][1]) for i in split["validation"]
               for r in issue_rows(data, split["weeks"][i]["rows"])]
     t0 = time.perf_counter()
     times = [data.times[r] for r, _ in issues]
-    # the same forecasts with the measured u and v over the horizon (as Table 3's): what the
-    # steady-state filter and online gains give when the inputs are known
+    nb = data.u.shape[1]
     served = Pipeline.from_model_file(model_file)
-    measured = {}
+    # with discharge-air points the inputs end with each box's discharge-air rise
+    rh = has_discharge(served.bundle)
+
+    def inputs_at(a: int, b: int) -> np.ndarray:
+        parts = [data.u[a:b], data.v[a:b]] + ([data.reheat[a:b]] if rh else [])
+        return np.hstack(parts)
+
+    measured, persisted = {}, {}
     for r, _ in issues:
-        parts = [data.u[r:r + HORIZON], data.v[r:r + HORIZON]]
-        if has_discharge(served.bundle):
-            parts.append(data.reheat[r:r + HORIZON])
-        ins = np.hstack(parts)
-        if len(ins) == HORIZON and np.isfinite(ins).all():
+        ins = inputs_at(r, r + HORIZON)
+        if len(ins) == HORIZON and np.isfinite(ins).all() and r >= HORIZON:
             measured[data.times[r]] = ins
-    runs = {"service": served.forecast(telemetry, times),
+            persisted[data.times[r]] = np.vstack([ins[:1], inputs_at(r + 1 - HORIZON, r)])
+    runs = {"service": served.forecast(telemetry, times, weather=weather or []),
+            "service_no_weather_forecast": served.forecast(telemetry, times),
+            "service_persistence": served.forecast(telemetry, times, persistence=True),
             "service_known_inputs": served.forecast(telemetry, times, inputs=measured)}
+    groups = {"airflows": list(range(nb)), "outdoor_temperature": [nb],
+              "supply_temperature": [nb + 1], "solar": list(range(nb + 2, nb + 6))}
+    for g, cols in groups.items():
+        mixed = {}
+        for t, ins in measured.items():
+            a = ins.copy()
+            a[:, cols] = persisted[t][:, cols]
+            mixed[t] = a
+        runs[f"known_but_persisted_{g}"] = served.forecast(telemetry, times, inputs=mixed)
     nz = len(data.zones)
-    out: dict = {"table3": {}, "horizon_rms": {}, "coverage_90": {}}
+    out: dict = {"table3": {}, "horizon_rms": {}, "coverage_90": {}, "attribution": {}}
     for name, fcs in runs.items():
-        pred, std, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(3))
+        pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
         for k, (r, stop) in enumerate(issues):
-            if name == "service_known_inputs" and data.times[r] not in measured:
+            needs_measured = name == "service_known_inputs" or name.startswith("known_but")
+            if needs_measured and data.times[r] not in measured:
                 continue
             fc = fcs[data.times[r]]
             n = min(HORIZON, stop - r - 1)
-            pred[k], std[k] = fc.mean, fc.std
+            pred[k], lo[k], hi[k] = fc.mean, fc.lower, fc.upper
             meas[k, :n] = data.y[r + 1:r + 1 + n]
-        out["table3"][name] = rms_by_zone(pred.reshape(-1, nz), meas.reshape(-1, nz), data.zones)
+        rms = rms_by_zone(pred.reshape(-1, nz), meas.reshape(-1, nz), data.zones)
+        if name.startswith("known_but"):
+            out["attribution"][name] = rms
+            continue
+        out["table3"][name] = rms
         out["horizon_rms"][name] = horizon_rms(pred, meas, data.zones)
-        out["coverage_90"][name] = coverage(pred, std, meas, data.zones)
+        out["coverage_90"][name] = _interval_coverage(lo, hi, meas, data.zones)
     out["n_forecasts"] = len(issues)
     out["seconds"] = time.perf_counter() - t0
     return out
@@ -324,10 +386,14 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
         extra={"profile_weeks": study["split"]["train_starts"]})
     t = time.perf_counter()
     progress("service check: the online estimator's day-ahead forecasts")
-    svc = service_check(model_file, campaign / "telemetry.csv", data, seed)
+    weather = _weather_forecasts(campaign, seed)
+    svc = service_check(model_file, campaign / "telemetry.csv", data, seed,
+                        weather=weather)
     study["table3"].update(svc["table3"])
     study["horizon_rms"].update(svc["horizon_rms"])
-    study.setdefault("coverage_90", {}).update(svc["coverage_90"])
+    study.setdefault("coverage_90", {}).update(
+        {f"{k}_calibrated": v for k, v in svc["coverage_90"].items()})
+    study["service_input_attribution"] = svc["attribution"]
     timings["service_check"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     pinned = set(ident.at_bounds())
@@ -344,6 +410,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
                   table3=study["table3"], horizon_rms=study["horizon_rms"],
                   gains_truth=study.get("gains_truth") or {},
                   coverage_90=study.get("coverage_90"),
+                  service_input_attribution=study.get("service_input_attribution"),
                   split={"identification": {"train": ident.train_weekends,
                                             "validation": ident.validation_weekends},
                          "gains": study.get("split")},

@@ -1,0 +1,185 @@
+"""90 % forecast intervals calibrated on a building's own recent forecast errors.
+
+The model's forecast standard deviation (steady-state filter, nominal model: state noise
+only) does not know the errors of the input forecasts and of the internal-gains profile;
+its 90 % intervals cover far less than 90 % (docs/forecasts.md). :class:`IntervalCalibrator`
+rescales it by lead time from the errors the building's own served forecasts made:
+
+- every ``cadence`` steps the streaming estimator issues a calibration forecast (the
+  same served forecast) and keeps its mean until its horizon has passed;
+- each new measurement y(t) gives, for every kept forecast and zone, the score
+  s = |y - mean| / std at that forecast's lead; the score goes into a histogram per
+  (bin, zone) with log-spaced score bins. A bin is a lead class (``lead_edges``: up to
+  2 h, 2-8 h, 8-24 h) times the UTC time of day of the *target* in ``tod_bins`` bins:
+  the errors depend on both (small at night, largest at noon of a working day), and a
+  forecast issued at any time of day must get intervals that fit it;
+- the histograms decay by ``lam`` per step (an effective window of 1 / (1 - lam) steps of
+  data, ~``window_days``), so the calibration follows the recent days, O(1) per step;
+  scores inside the site's experiments are not kept (the streaming estimator skips them);
+- the served half-width is q(bin, zone) x std(h): split-conformal scaling of the model
+  std with the empirical quantile of recent scores;
+- the quantile's level per zone follows adaptive conformal inference (Gibbs and Candès
+  2021): after each scored error, level += gamma (miss - (1 - target)), with miss = 1 when
+  the error lay outside the interval then served. A window of harder (or easier) days
+  than the present would otherwise widen (narrow) the intervals for as long as it lasts.
+
+Until a bin has ``min_weight`` scores the model's own z_0.9 = 1.645 is used.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Mapping
+
+import numpy as np
+
+__all__ = ["CALIBRATION_DEFAULTS", "IntervalCalibrator"]
+
+#: chosen on the training weeks (docs/forecasts.md "Served forecast")
+CALIBRATION_DEFAULTS = {"window_days": 7.0, "cadence": 8, "tod_bins": 12, "level": 0.9,
+                        "min_weight": 30.0, "gamma": 0.0005}
+
+_EDGES = np.geomspace(1e-2, 1e2, 51)  # score bins; below/above go to the first/last
+_DAY_NS = 86_400 * 10**9
+
+
+class IntervalCalibrator:
+    """Empirical quantiles of standardised forecast errors per lead bin and zone.
+
+    Parameters
+    ----------
+    n_zones, horizon : int
+        Zones and forecast steps.
+    steps_per_day : int
+        Steps per day (for ``window_days``).
+    window_days : float
+        Effective memory [days of data].
+    cadence : int
+        A calibration forecast every ``cadence`` steps.
+    tod_bins : int
+        Bins of the target's UTC time of day.
+    level : float
+        Interval coverage aimed at [-].
+    gamma : float
+        Step of the adaptive level per scored error [-] (0: fixed level).
+    lead_edges : sequence of int
+        Lead classes in steps: [e0, e1), [e1, e2), ... (e0 = 0, last = horizon).
+    min_weight : float
+        Scores a bin needs before its quantile replaces z_0.9.
+    z_default : float
+        Multiplier of std without enough scores.
+    """
+
+    def __init__(self, n_zones: int, horizon: int, steps_per_day: int, *,
+                 window_days: float = CALIBRATION_DEFAULTS["window_days"],
+                 cadence: int = CALIBRATION_DEFAULTS["cadence"],
+                 tod_bins: int = CALIBRATION_DEFAULTS["tod_bins"],
+                 level: float = CALIBRATION_DEFAULTS["level"],
+                 min_weight: float = CALIBRATION_DEFAULTS["min_weight"],
+                 gamma: float = CALIBRATION_DEFAULTS["gamma"],
+                 lead_edges=(0, 8, 32), step_ns: int = 900 * 10**9,
+                 z_default: float = 1.6448536269514722):
+        if not 0 < level < 1:
+            raise ValueError("level must lie in (0, 1)")
+        self.nz, self.horizon, self.cadence = int(n_zones), int(horizon), int(cadence)
+        self.tod_bins, self.target, self.gamma = int(tod_bins), float(level), float(gamma)
+        self.step_ns = int(step_ns)
+        self.lam = 1.0 - 1.0 / (window_days * steps_per_day)
+        self.min_weight, self.z_default = float(min_weight), float(z_default)
+        lead_class = np.searchsorted(np.asarray(lead_edges[1:]), np.arange(1, horizon + 1),
+                                     side="right")
+        self._lead_class = lead_class  # lead h (1..horizon) at index h - 1
+        self.n_bins = (int(lead_class.max()) + 1) * self.tod_bins
+        self.hist = np.zeros((self.n_bins, self.nz, len(_EDGES) + 1))
+        self.level = np.full(self.nz, self.target)
+        self.pending: deque[tuple[int, np.ndarray]] = deque(maxlen=horizon // cadence + 1)
+        self._q: np.ndarray | None = None
+
+    def bins(self, step_index: int, leads: np.ndarray) -> np.ndarray:
+        """Bin of the targets at leads ``leads`` (1..horizon) of a forecast issued at grid
+        step ``step_index``."""
+        leads = np.asarray(leads, dtype=np.int64)
+        t = (int(step_index) + leads) * self.step_ns
+        tod = (t % _DAY_NS) * self.tod_bins // _DAY_NS
+        return self._lead_class[leads - 1] * self.tod_bins + tod
+
+    def due(self, step_index: int) -> bool:
+        """Whether a calibration forecast is due at grid step number ``step_index``."""
+        return step_index % self.cadence == 0
+
+    def add_forecast(self, step_index: int, mean: np.ndarray) -> None:
+        """Keep a forecast issued at step ``step_index`` (mean (horizon, n_zones) [degC])."""
+        self.pending.append((int(step_index), np.array(mean, dtype=float)))
+
+    def resolve(self, step_index: int, y: np.ndarray, std: np.ndarray) -> int:
+        """Score the kept forecasts against y at step ``step_index`` (decays the histograms
+        once); ``std`` (horizon, n_zones) the model std [K]. Returns the scores added."""
+        y = np.asarray(y, float)
+        ok = np.isfinite(y)
+        added = 0
+        if ok.any():
+            zones = np.flatnonzero(ok)
+            q = self.quantiles()
+            for k0, mean in self.pending:
+                h = step_index - k0
+                if 1 <= h <= self.horizon:
+                    s = np.abs(y[zones] - mean[h - 1, zones]) / np.maximum(std[h - 1, zones], 1e-9)
+                    b = int(self.bins(k0, [h])[0])
+                    self.hist[b, zones, np.searchsorted(_EDGES, s)] += 1.0
+                    if self.gamma > 0:
+                        miss = (s > q[b, zones]).astype(float)
+                        self.level[zones] = np.clip(
+                            self.level[zones] + self.gamma * (miss - (1.0 - self.target)),
+                            0.5, 0.995)
+                    added += len(zones)
+        self.hist *= self.lam
+        while self.pending and step_index - self.pending[0][0] >= self.horizon:
+            self.pending.popleft()
+        self._q = None
+        return added
+
+    def quantiles(self) -> np.ndarray:
+        """(n_bins, n_zones) score quantile at each zone's current level (z_default where
+        a bin has too few scores). Linear interpolation in log score within a histogram
+        bin."""
+        if self._q is not None:
+            return self._q
+        c = np.cumsum(self.hist, axis=2)
+        total = c[:, :, -1]
+        target = self.level[None, :] * total
+        k = np.minimum((c < target[:, :, None]).sum(axis=2), len(_EDGES))
+        prev = np.take_along_axis(c, np.maximum(k - 1, 0)[:, :, None], axis=2)[:, :, 0]
+        prev = np.where(k == 0, 0.0, prev)
+        here = np.take_along_axis(self.hist, k[:, :, None], axis=2)[:, :, 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            frac = np.clip(np.where(here > 0, (target - prev) / here, 0.5), 0.0, 1.0)
+        lo_e = np.log(np.concatenate([[_EDGES[0] / 1.1], _EDGES]))
+        hi_e = np.log(np.concatenate([_EDGES, [_EDGES[-1] * 1.1]]))
+        q = np.exp(lo_e[k] + frac * (hi_e[k] - lo_e[k]))
+        self._q = np.where(total >= self.min_weight, q, self.z_default)
+        return self._q
+
+    def halfwidth(self, step_index: int, std: np.ndarray) -> np.ndarray:
+        """Calibrated 90 % half-widths (horizon, n_zones) [K] of a forecast issued at grid
+        step ``step_index`` with model std ``std`` [K]."""
+        b = self.bins(step_index, np.arange(1, self.horizon + 1))
+        return self.quantiles()[b] * np.asarray(std, float)
+
+    # --- state ------------------------------------------------------------------------
+    def state_arrays(self, prefix: str = "cal_") -> dict[str, np.ndarray]:
+        steps = np.array([k for k, _ in self.pending], dtype=np.int64)
+        means = np.array([m for _, m in self.pending]).reshape(-1, self.horizon, self.nz)
+        return {f"{prefix}hist": self.hist, f"{prefix}level": self.level,
+                f"{prefix}steps": steps, f"{prefix}means": means}
+
+    def load_state_arrays(self, arrays: Mapping[str, np.ndarray], prefix: str = "cal_") -> bool:
+        if f"{prefix}hist" not in arrays or np.shape(arrays[f"{prefix}hist"]) != self.hist.shape:
+            return False
+        self.hist = np.array(arrays[f"{prefix}hist"], float)
+        if f"{prefix}level" in arrays:
+            self.level = np.array(arrays[f"{prefix}level"], float)
+        self.pending.clear()
+        for k, m in zip(arrays[f"{prefix}steps"], arrays[f"{prefix}means"]):
+            self.pending.append((int(k), np.array(m, float)))
+        self._q = None
+        return True

@@ -1,0 +1,206 @@
+"""The served forecast's inputs: HVAC-input forecaster, weather forecasts and fallback,
+calibrated intervals (estimator/inputs_forecast.py, weather_forecast.py, calibration.py)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from zonecast.estimator.calibration import IntervalCalibrator
+from zonecast.estimator.inputs_forecast import DayCalendar, HvacInputForecaster
+from zonecast.estimator.weather_forecast import (
+    DiurnalWeather,
+    WeatherForecastError,
+    from_open_meteo,
+    parse_weather_forecast,
+)
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+STEP = 900 * 10**9
+TZ = "America/Los_Angeles"
+
+
+def _grid(start: str, days: int) -> np.ndarray:
+    t0 = pd.Timestamp(start, tz=TZ).tz_convert("UTC").value
+    return t0 + STEP * np.arange(days * 96, dtype=np.int64)
+
+
+def _pattern(times_ns: np.ndarray, cal: DayCalendar, ta: np.ndarray) -> np.ndarray:
+    """A known weekly pattern: per slot a level plus a slope on outdoor temperature."""
+    s = cal.slots(times_ns)
+    level = 0.1 + 0.002 * (s % 96) + 0.05 * (s >= 96)
+    return np.column_stack([level + 0.01 * ta, 14.0 - 0.2 * ta + 0 * level])
+
+
+def test_calendar_day_classes_and_holidays():
+    cal = DayCalendar(TZ, "15min", holidays=["2015-05-25"])
+    t = _grid("2015-05-22", 4)  # Friday .. Monday (Memorial Day)
+    s = cal.slots(t)
+    assert (s[:96] == np.arange(96)).all()          # Friday: working, local 00:00 is slot 0
+    assert (s[96:288] == 96 + np.tile(np.arange(96), 2)).all()  # weekend
+    assert (s[288:] >= 96).all()                    # the holiday is not a working day
+    # off-grid times take the same slots
+    assert cal.slots(t[:5] + 1).tolist() == s[:5].tolist()
+
+
+def test_forecaster_learns_a_known_weekly_pattern_exactly():
+    """Noise-free data of a per-slot linear law in outdoor temperature: after two weeks the
+    forecast reproduces it at new outdoor temperatures (shrinkage vanishing)."""
+    cal = DayCalendar(TZ, "15min")
+    f = HvacInputForecaster(cal, 2, n_regressors=1, shrink=[1e-6], lam=1.0, tau_h=0.0,
+                            nonnegative=[True, False])
+    rng = np.random.default_rng(1)
+    t = _grid("2015-05-04", 21)
+    ta = 12 + 6 * rng.random(len(t))
+    y = _pattern(t, cal, ta)
+    for k in range(len(t)):
+        assert f.update(int(t[k]), [ta[k]], y[k])
+    tf = _grid("2015-05-25", 2)[:96]
+    ta_f = 10 + 8 * rng.random(96)
+    out = f.forecast(tf, ta_f[:, None], np.full(2, np.nan), np.zeros((96, 2)))
+    np.testing.assert_allclose(out, _pattern(tf, cal, ta_f), rtol=0, atol=1e-6)
+
+
+def test_forecaster_skips_missing_rows_and_falls_back_on_unseen_slots():
+    cal = DayCalendar(TZ, "15min")
+    f = HvacInputForecaster(cal, 1, n_regressors=1, shrink=[1.0])
+    t = _grid("2015-05-04", 1)
+    assert not f.update(int(t[0]), [np.nan], [1.0])
+    assert not f.update(int(t[0]), [10.0], [np.nan])
+    assert f.updates == 0
+    fb = np.full((96, 1), 7.0)
+    out = f.forecast(t, np.full((96, 1), 10.0), np.array([np.nan]), fb)
+    assert (out == 7.0).all()
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 400))
+def test_forecaster_state_is_constant_size_and_round_trips_bitwise(seed, n):
+    cal = DayCalendar(TZ, "15min")
+    f = HvacInputForecaster(cal, 3, n_regressors=2, shrink=[1.0, 30.0], lam=0.9)
+    sizes = {k: v.shape for k, v in f.state_arrays().items()}
+    rng = np.random.default_rng(seed)
+    t = _grid("2015-05-04", 5)[:n]
+    for k in range(n):
+        f.update(int(t[k]), rng.normal(size=2) * [3, 100] + [15, 300], rng.random(3))
+    assert {k: v.shape for k, v in f.state_arrays().items()} == sizes  # O(1) state
+    g = HvacInputForecaster(cal, 3, n_regressors=2, shrink=[1.0, 30.0], lam=0.9)
+    assert g.load_state_arrays({k: v.copy() for k, v in f.state_arrays().items()})
+    x = rng.normal(size=(96, 2)) * [3, 100] + [15, 300]
+    a = f.forecast(t[:1] + STEP * np.arange(96), x, rng.random(3), np.zeros((96, 3)))
+    b = g.forecast(t[:1] + STEP * np.arange(96), x, a[0], np.zeros((96, 3)))
+    assert np.array_equal(a, b)
+
+
+def test_weather_body_validation_gives_reasons():
+    t = pd.date_range("2015-05-13T07:00Z", periods=37, freq="1h")
+    good = {"issued": "2015-05-13T07:00:00Z", "times": [x.isoformat() for x in t],
+            "temperature": [15.0] * 37, "ghi": [100.0] * 37, "dni": [50.0] * 37,
+            "dhi": [50.0] * 37}
+    wf = parse_weather_forecast(good)
+    assert wf.times.unit == "ns" and len(wf.times) == 37
+    cases = {"missing_field": {k: v for k, v in good.items() if k != "ghi"},
+             "absurd_value": {**good, "ghi": [100.0] * 36 + [5000.0]},
+             "length_mismatch": {**good, "dni": [1.0] * 3},
+             "not_increasing": {**good, "times": good["times"][::-1]},
+             "time_without_offset": {**good, "issued": "2015-05-13T07:00"},
+             "too_short": {**good, **{k: good[k][:10] for k in
+                                      ("times", "temperature", "ghi", "dni", "dhi")}},
+             "wrong_type": {**good, "temperature": ["warm"] * 37}}
+    for reason, body in cases.items():
+        with pytest.raises(WeatherForecastError) as e:
+            parse_weather_forecast(body)
+        assert e.value.reason == reason
+    with pytest.raises(WeatherForecastError) as e:
+        parse_weather_forecast(good, now=pd.Timestamp("2015-05-11T00:00Z"))
+    assert e.value.reason == "future_time"
+
+
+def test_open_meteo_adapter_on_a_recorded_response():
+    doc = json.loads((DATA / "open_meteo_forecast.json").read_text())
+    wf = parse_weather_forecast(from_open_meteo(doc))
+    # local 2015-05-13T00:00 PDT = 07:00 UTC; radiation of the hour ending 13:00 local
+    # (802 W/m2) is stamped at 12:30 local = 19:30 UTC
+    assert wf.issued == pd.Timestamp("2015-05-13T07:00Z")
+    k = list(wf.times).index(pd.Timestamp("2015-05-13T19:30Z"))
+    assert wf.ghi[k] == 802.0 and wf.dni[k] == 795.6 and wf.dhi[k] == 120.0
+    # temperature interpolated to the half hour between 12:00 (17.7) and 13:00 (18.4)
+    assert wf.temperature[k] == pytest.approx(18.05)
+    # the null temperature at 04:00 is bridged, every value is finite
+    assert np.isfinite(wf.temperature).all()
+    v = wf.values_at(np.array([pd.Timestamp("2015-05-13T19:45Z").value]))
+    assert v[0, 1] == pytest.approx(802.0 + 0.25 * (781.0 - 802.0))  # 19:30 .. 20:30
+    bad = json.loads(json.dumps(doc))
+    bad["hourly_units"]["temperature_2m"] = "°F"
+    with pytest.raises(WeatherForecastError):
+        from_open_meteo(bad)
+
+
+def test_diurnal_fallback_learns_the_shape_and_shifts_temperature():
+    d = DiurnalWeather(96, lam=0.5, tau_h=6.0)
+    tod = np.arange(96)
+    shape = 15 + 3 * np.sin(2 * np.pi * tod / 96)
+    for _ in range(10):
+        for k in tod:
+            d.update(int(k), shape[k], np.full(4, 100.0 * (k > 40)))
+    lead = np.arange(96) * 0.25
+    out = d.forecast(tod, lead, np.array([shape[0] + 2.0, 0, 0, 0, 0]))
+    np.testing.assert_allclose(out[:, 0], shape + 2.0 * np.exp(-lead / 6.0), atol=1e-9)
+    assert out[50, 1] == pytest.approx(100.0)
+
+
+def test_calibrated_intervals_cover_on_stationary_errors():
+    """Scores from a known error law: the calibrated half-widths converge to the error's
+    90 % quantile (about 1.645 sigma for a normal error) and cover about 90 %."""
+    rng = np.random.default_rng(3)
+    H, nz, sigma = 96, 2, np.array([0.5, 1.5])
+    cal = IntervalCalibrator(nz, H, 96, window_days=30, cadence=8, gamma=0.0)
+    std = np.full((H, nz), 0.2)
+    truth = 20.0 + np.zeros(nz)
+    hits, n = 0, 0
+    for k in range(96 * 40):
+        y = truth + sigma * rng.standard_normal(nz)
+        if k > 96 * 20:
+            for k0, mean in cal.pending:
+                h = k - k0
+                if 1 <= h <= H:
+                    hw = cal.halfwidth(k0, std)[h - 1]
+                    hits += int((np.abs(y - mean[h - 1]) <= hw).sum())
+                    n += nz
+        cal.resolve(k, y, std)
+        if cal.due(k):
+            cal.add_forecast(k, np.tile(truth, (H, 1)))
+    assert 0.87 <= hits / n <= 0.93
+    hw = cal.halfwidth(0, std)
+    np.testing.assert_allclose(hw.mean(axis=0), 1.645 * sigma, rtol=0.1)
+    # checkpoint round trip
+    other = IntervalCalibrator(nz, H, 96, window_days=30, cadence=8, gamma=0.0)
+    assert other.load_state_arrays(cal.state_arrays())
+    assert np.array_equal(other.halfwidth(5, std), cal.halfwidth(5, std))
+
+
+def test_adaptive_level_widens_after_misses():
+    cal = IntervalCalibrator(1, 96, 96, gamma=0.01)
+    std = np.ones((96, 1))
+    before = cal.level.copy()
+    cal.add_forecast(0, np.zeros((96, 1)))
+    cal.resolve(1, np.array([100.0]), std)  # far outside: a miss
+    assert cal.level[0] > before[0]
+
+
+
+def test_site_thermostat_holidays_reach_the_calendar(site_dict, tmp_path):
+    from zonecast.estimator.site import load_site
+
+    from tests.conftest import write_site
+
+    site_dict["thermostat"] = {"heating_occupied": 21, "heating_unoccupied": 17,
+                               "holidays": ["2015-05-25"]}
+    cal = DayCalendar.for_site(load_site(write_site(tmp_path, site_dict)))
+    monday, tuesday = _grid("2015-05-25", 2)[[40, 136]]
+    assert cal.slots([monday])[0] == 96 + 40 and cal.slots([tuesday])[0] == 40

@@ -117,9 +117,11 @@ class MqttSettings(BaseModel):
     keepalive : int
         [s].
     receive_maximum : int
-        MQTT v5: most unacknowledged messages the broker may send at once.
+        MQTT v5: most unacknowledged messages the broker may send at once; default
+        1000, so the broker keeps sending while a group is being committed (with 100 the
+        ingester idled during every commit, docs/benchmarks.md).
     batch_max_messages : int
-        Most messages committed in one storage transaction.
+        Most messages committed in one storage transaction (default 500).
     topic_prefix : str
         First topic level (``zonecast``).
     max_payload_bytes, max_readings, max_future : int, int, float
@@ -143,8 +145,8 @@ class MqttSettings(BaseModel):
     protocol: Literal["5", "3.1.1"] = "5"
     session_expiry: int = Field(7 * 24 * 3600, ge=1)
     keepalive: int = Field(30, ge=5)
-    receive_maximum: int = Field(100, ge=1, le=65535)
-    batch_max_messages: int = Field(100, ge=1)
+    receive_maximum: int = Field(1000, ge=1, le=65535)
+    batch_max_messages: int = Field(500, ge=1)
     topic_prefix: str = DEFAULT_PREFIX
     max_payload_bytes: int = Field(64 * 1024, ge=1)
     max_readings: int = Field(5000, ge=1)

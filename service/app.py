@@ -20,6 +20,7 @@ from starlette.concurrency import run_in_threadpool
 from zonecast.service.api.routes import (
     buildings,
     forecast,
+    gaps,
     health,
     internal_gains,
     metrics,
@@ -82,7 +83,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     async def _invalid(request: Request, exc: RequestValidationError):
         return JSONResponse({"detail": _message(exc)}, status_code=422)
 
-    for module in (buildings, state, internal_gains, forecast, telemetry):
+    for module in (buildings, state, internal_gains, forecast, gaps, telemetry):
         app.include_router(module.router, prefix=API)
     app.include_router(health.router)
     app.include_router(metrics.router)

@@ -179,6 +179,9 @@ class RunnerSettings(BaseModel):
     watermark_support: int = Field(2, ge=1, description="readings of this many points at one "
                                    "time make it a watermark that closes earlier rows (a lone "
                                    "reading ahead of the stream does not)")
+    gap_tolerance: float = Field(0.0, ge=0, description="runs of 15-min steps without a "
+                                 "reading of a point up to this long are not reported as gaps "
+                                 "[s]; 0: every missing step is")
 
 
 class ServiceSettings(BaseSettings):

@@ -563,15 +563,19 @@ class Storage(ABC):
         return [DeadLetter(i, b, t, p, r, self._from_db(at)) for i, b, t, p, r, at in rows]
 
     # --- gaps -----------------------------------------------------------------------
-    def record_gaps(self, building: str, gaps: Iterable[Gap]) -> None:
+    def record_gaps(self, building: str, gaps: Iterable[Gap], *, sync: bool = True) -> None:
         """Insert or update gaps of ``building`` (keyed by point and start), one
-        transaction. The runner writes a gap when it opens and when it closes."""
+        transaction. The runner writes a gap when it opens and when it closes; ``sync``
+        as for :meth:`save_checkpoint`."""
         rows = [(building, _check_name(g.point, "gap point"),
                  self._to_db(_utc(g.start, "gap start")), self._to_db(_utc(g.end, "gap end")),
                  bool(g.open)) for g in gaps]
         if not rows:
             return
-        with self._transaction() as cur:
+        with self._lock, (nullcontext() if sync else self._unsynced()), \
+                self._transaction() as cur:
+            if not sync:
+                self._unsynced_transaction(cur)
             cur.executemany(self._sql(
                 "INSERT INTO gaps (building, point, gap_start, gap_end, is_open) "
                 "VALUES (?, ?, ?, ?, ?) ON CONFLICT (building, gap_start, point) DO UPDATE "

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import re
 import time
-from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -79,7 +78,7 @@ def test_tolerance_and_range_filters_and_paging(storage):
     tr.observe(at(5), present(2, 0))  # a: two steps (4, 5)
     tr.observe(at(6), present(2))
     assert tr.gaps_found == 2
-    total, page = storage.gaps("office6")
+    _, page = storage.gaps("office6")
     assert [(g.point, g.start, g.end) for g in page] == [("b", at(2), at(5)),
                                                          ("a", at(4), at(6))]
     assert storage.gaps("office6", start=at(5))[0] == 1  # b ended at 5 (exclusive)
@@ -123,7 +122,7 @@ def _wait(cond, timeout, what):
 
 
 def _metric(text: str, name: str) -> float:
-    m = re.search(rf'^{name}{{building="office6"}} (\S+)$', text, re.M)
+    m = re.search(rf'^{name}{{building="office6"}} (\S+)$', text, re.MULTILINE)
     assert m, f"{name} not in /metrics"
     return float(m.group(1))
 

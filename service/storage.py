@@ -154,20 +154,23 @@ def _check_name(value: Any, what: str) -> str:
     return value
 
 
-def _unique_rows(rows: Iterable[Sequence[Any]]) -> tuple[list[tuple[str, datetime, float]], int, int]:
+def _unique_rows(rows: Iterable[Sequence[Any]]
+                 ) -> tuple[list[tuple[str, datetime, float]], int, int, set[datetime]]:
     """Validate rows; drop repeats of a key inside the batch (first kept).
 
-    Returns the unique rows, the number of repeats and how many of those
-    repeats carried a different value.
+    Returns the unique rows, the number of repeats, how many of those repeats carried a
+    different value, and the distinct times.
     """
     seen: dict[tuple[str, datetime], float] = {}
+    times: set[datetime] = set()
     repeats = conflicts = 0
     for row in rows:
         try:
             point, when, value = row
         except (TypeError, ValueError):
             raise ValueError(f"reading {row!r} must be a (point, time, value) triple") from None
-        _check_name(point, f"reading {row!r}: point")
+        if type(point) is not str or not point or "\x00" in point:  # message built on error only
+            _check_name(point, f"reading {row!r}: point")
         if isinstance(value, bool) or not isinstance(value, int | float) \
                 or not math.isfinite(value):
             raise ValueError(f"reading {row!r}: value must be a finite number; omit missing "
@@ -180,7 +183,8 @@ def _unique_rows(rows: Iterable[Sequence[Any]]) -> tuple[list[tuple[str, datetim
             conflicts += seen[key] != float(value)
         else:
             seen[key] = float(value)
-    return [(p, t, v) for (p, t), v in seen.items()], repeats, conflicts
+            times.add(key[1])
+    return [(p, t, v) for (p, t), v in seen.items()], repeats, conflicts, times
 
 
 class Storage(ABC):
@@ -345,17 +349,21 @@ class Storage(ABC):
         and each batch is stored by itself, so every batch's counts stay exact."""
         if len(members) > 1:
             combined = [row for _, (_, unique, *_) in members for row in unique]
-            if len({(p, t) for p, t, _ in combined}) == len(combined):
+            # batches with disjoint times (one message, one time) cannot share a key; else
+            # compare the keys themselves
+            times = [b[4] for _, b in members]
+            if sum(map(len, times)) == len(set().union(*times)) or \
+                    len({(p, t) for p, t, _ in combined}) == len(combined):
                 cur.execute("SAVEPOINT zonecast_group")
                 inserted, _ = self._insert_unique(cur, building, combined, received)
                 if inserted == len(combined):
                     cur.execute("RELEASE SAVEPOINT zonecast_group")
-                    for i, (_, unique, repeats, repeat_conflicts) in members:
+                    for i, (_, unique, repeats, repeat_conflicts, _) in members:
                         results[i] = PutResult(len(unique), repeats, repeat_conflicts)
                     return
                 cur.execute("ROLLBACK TO SAVEPOINT zonecast_group")
                 cur.execute("RELEASE SAVEPOINT zonecast_group")
-        for i, (_, unique, repeats, repeat_conflicts) in members:
+        for i, (_, unique, repeats, repeat_conflicts, _) in members:
             inserted, conflicts = self._insert_unique(cur, building, unique, received)
             results[i] = PutResult(inserted, len(unique) - inserted + repeats,
                                    conflicts + repeat_conflicts)
@@ -605,7 +613,7 @@ class Storage(ABC):
             params.append(self._to_db(_utc(start, "start")))
         if point is not None:
             where.append("point = ?")
-            params.append(point)
+            params.append(_check_name(point, "point"))
         if open_only:
             where.append("is_open")
         cond = " AND ".join(where)

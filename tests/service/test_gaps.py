@@ -172,6 +172,8 @@ def test_gaps_endpoint_state_and_metrics(tmp_path, vb, bundle, telemetry):
         assert before["total"] == 0
         bad = client.get(url, headers=AUTH, params={"from": iso[12], "to": iso[11]})
         assert bad.status_code == 422 and "'to'" in bad.json()["detail"]
+        nul = client.get(url, headers=AUTH, params={"point": "T\x00"})
+        assert nul.status_code == 422 and "NUL" in nul.json()["detail"]
         assert client.get(url, params={}).status_code == 401
         assert client.get("/api/v1/buildings/nope/gaps", headers=AUTH).status_code == 404
         state = client.get("/api/v1/buildings/office6/state", headers=AUTH).json()

@@ -254,6 +254,12 @@ def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(Path(__file__).parent))
     from bench_ingest import ensure_broker
 
+    try:
+        psycopg.connect(args.url, connect_timeout=3).close()
+    except psycopg.Error as exc:
+        print(f"no PostgreSQL answered at {args.url} ({str(exc).strip().splitlines()[0]}): "
+              "skipped; pass --url")
+        return 0
     tmp = tempfile.TemporaryDirectory()
     if not args.no_mqtt:
         args.port, broker = ensure_broker(args.host, args.port, Path(tmp.name))

@@ -267,7 +267,7 @@ def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
     app = create_app(make_settings(tmp_path, vb))
     paths = ["/api/v1/buildings", "/api/v1/buildings/office6", "/api/v1/buildings/office6/state",
              "/api/v1/buildings/office6/internal-gains", "/api/v1/buildings/office6/forecast",
-             "/metrics"]
+             "/api/v1/buildings/office6/gaps", "/metrics"]
     with TestClient(app) as client:
         for p in paths:
             for headers in ({}, {"Authorization": "Bearer wrong"}, {"Authorization": "Basic x"}):
@@ -281,7 +281,7 @@ def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
         assert client.get("/readyz").json()["ready"] is True
         spec = client.get("/openapi.json").json()
     ops = {(path, m): op for path, item in spec["paths"].items() for m, op in item.items()}
-    assert len(ops) == 9
+    assert len(ops) == 10
     for (path, method), op in ops.items():
         assert bool(op.get("security")) == (path not in ("/healthz", "/readyz")), path
 

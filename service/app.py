@@ -23,6 +23,7 @@ from zonecast.service.api.routes import (
     buildings,
     diagnosis,
     forecast,
+    gaps,
     health,
     history,
     internal_gains,
@@ -88,7 +89,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     async def _invalid(request: Request, exc: RequestValidationError):
         return JSONResponse({"detail": _message(exc)}, status_code=422)
 
-    for module in (buildings, state, internal_gains, forecast, telemetry, history,
+    for module in (buildings, state, internal_gains, forecast, gaps, telemetry, history,
                    model_health, diagnosis, weather):
         app.include_router(module.router, prefix=API)
     app.include_router(health.router)

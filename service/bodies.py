@@ -54,6 +54,12 @@ def state_body(ctx: ServiceContext, runner: Runner) -> S.StateBody:
             flags += [f"never_received:{p}" for p, u in zip(runner.points, runner.unseen) if u]
         last = est.time
         late, last_late = runner.late_readings, runner.last_late
+        tracker = runner.gaps
+        open_gaps = tracker.open_gaps()
+        flags += [f"gap:{p}" for p, _ in open_gaps]
+        gaps = S.GapSummary(open=[S.OpenGap(point=p, since=as_utc(t)) for p, t in open_gaps],
+                            found=tracker.gaps_found, missing_steps=tracker.missing_steps,
+                            tolerance_s=tracker.tolerance)
         steps, nis = est.steps, (est.nis_sum / est.dof_sum if est.dof_sum else None)
     wm = runner.watermark
     fresh = (now - wm).total_seconds() if wm is not None else None
@@ -67,7 +73,7 @@ def state_body(ctx: ServiceContext, runner: Runner) -> S.StateBody:
                        data_freshness_s=fresh, update_age_s=age, zones=zones, steps=steps,
                        nis_per_dof=nis, quality=flags, late_readings=late,
                        late_reading_times=None if last_late is None
-                       else [as_utc(last_late[0]), as_utc(last_late[1])])
+                       else [as_utc(last_late[0]), as_utc(last_late[1])], gaps=gaps)
 
 
 def forecast_body(runner: Runner, steps: int, fc: Forecast | None = None) -> S.ForecastBody:

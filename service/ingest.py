@@ -600,8 +600,14 @@ def validate_message(
 
     accepted: list[Reading] = []
     for point, when, value in items:
+        spec = catalogue.get(point)
+        # the common case first: a float inside the point's range with a parsed time; the
+        # same outcome as the checks below (NaN and infinities fail the comparison)
+        if spec is not None and type(value) is float and spec.low <= value <= spec.high \
+                and type(when) is datetime:
+            accepted.append(Reading(point, when, value))
+            continue
         try:
-            spec = catalogue.get(point)
             if spec is None:
                 raise _Bad(Reason.UNKNOWN_POINT,
                            f"point {point!r} is not in the catalogue of building {building!r}: "

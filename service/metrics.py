@@ -65,6 +65,18 @@ class _Collector:
                                      labels=["building"])
         late = CounterMetricFamily("zonecast_late_readings", "readings that arrived for steps "
                                    "already processed (stored, not used)", labels=["building"])
+        gaps = CounterMetricFamily("zonecast_gaps", "gaps found in the telemetry the site "
+                                   "declares (runs of missing steps beyond the tolerance)",
+                                   labels=["building"])
+        gap_steps = CounterMetricFamily("zonecast_gap_steps", "point-steps without a reading "
+                                        "in rows the runner closed", labels=["building"])
+        gaps_open = GaugeMetricFamily("zonecast_gaps_open", "points whose gap is still open",
+                                      labels=["building"])
+        for bid, r in sorted(ctx.runners.items()):
+            gaps.add_metric([bid], r.gaps.gaps_found)
+            gap_steps.add_metric([bid], r.gaps.missing_steps)
+            gaps_open.add_metric([bid], len(r.gaps.open_gaps()))
+        yield from (gaps, gap_steps, gaps_open)
         for bid, r in sorted(ctx.runners.items()):
             est = r.est
             steps.add_metric([bid], est.steps)

@@ -19,10 +19,13 @@ Delivery contract (see ``docs/service.md``):
   ``internal_error``); a message that storage refuses as data is dead-lettered
   (``storage_rejected``); only an unavailable storage holds acknowledgements back.
 
-Threads: paho's network thread only queues incoming messages; one worker
-thread validates, commits a group of queued messages in one transaction (one
-disk sync for many messages), publishes dead letters and acknowledges, in the
-order the messages arrived.
+Threads: paho's network thread validates each incoming message and queues it; one
+worker thread commits a group of queued messages in one transaction (one disk sync for
+many messages), publishes dead letters and acknowledges, in the order the messages
+arrived. Validating on the network thread lets it run while the worker waits for the
+database (a commit releases the GIL), so validation and storage overlap; the broker keeps
+sending during a commit as long as fewer than ``receive_maximum`` messages are
+unacknowledged.
 """
 
 from __future__ import annotations
@@ -148,7 +151,7 @@ class Ingester:
         self._limits = settings.limits
         #: the MQTT client id (:func:`ingester_client_id`)
         self.client_id = ingester_client_id(settings, storage)
-        self._queue: queue.Queue[tuple[mqtt.MQTTMessage, datetime]] = queue.Queue()
+        self._queue: queue.Queue[tuple[_Checked, datetime]] = queue.Queue()
         self._stopping = threading.Event()
         self._aborted = False
         self._ready = threading.Event()
@@ -316,10 +319,11 @@ class Ingester:
             log.warning("MQTT disconnected (%s); reconnecting", reason_code)
 
     def _on_message(self, client, userdata, message) -> None:
-        # Network thread: only count and queue; the worker does the rest.
+        # Network thread: count, validate (cannot raise) and queue; the worker stores.
         self._count("messages_in")
         self._pending.append(time.monotonic())
-        self._queue.put((message, datetime.now(UTC)))
+        received = datetime.now(UTC)
+        self._queue.put((self._accept(message, received), received))
 
     # --- worker -----------------------------------------------------------------
     def _join_worker(self, timeout: float) -> None:
@@ -404,8 +408,8 @@ class Ingester:
                 self._counts["readings_rejected"] += len(acc.rejections)
             self._rejected.update(acc.reasons)
 
-    def _process(self, batch: list[tuple[mqtt.MQTTMessage, datetime]]) -> None:
-        checked = [self._accept(message, received) for message, received in batch]
+    def _process(self, batch: list[tuple[_Checked, datetime]]) -> None:
+        checked = [item for item, _ in batch]
         try:
             results = self._commit(checked)
         except _DataError:
@@ -441,7 +445,7 @@ class Ingester:
                                    json.dumps(notice), qos=1)
                 except Exception:  # never hold back the acknowledgement
                     log.exception("publishing a dead-letter notice failed")
-        for message, _ in batch:
+        for (message, _, _), _ in batch:
             if message.qos > 0:
                 client.ack(message.mid, message.qos)
             try:

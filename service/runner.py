@@ -50,6 +50,7 @@ from zonecast.estimator.streaming import (
     StepReport,
     checkpoint_header,
 )
+from zonecast.service.gaps import GapTracker
 from zonecast.service.settings import RunnerSettings
 from zonecast.service.storage import Storage
 
@@ -131,7 +132,11 @@ class Runner:
         self._received_seen: datetime | None = None  # arrivals checked for late readings
         self._forecast_ok = False
         self._undefined_from: pd.Timestamp | None = None
+        #: gaps in the site's points, found as rows close (service/gaps.py)
+        self.gaps = GapTracker(self.building, self.points, storage,
+                               tolerance=settings.gap_tolerance)
         self._resume()
+        self.gaps.resume(self.next_time)
 
     # --- checkpoint ------------------------------------------------------------------
     def _resume(self) -> None:
@@ -280,6 +285,7 @@ class Runner:
             if not closable:
                 return done, False
             self.next_time = t + STEP
+            self.gaps.observe(t, present)
             if present is not None and present.any():
                 self.unseen &= ~present
                 self._process(t, row)

@@ -11,7 +11,8 @@ from pydantic import AwareDatetime, BaseModel, Field
 
 __all__ = [
     "BuildingDetail", "BuildingSummary", "DiagnosisBody", "DiagnosisEffect", "ErrorBody",
-    "ForecastBody", "Health", "HistoryBody", "InternalGains", "ModelHealth", "PointGaps",
+    "ForecastBody", "GapItem", "GapPage", "GapSummary", "Health", "HistoryBody", "InternalGains",
+    "ModelHealth", "OpenGap", "PointGaps",
     "Readiness", "StateBody", "TelemetryRefused", "TelemetryResult", "ZoneForecast", "ZoneGains",
     "ZoneHealth", "ZoneHistory", "ZoneState",
 ]
@@ -50,6 +51,21 @@ class ZoneState(BaseModel):
                                                "[degC]; null if no sensor reported")
 
 
+class OpenGap(BaseModel):
+    point: str = Field(description="a point the site declares")
+    since: AwareDatetime = Field(description="first 15-min step without a reading of it (UTC)")
+
+
+class GapSummary(BaseModel):
+    open: list[OpenGap] = Field(description="points without a reading since a step longer "
+                                "ago than the tolerance, as of the last processed row")
+    found: int = Field(description="gaps found since the runner started [-]")
+    missing_steps: int = Field(description="point-steps without a reading since the runner "
+                               "started, inside gaps or not [-]")
+    tolerance_s: float = Field(description="runs of missing steps up to this long are not "
+                               "gaps (runner.gap_tolerance) [s]")
+
+
 class StateBody(BaseModel):
     building: str
     last_update: AwareDatetime | None = Field(
@@ -66,11 +82,13 @@ class StateBody(BaseModel):
     quality: list[str] = Field(
         description="flags: not_started, stale, missing_sensor:<zone>, held_input:<input>, "
                     "filter_restarted, never_received:<point> (no reading of the point in "
-                    "any processed step), late_readings")
+                    "any processed step), late_readings, gap:<point> (a gap of the point is open)")
     late_readings: int = Field(0, description="readings that arrived for steps already "
                                "processed since the runner started; stored, not used [-]")
     late_reading_times: list[AwareDatetime] | None = Field(
         None, description="earliest and latest time of the last late readings found (UTC)")
+    gaps: GapSummary | None = Field(
+        None, description="gaps in the telemetry the site declares (GET .../gaps lists them)")
 
 
 class ZoneGains(BaseModel):
@@ -216,3 +234,24 @@ class DiagnosisBody(BaseModel):
     modified: AwareDatetime | None = Field(description="when the report file was written (UTC)")
     detail: str | None = Field(description="why there is none, or null")
     effects: list[DiagnosisEffect] = Field(description="ranked effects, most likely first")
+
+
+class GapItem(BaseModel):
+    point: str = Field(description="a point the site declares")
+    start: AwareDatetime = Field(description="first 15-min step without a reading (UTC)")
+    end: AwareDatetime = Field(description="first step with a reading again (exclusive); for "
+                               "an open gap the runner's next row (UTC)")
+    steps: int = Field(description="steps without a reading, (end - start) / 15 min [-]")
+    open: bool = Field(description="no reading of the point since start")
+
+
+class GapPage(BaseModel):
+    building: str
+    total: int = Field(description="gaps matching the filters [-]")
+    offset: int = Field(description="index of the first item in all matches [-]")
+    next_offset: int | None = Field(description="offset of the next page; null on the last")
+    tolerance_s: float = Field(description="runs of missing steps up to this long are not "
+                               "gaps [s]")
+    position: AwareDatetime | None = Field(
+        description="the runner's next row: gaps are known up to here (UTC)")
+    items: list[GapItem]

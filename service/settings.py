@@ -134,9 +134,11 @@ class MqttSettings(BaseModel):
     keepalive : int
         [s].
     receive_maximum : int
-        MQTT v5: most unacknowledged messages the broker may send at once.
+        MQTT v5: most unacknowledged messages the broker may send at once; default
+        1000, so the broker keeps sending while a group is being committed (with 100 the
+        ingester idled during every commit, docs/benchmarks.md).
     batch_max_messages : int
-        Most messages committed in one storage transaction.
+        Most messages committed in one storage transaction (default 500).
     topic_prefix : str
         First topic level (``zonecast``).
     max_payload_bytes, max_readings, max_future : int, int, float
@@ -160,8 +162,8 @@ class MqttSettings(BaseModel):
     protocol: Literal["5", "3.1.1"] = "5"
     session_expiry: int = Field(7 * 24 * 3600, ge=1)
     keepalive: int = Field(30, ge=5)
-    receive_maximum: int = Field(100, ge=1, le=65535)
-    batch_max_messages: int = Field(100, ge=1)
+    receive_maximum: int = Field(1000, ge=1, le=65535)
+    batch_max_messages: int = Field(500, ge=1)
     topic_prefix: str = DEFAULT_PREFIX
     max_payload_bytes: int = Field(64 * 1024, ge=1)
     max_readings: int = Field(5000, ge=1)
@@ -194,6 +196,9 @@ class RunnerSettings(BaseModel):
     watermark_support: int = Field(2, ge=1, description="readings of this many points at one "
                                    "time make it a watermark that closes earlier rows (a lone "
                                    "reading ahead of the stream does not)")
+    gap_tolerance: float = Field(0.0, ge=0, description="runs of 15-min steps without a "
+                                 "reading of a point up to this long are not reported as gaps "
+                                 "[s]; 0: every missing step is")
 
 
 class ServiceSettings(BaseSettings):

@@ -45,6 +45,7 @@ __all__ = [
     "DEFAULT_URL",
     "Checkpoint",
     "DeadLetter",
+    "Gap",
     "PostgresStorage",
     "PutResult",
     "SQLiteStorage",
@@ -58,6 +59,14 @@ log = logging.getLogger(__name__)
 _EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 #: Longest payload excerpt kept in a dead letter [characters].
 EXCERPT_CHARS = 1024
+
+
+#: gaps in the telemetry a building's site declares (schema 4): one row per point and run
+#: of consecutive steps without a reading, [gap_start, gap_end); an open gap's end is where
+#: the runner was when the row was last written
+_GAPS_DDL = ("CREATE TABLE gaps (building TEXT NOT NULL, point TEXT NOT NULL, "
+             "gap_start {time} NOT NULL, gap_end {time} NOT NULL, is_open {flag} NOT NULL, "
+             "PRIMARY KEY (building, gap_start, point))")
 
 
 class StorageURLError(ValueError):
@@ -102,6 +111,17 @@ class DeadLetter:
     received_at: datetime
 
 
+@dataclass(frozen=True)
+class Gap:
+    """A run of consecutive steps without a reading of one point, ``[start, end)``; an
+    open gap has not ended yet (``end``: how far it was known to reach)."""
+
+    point: str
+    start: datetime
+    end: datetime
+    open: bool
+
+
 class Checkpoint(NamedTuple):
     """Latest saved state of a building's online runner."""
 
@@ -134,31 +154,37 @@ def _check_name(value: Any, what: str) -> str:
     return value
 
 
-def _unique_rows(rows: Iterable[Sequence[Any]]) -> tuple[list[tuple[str, datetime, float]], int, int]:
+def _unique_rows(rows: Iterable[Sequence[Any]]
+                 ) -> tuple[list[tuple[str, datetime, float]], int, int, set[datetime]]:
     """Validate rows; drop repeats of a key inside the batch (first kept).
 
-    Returns the unique rows, the number of repeats and how many of those
-    repeats carried a different value.
+    Returns the unique rows, the number of repeats, how many of those repeats carried a
+    different value, and the distinct times.
     """
     seen: dict[tuple[str, datetime], float] = {}
+    times: set[datetime] = set()
     repeats = conflicts = 0
     for row in rows:
         try:
             point, when, value = row
         except (TypeError, ValueError):
             raise ValueError(f"reading {row!r} must be a (point, time, value) triple") from None
-        _check_name(point, f"reading {row!r}: point")
+        if type(point) is not str or not point or "\x00" in point:  # message built on error only
+            _check_name(point, f"reading {row!r}: point")
         if isinstance(value, bool) or not isinstance(value, int | float) \
                 or not math.isfinite(value):
             raise ValueError(f"reading {row!r}: value must be a finite number; omit missing "
                              "readings instead of storing NaN")
-        key = (point, _utc(when, f"reading {point!r}"))
+        # ingest hands over UTC datetimes: no parsing for those (the hot path)
+        key = (point, when if type(when) is datetime and when.tzinfo is UTC
+               else _utc(when, f"reading {point!r}"))
         if key in seen:
             repeats += 1
             conflicts += seen[key] != float(value)
         else:
             seen[key] = float(value)
-    return [(p, t, v) for (p, t), v in seen.items()], repeats, conflicts
+            times.add(key[1])
+    return [(p, t, v) for (p, t), v in seen.items()], repeats, conflicts, times
 
 
 class Storage(ABC):
@@ -294,19 +320,53 @@ class Storage(ABC):
             _check_name(building, "building")
             prepared.append((building, *_unique_rows(rows)))
         letters = [self._dead_letter_row(**kw) for kw in dead_letters]
-        results = []
+        results: list[PutResult] = [PutResult(0, 0)] * len(prepared)
         with self._transaction() as cur:
-            for building, unique, repeats, repeat_conflicts in prepared:
-                inserted, conflicts = (self._insert_unique(cur, building, unique, received)
-                                       if unique else (0, 0))
-                results.append(PutResult(inserted, len(unique) - inserted + repeats,
-                                         conflicts + repeat_conflicts))
+            for building, members in self._by_building(prepared).items():
+                self._insert_group(cur, building, [(i, prepared[i]) for i in members],
+                                   received, results)
             self._insert_dead_letters(cur, letters)
         for (building, *_), result in zip(prepared, results, strict=True):
             if result.conflicts:
                 log.warning("building %s: %d readings conflict with stored values (kept the "
                             "stored ones)", building, result.conflicts)
         return results
+
+    @staticmethod
+    def _by_building(prepared: list[tuple]) -> dict[str, list[int]]:
+        groups: dict[str, list[int]] = {}
+        for i, (building, unique, *_) in enumerate(prepared):
+            if unique:
+                groups.setdefault(building, []).append(i)
+        return groups
+
+    def _insert_group(self, cur: Any, building: str, members: list[tuple[int, tuple]],
+                      received: datetime, results: list[PutResult]) -> None:
+        """Store the batches of one building (``members``: index, prepared batch) and set
+        their results. One statement for all of them when their keys are distinct and all
+        new (the normal case: one statement per building and commit, not per message);
+        otherwise (a redelivery or a key repeated across messages) the statement is undone
+        and each batch is stored by itself, so every batch's counts stay exact."""
+        if len(members) > 1:
+            combined = [row for _, (_, unique, *_) in members for row in unique]
+            # batches with disjoint times (one message, one time) cannot share a key; else
+            # compare the keys themselves
+            times = [b[4] for _, b in members]
+            if sum(map(len, times)) == len(set().union(*times)) or \
+                    len({(p, t) for p, t, _ in combined}) == len(combined):
+                cur.execute("SAVEPOINT zonecast_group")
+                inserted, _ = self._insert_unique(cur, building, combined, received)
+                if inserted == len(combined):
+                    cur.execute("RELEASE SAVEPOINT zonecast_group")
+                    for i, (_, unique, repeats, repeat_conflicts, _) in members:
+                        results[i] = PutResult(len(unique), repeats, repeat_conflicts)
+                    return
+                cur.execute("ROLLBACK TO SAVEPOINT zonecast_group")
+                cur.execute("RELEASE SAVEPOINT zonecast_group")
+        for i, (_, unique, repeats, repeat_conflicts, _) in members:
+            inserted, conflicts = self._insert_unique(cur, building, unique, received)
+            results[i] = PutResult(inserted, len(unique) - inserted + repeats,
+                                   conflicts + repeat_conflicts)
 
     def reading_bounds(self, building: str, since: Any = None, until: Any = None
                        ) -> tuple[datetime | None, datetime | None, datetime | None]:
@@ -510,6 +570,63 @@ class Storage(ABC):
             rows = cur.fetchall()
         return [DeadLetter(i, b, t, p, r, self._from_db(at)) for i, b, t, p, r, at in rows]
 
+    # --- gaps -----------------------------------------------------------------------
+    def record_gaps(self, building: str, gaps: Iterable[Gap], *, sync: bool = True) -> None:
+        """Insert or update gaps of ``building`` (keyed by point and start), one
+        transaction. The runner writes a gap when it opens and when it closes; ``sync``
+        as for :meth:`save_checkpoint`."""
+        rows = [(building, _check_name(g.point, "gap point"),
+                 self._to_db(_utc(g.start, "gap start")), self._to_db(_utc(g.end, "gap end")),
+                 bool(g.open)) for g in gaps]
+        if not rows:
+            return
+        with self._lock, (nullcontext() if sync else self._unsynced()), \
+                self._transaction() as cur:
+            if not sync:
+                self._unsynced_transaction(cur)
+            cur.executemany(self._sql(
+                "INSERT INTO gaps (building, point, gap_start, gap_end, is_open) "
+                "VALUES (?, ?, ?, ?, ?) ON CONFLICT (building, gap_start, point) DO UPDATE "
+                "SET gap_end = excluded.gap_end, is_open = excluded.is_open"), rows)
+
+    def gaps(self, building: str, start: Any = None, end: Any = None, *,
+             point: str | None = None, open_only: bool = False, limit: int = 100,
+             offset: int = 0) -> tuple[int, list[Gap]]:
+        """Gaps of ``building`` overlapping ``[start, end)`` (open gaps reach any later
+        ``start``), ordered by start and point.
+
+        Returns
+        -------
+        total : int
+            How many gaps match (for paging).
+        page : list of Gap
+            At most ``limit`` of them from ``offset`` on.
+        """
+        if limit < 1 or offset < 0:
+            raise ValueError(f"limit must be >= 1 and offset >= 0, got {limit}, {offset}")
+        where, params = ["building = ?"], [building]
+        if end is not None:
+            where.append("gap_start < ?")
+            params.append(self._to_db(_utc(end, "end")))
+        if start is not None:
+            where.append("(gap_end > ? OR is_open)")
+            params.append(self._to_db(_utc(start, "start")))
+        if point is not None:
+            where.append("point = ?")
+            params.append(_check_name(point, "point"))
+        if open_only:
+            where.append("is_open")
+        cond = " AND ".join(where)
+        with self._transaction() as cur:
+            cur.execute(self._sql(f"SELECT count(*) FROM gaps WHERE {cond}"), params)
+            total = int(cur.fetchone()[0])
+            cur.execute(self._sql(f"SELECT point, gap_start, gap_end, is_open FROM gaps "
+                                  f"WHERE {cond} ORDER BY gap_start, point LIMIT ? OFFSET ?"),
+                        [*params, int(limit), int(offset)])
+            rows = cur.fetchall()
+        return total, [Gap(p, self._from_db(a), self._from_db(b), bool(o))
+                       for p, a, b, o in rows]
+
     # --- checkpoints ----------------------------------------------------------
     def save_checkpoint(self, building: str, time: Any, state: bytes, *,
                         sync: bool = True) -> None:
@@ -609,8 +726,12 @@ class SQLiteStorage(Storage):
         ),
         # the runner's watermark query: latest arrival per building without a scan
         2: ("CREATE INDEX readings_by_received ON readings (building, received_at)",),
+        # PostgreSQL's key order changed in 3; SQLite's readings stay as they are (rebuilding
+        # a WITHOUT ROWID table would copy the whole history; SQLite was not the bottleneck)
+        3: (),
+        4: (_GAPS_DDL.format(time="INTEGER", flag="INTEGER"),),
         # values that outlive restarts of the service (the MQTT client id)
-        3: ("CREATE TABLE instance (key TEXT PRIMARY KEY, value TEXT NOT NULL)",),
+        5: ("CREATE TABLE instance (key TEXT PRIMARY KEY, value TEXT NOT NULL)",),
     }
 
     def __init__(self, url: str):
@@ -687,6 +808,30 @@ class SQLiteStorage(Storage):
         return inserted, conflicts
 
 
+#: one statement per building and commit: the readings as three arrays, stored unless their
+#: key is (ON CONFLICT on the primary key: no read of the history)
+_PG_INSERT = (
+    "INSERT INTO readings (building, point, time, value, received_at) "
+    "SELECT %(b)s, i.point, i.time, i.value, %(r)s FROM unnest(%(p)s::text[], "
+    "%(t)s::timestamptz[], %(v)s::float8[]) AS i(point, time, value) "
+    "ON CONFLICT (building, point, time) DO NOTHING")
+#: how many of the readings differ from the stored value of their key. Runs after the
+#: insert in the same transaction: a key inserted just now holds its own value, so only
+#: keys stored before count. LATERAL ... LIMIT 1 makes it one primary-key look-up per
+#: reading; a plain join let the planner hash the building's whole history (94 ms at
+#: 258,000 readings, growing with it).
+_PG_CONFLICTS = (
+    "SELECT count(*) FROM unnest(%(p)s::text[], %(t)s::timestamptz[], %(v)s::float8[]) "
+    "AS i(point, time, value) CROSS JOIN LATERAL (SELECT r.value FROM readings r "
+    "WHERE r.building = %(b)s AND r.point = i.point AND r.time = i.time LIMIT 1) AS s "
+    "WHERE s.value <> i.value")
+
+
+def _pg_quote(text: str) -> str:
+    """One element of a PostgreSQL array literal, double-quoted and escaped."""
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
 class PostgresStorage(Storage):
     """PostgreSQL backend (psycopg 3); see :func:`open_storage`."""
 
@@ -704,7 +849,15 @@ class PostgresStorage(Storage):
              "state BYTEA NOT NULL, saved_at TIMESTAMPTZ NOT NULL)"),
         ),
         2: ("CREATE INDEX readings_by_received ON readings (building, received_at)",),
-        3: ("CREATE TABLE instance (key TEXT PRIMARY KEY, value TEXT NOT NULL)",),
+        # the key in the order readings arrive (one time, all points): inserts append at
+        # the index's right edge instead of one leaf per point, and the key also serves the
+        # time-range reads, so the (building, time) index goes (one index less per row)
+        3: (("ALTER TABLE readings DROP CONSTRAINT readings_pkey, "
+             "ADD CONSTRAINT readings_pkey PRIMARY KEY (building, time, point)"),
+            "DROP INDEX readings_by_time"),
+        4: (_GAPS_DDL.format(time="TIMESTAMPTZ", flag="BOOLEAN"),),
+        # values that outlive restarts of the service (the MQTT client id)
+        5: ("CREATE TABLE instance (key TEXT PRIMARY KEY, value TEXT NOT NULL)",),
     }
 
     def __init__(self, url: str):
@@ -714,6 +867,7 @@ class PostgresStorage(Storage):
         if self.schema is not None and not self.schema.replace("_", "").isalnum():
             raise StorageURLError(f"schema {self.schema!r} must be letters, digits and _ only")
         query.setdefault("connect_timeout", "10")
+        self._quoted: dict[str, str] = {}  # point -> its array-literal element
         self._conninfo = urlunsplit(("postgresql", parts.netloc, parts.path,
                                      urlencode(query), ""))
         super().__init__(url)
@@ -749,21 +903,34 @@ class PostgresStorage(Storage):
 
     def _insert_unique(self, cur: Any, building: str, rows: list[tuple[str, datetime, float]],
                        received_at: datetime) -> tuple[int, int]:
-        points, times, values = (list(col) for col in zip(*rows, strict=True))
-        # All parts of one statement see the same snapshot: "conflicts" compares
-        # with rows stored before this insert.
-        cur.execute(
-            "WITH incoming AS (SELECT * FROM unnest(%(p)s::text[], %(t)s::timestamptz[], "
-            "  %(v)s::float8[]) AS i(point, time, value)), "
-            "ins AS (INSERT INTO readings (building, point, time, value, received_at) "
-            "  SELECT %(b)s, point, time, value, %(r)s FROM incoming "
-            "  ON CONFLICT (building, point, time) DO NOTHING RETURNING 1) "
-            "SELECT (SELECT count(*) FROM ins), (SELECT count(*) FROM incoming i "
-            "  JOIN readings r ON r.building = %(b)s AND r.point = i.point AND r.time = i.time "
-            "  WHERE r.value <> i.value)",
-            {"p": points, "t": times, "v": values, "b": building, "r": received_at})
-        inserted, conflicts = cur.fetchone()
-        return int(inserted), int(conflicts)
+        # the three columns as array literals built with str.join: psycopg adapts a
+        # Python list item by item (about 4 us per reading, the largest CPU cost of ingest)
+        quoted = self._quoted
+        stamps: dict[datetime, str] = {}
+        points, times, values = [], [], []
+        for point, when, value in rows:
+            q = quoted.get(point)
+            if q is None:
+                if len(quoted) > 100_000:  # bounded: point names come from catalogues
+                    quoted.clear()
+                q = quoted[point] = _pg_quote(point)
+            points.append(q)
+            stamp = stamps.get(when)
+            if stamp is None:  # ISO form: no character that needs quoting in an array
+                stamp = stamps[when] = when.isoformat()
+            times.append(stamp)
+            values.append(repr(float(value)))  # shortest repr: read back exactly
+        params = {"p": "{" + ",".join(points) + "}", "t": "{" + ",".join(times) + "}",
+                  "v": "{" + ",".join(values) + "}", "b": building, "r": received_at}
+        # The primary key (building, point, time) is the idempotency rule: each row is one
+        # probe of its index, whatever the size of the history.
+        cur.execute(_PG_INSERT, params)
+        inserted = cur.rowcount
+        conflicts = 0
+        if inserted < len(rows):  # redelivery (rare): compare with what is stored
+            cur.execute(_PG_CONFLICTS, params)
+            conflicts = int(cur.fetchone()[0])
+        return int(inserted), conflicts
 
 
 def open_storage(url: str = DEFAULT_URL) -> Storage:

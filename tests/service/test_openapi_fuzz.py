@@ -37,7 +37,7 @@ def test_no_server_error(api_schema):
     """Every operation, with and without the token (schemathesis's pytest plugin does not
     work with this pytest; the strategies are driven with hypothesis directly)."""
     operations = [result.ok() for result in api_schema.get_all_operations()]
-    assert len(operations) == 14  # + history, health, diagnosis, weather forecast (2)
+    assert len(operations) == 15  # + gaps, history, health, diagnosis, weather forecast (2)
 
     for op in operations:
         @given(case=op.as_strategy())

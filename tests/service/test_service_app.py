@@ -301,7 +301,7 @@ def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
     paths = ["/api/v1/buildings", "/api/v1/buildings/office6", "/api/v1/buildings/office6/state",
              "/api/v1/buildings/office6/internal-gains", "/api/v1/buildings/office6/forecast",
              "/api/v1/buildings/office6/history", "/api/v1/buildings/office6/health",
-             "/api/v1/buildings/office6/diagnosis", "/metrics"]
+             "/api/v1/buildings/office6/diagnosis", "/api/v1/buildings/office6/gaps", "/metrics"]
     with TestClient(app) as client:
         for p in paths:
             for headers in ({}, {"Authorization": "Bearer wrong"}, {"Authorization": "Basic x"}):
@@ -317,7 +317,7 @@ def test_every_endpoint_but_health_needs_a_valid_token(tmp_path, vb):
         assert client.get("/readyz").json()["ready"] is True
         spec = client.get("/openapi.json").json()
     ops = {(path, m): op for path, item in spec["paths"].items() for m, op in item.items()}
-    assert len(ops) == 14  # /ui and its files are not in the spec
+    assert len(ops) == 15  # /ui and its files are not in the spec
     for (path, method), op in ops.items():
         assert bool(op.get("security")) == (path not in ("/healthz", "/readyz")), path
 

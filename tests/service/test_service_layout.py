@@ -61,6 +61,11 @@ OPERATIONS = {
     ("get", "/api/v1/buildings/{building_id}/forecast"): (
         "get_forecast_api_v1_buildings__building_id__forecast_get", ["forecast"],
         [("building_id", "path"), ("horizon", "query")], ["200", "401", "403", "404", "409", "422"]),
+    ("get", "/api/v1/buildings/{building_id}/gaps"): (
+        "get_gaps_api_v1_buildings__building_id__gaps_get", ["gaps"],
+        [("building_id", "path"), ("from", "query"), ("to", "query"), ("point", "query"),
+         ("open", "query"), ("limit", "query"), ("offset", "query")],
+        ["200", "401", "403", "404", "422"]),
     ("post", "/api/v1/buildings/{building_id}/telemetry"): (
         "post_telemetry_api_v1_buildings__building_id__telemetry_post", ["telemetry"],
         [("building_id", "path")], ["200", "401", "403", "404", "413", "422"]),

@@ -30,10 +30,10 @@ def rows_at(n, point="T_NW", start=T0, value=20.0):
 
 
 def test_schema_created_and_versioned(storage, storage_url):
-    assert storage.schema_version == 3
+    assert storage.schema_version == 5
     storage.close()
     again = open_storage(storage_url)  # reopening does not re-apply migrations
-    assert again.schema_version == 3
+    assert again.schema_version == 5
     again.close()
 
 
@@ -50,7 +50,7 @@ def test_version_1_database_is_migrated_and_keeps_its_readings(tmp_path):
     old.put_readings("office6", rows_at(3))
     old.close()
     store = open_storage(url)
-    assert store.schema_version == 3
+    assert store.schema_version == 5
     assert store.readings("office6", T0, T0 + timedelta(hours=1))["T_NW"].tolist() == \
         [20.0, 21.0, 22.0]
     store.close()
@@ -309,3 +309,88 @@ def test_instance_value_is_stored_once_and_kept(storage, storage_url):
     again.close()
     with open_storage(storage_url) as third, pytest.raises(ValueError, match="non-empty key"):
         third.instance_value("", "x")
+
+
+def test_put_many_counts_each_batch_when_one_statement_cannot(storage):
+    """Batches of one building go in as one statement; a redelivered batch or a key
+    repeated across batches falls back to one statement per batch with exact counts."""
+    storage.put_readings("office6", rows_at(2))  # T_NW at T0, T0+15 min stored
+    fresh = rows_at(2, point="T_NE")
+    results = storage.put_many([("office6", fresh),
+                                ("office6", rows_at(3, value=20.0)),  # 2 dup + 1 new
+                                ("office6", [("T_NE", T0, 99.0)]),  # same key as batch 0
+                                ("office7", rows_at(1))])
+    assert [tuple(r) for r in results] == [(2, 0), (1, 2), (0, 1), (1, 0)]
+    assert [r.conflicts for r in results] == [0, 0, 1, 0]
+    assert storage.readings("office6", T0, T0 + timedelta(hours=1))["T_NE"].tolist()[:2] == \
+        [20.0, 21.0]
+    # all new and distinct: one statement, the same counts as batch by batch
+    results = storage.put_many([("office6", rows_at(2, start=T0 + timedelta(days=1))),
+                                ("office6", rows_at(2, point="T_NE",
+                                                    start=T0 + timedelta(days=1)))])
+    assert [tuple(r) for r in results] == [(2, 0), (2, 0)]
+
+
+def _pg_key_columns(conn) -> list[str]:
+    return [r[0] for r in conn.execute(
+        "SELECT a.attname FROM pg_index i JOIN pg_class c ON c.oid = i.indrelid "
+        "JOIN pg_namespace n ON n.oid = c.relnamespace "
+        "JOIN LATERAL unnest(i.indkey) WITH ORDINALITY AS k(attnum, ord) ON true "
+        "JOIN pg_attribute a ON a.attrelid = c.oid AND a.attnum = k.attnum "
+        "WHERE c.relname = 'readings' AND n.nspname = current_schema() AND i.indisprimary "
+        "ORDER BY k.ord").fetchall()]
+
+
+def test_postgres_idempotency_is_the_primary_key_at_sql_level(postgres_url):
+    """On PostgreSQL the rule lives in the database: the primary key refuses a second row
+    of a key whatever writes it, and the conflict check probes that key per reading
+    instead of reading the building's history (it hashed all of it before)."""
+    import psycopg
+    from zonecast.service.storage import _PG_CONFLICTS
+
+    store = open_storage(postgres_url)
+    conn = store._conn
+    assert _pg_key_columns(conn) == ["building", "time", "point"]
+    store.put_readings("office6", rows_at(3))
+    with pytest.raises(psycopg.errors.UniqueViolation):
+        conn.execute("INSERT INTO readings VALUES ('office6', 'T_NW', %s, 5.0, now())", (T0,))
+    # history of 20,000 readings so that the planner has a choice to make
+    conn.execute("INSERT INTO readings SELECT 'office6', 'P' || (s %% 20), "
+                 "%s - s * interval '15 minutes', 1.0, now() "
+                 "FROM generate_series(1, 20000) AS s", (T0,))
+    conn.execute("ANALYZE readings")
+    result = store.put_readings("office6", rows_at(3, value=20.5) + rows_at(1, point="T_SW"))
+    assert tuple(result) == (1, 3) and result.conflicts == 3
+    plan = "\n".join(r[0] for r in conn.execute(
+        "EXPLAIN " + _PG_CONFLICTS, {"p": '{"T_NW"}', "t": "{" + T0.isoformat() + "}",
+                                     "v": "{1.5}", "b": "office6"}).fetchall())
+    assert "readings_pkey" in plan and "Seq Scan" not in plan and "Hash" not in plan, plan
+    # the stored values are the first ones
+    frame = store.readings("office6", T0, T0 + timedelta(hours=1))
+    assert frame["T_NW"].tolist() == [20.0, 21.0, 22.0]
+    store.close()
+
+
+def test_postgres_schema_2_is_migrated_to_the_time_first_key(postgres_url):
+    """A schema-2 PostgreSQL database (key (building, point, time) and an index on
+    (building, time)) keeps its readings and idempotency after the migration."""
+    from zonecast.service.storage import PostgresStorage
+
+    class Version2(PostgresStorage):
+        _migrations: ClassVar[dict] = {v: PostgresStorage._migrations[v] for v in (1, 2)}
+
+    old = Version2(postgres_url)
+    assert _pg_key_columns(old._conn) == ["building", "point", "time"]
+    old.put_readings("office6", rows_at(3))
+    old.close()
+    store = open_storage(postgres_url)
+    assert store.schema_version == 5
+    assert _pg_key_columns(store._conn) == ["building", "time", "point"]
+    indexes = {r[0] for r in store._conn.execute(
+        "SELECT indexname FROM pg_indexes WHERE tablename = 'readings' "
+        "AND schemaname = current_schema()").fetchall()}
+    assert indexes == {"readings_pkey", "readings_by_received"}
+    assert tuple(store.put_readings("office6", rows_at(4))) == (1, 3)
+    assert store.readings("office6", T0, T0 + timedelta(hours=1))["T_NW"].tolist() == \
+        [20.0, 21.0, 22.0, 23.0]
+    store.close()

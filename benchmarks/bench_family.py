@@ -181,7 +181,8 @@ def main() -> int:
     summ = summary(rows)
     (args.out / "bench_family.json").write_text(json.dumps(
         {"rows": rows, "summary": summ, "seconds": time.perf_counter() - t0,
-         "reproduce_args": args.reproduce_args, "starts": args.starts}, indent=1))
+         "reproduce_args": args.reproduce_args, "starts": args.starts}, indent=1,
+        default=str))  # a failed member's record holds its report path
     md = markdown(rows, summ)
     (args.out / "bench_family.md").write_text(md + "\n")
     print(md)

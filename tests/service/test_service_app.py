@@ -51,9 +51,15 @@ def wait_until(cond, timeout=60.0, what="condition"):
 
 
 def processed_through(app, t: str):
+    """The runner has processed the row at ``t`` and finished its step (the row's forecast
+    is set under the runner's lock, after the estimator's time moves on)."""
     target = pd.Timestamp(t).tz_convert("UTC")
-    return lambda: (app.state.zc.runners["office6"].est.time or pd.Timestamp(0, tz="UTC")) \
-        >= target
+
+    def done() -> bool:
+        runner = app.state.zc.runners["office6"]
+        with runner.lock:
+            return (runner.est.time or pd.Timestamp(0, tz="UTC")) >= target
+    return done
 
 
 def assert_same_forecast(a, b, tol=1e-9):
@@ -488,7 +494,8 @@ def test_state_and_forecast_are_published_retained_over_mqtt(tmp_path, vb, bundl
             # message is then the step before, and the last one follows as a live message
             got[msg.topic.rsplit("/", 1)[-1]] = json.loads(msg.payload)
             state = got.get("state", {}).get("last_update")
-            if "forecast" in got and state is not None and pd.Timestamp(state) == last:
+            fc = got.get("forecast", {}).get("issued")  # likewise the last forecast
+            if fc == rest["issued"] and state is not None and pd.Timestamp(state) == last:
                 both.set()
 
         sub = mqtt.Client(callback_api_version=CallbackAPIVersion.VERSION2,

@@ -116,6 +116,18 @@ async def require_metrics_scope(principal: PrincipalDep) -> Principal:
     return principal
 
 
+async def read_body(request: Request, limit: int) -> bytes:
+    """The request body, refused with 413 when its declared or actual size exceeds
+    ``limit`` [bytes] (the service's ``max_body_bytes``) before more is read."""
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.isdigit() and int(declared) > limit:
+        raise HTTPException(413, f"body is {declared} bytes, the limit is {limit}")
+    body = await request.body()
+    if len(body) > limit:
+        raise HTTPException(413, f"body is {len(body)} bytes, the limit is {limit}")
+    return body
+
+
 async def get_runner(ctx: Ctx, building_id: BuildingId, principal: PrincipalDep) -> Runner:
     """The runner of ``building_id``; 404 naming the known buildings the token may read,
     or the reason its model did not load."""

@@ -13,11 +13,19 @@ from __future__ import annotations
 
 from datetime import UTC, datetime
 
-from fastapi import APIRouter, HTTPException, Request
+from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 from zonecast.service import schemas as S
-from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, PrincipalDep, get_runner
+from zonecast.service.api.deps import (
+    AUTH,
+    ERRORS,
+    BuildingId,
+    Ctx,
+    PrincipalDep,
+    get_runner,
+    read_body,
+)
 from zonecast.service.ingest import (
     MessageRejected,
     Reason,
@@ -52,13 +60,7 @@ def _rejections(acc) -> list[S.TelemetryRejection]:
              openapi_extra=_telemetry_body)
 async def post_telemetry(ctx: Ctx, building_id: BuildingId, request: Request,
                          principal: PrincipalDep):
-    limit = ctx.settings.max_body_bytes
-    declared = request.headers.get("content-length")
-    if declared is not None and declared.isdigit() and int(declared) > limit:
-        raise HTTPException(413, f"body is {declared} bytes, the limit is {limit}")
-    body = await request.body()
-    if len(body) > limit:
-        raise HTTPException(413, f"body is {len(body)} bytes, the limit is {limit}")
+    body = await read_body(request, ctx.settings.max_body_bytes)
     if building_id not in ctx.catalogues:
         await get_runner(ctx, building_id, principal)  # raises 404 with the reason
     prefix = ctx.settings.mqtt.topic_prefix

@@ -15,7 +15,7 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 from zonecast.service import schemas as S
-from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, RunnerDep
+from zonecast.service.api.deps import AUTH, ERRORS, BuildingId, Ctx, RunnerDep, read_body
 from zonecast.service.weather import WEATHER_SUFFIX, accept_weather
 
 router = APIRouter(prefix="/buildings", tags=["weather"], dependencies=AUTH,
@@ -45,17 +45,11 @@ def _summary(building: str, wf, in_use: bool) -> dict:
                                              422: {"model": S.ErrorBody}})
 async def post_weather_forecast(ctx: Ctx, building_id: BuildingId, runner: RunnerDep,
                                 request: Request):
-    limit = ctx.settings.max_body_bytes
-    declared = request.headers.get("content-length")
-    if declared is not None and declared.isdigit() and int(declared) > limit:
-        raise HTTPException(413, f"body is {declared} bytes, the limit is {limit}")
-    body = await request.body()
-    if len(body) > limit:
-        raise HTTPException(413, f"body is {len(body)} bytes, the limit is {limit}")
+    body = await read_body(request, ctx.settings.max_body_bytes)
     prefix = ctx.settings.mqtt.topic_prefix
     received = datetime.now(UTC)
     acc = accept_weather(f"{prefix}/{building_id}/{WEATHER_SUFFIX}", body, received,
-                         ctx.runners, prefix=prefix, max_bytes=limit)
+                         ctx.runners, prefix=prefix, max_bytes=ctx.settings.max_body_bytes)
     if acc.forecast is None:
         await run_in_threadpool(ctx.storage.put_many, [], acc.dead_letters,
                                 received_at=received)

@@ -70,7 +70,9 @@ def run_one(zc: str, m: dict, out: Path, starts: int, rerun: bool,
     t2, t3 = res["table2"], res["table3"]
     gains = [v["total"]["r"] for v in (res.get("gains_truth") or {}).values()
              if v.get("total", {}).get("r") is not None]
-    cov = (res.get("coverage_90") or {}).get("service")
+    # the served forecast's intervals: calibrated ones where reproduce reports them
+    covs = res.get("coverage_90") or {}
+    cov = covs.get("service_calibrated", covs.get("service"))
     return {
         **m, "campaign": str(m["campaign"]),
         "training": t2["training"]["mean"],

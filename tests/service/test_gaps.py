@@ -14,6 +14,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from tests.service.helpers import body_of as _body
+from tests.service.helpers import wait_until as _wait
+
 TOKEN = "test-token-1"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 STEP = pd.Timedelta("15min")
@@ -104,21 +107,6 @@ def _settings(tmp_path, vb, broker=None, **extra):
               **extra}
     return load_settings(storage_url=f"sqlite:///{tmp_path / 'zc.db'}", api_tokens=[TOKEN],
                          buildings={"office6": str(vb / "model.json")}, runner=runner, **mqtt)
-
-
-def _body(row: pd.Series, drop=()) -> dict:
-    return {"time": row["time"], "readings": {k: float(v) for k, v in row.items()
-                                              if k != "time" and k not in drop
-                                              and pd.notna(v)}}
-
-
-def _wait(cond, timeout, what):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def _metric(text: str, name: str) -> float:

@@ -9,12 +9,13 @@ issued with ``offline_forecasts`` on the same telemetry (1e-9).
 from __future__ import annotations
 
 import json
-import time
 from datetime import UTC, datetime
 
 import numpy as np
 import pandas as pd
 import pytest
+
+from tests.service.helpers import body_of, wait_until
 
 TOKEN = "test-token-1"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -34,20 +35,6 @@ def make_settings(tmp_path, vb, broker=None, **runner):
                          buildings={"office6": str(vb / "model.json")},
                          runner={"poll_interval": 0.05, "forecast_every": 1, "publish": False,
                                  **runner}, **mqtt)
-
-
-def body_of(row: pd.Series) -> dict:
-    return {"time": row["time"],
-            "readings": {k: float(v) for k, v in row.items() if k != "time" and pd.notna(v)}}
-
-
-def wait_until(cond, timeout=60.0, what="condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def processed_through(app, t: str):

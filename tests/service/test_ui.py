@@ -17,12 +17,13 @@ import os
 import shutil
 import socket
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+
+from tests.service.helpers import wait_until as _wait
 
 TOKEN = "ui-test-token-7f3a"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -37,15 +38,6 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def _wait(cond, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def _diagnosis_file(path: Path, zones: list[str]) -> None:

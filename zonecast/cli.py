@@ -24,6 +24,19 @@ testbed_app = typer.Typer(no_args_is_help=True,
                           help="The virtual building: EnergyPlus plays the real building.")
 app.add_typer(testbed_app, name="testbed")
 
+
+@app.callback()
+def _one_blas_thread() -> None:
+    """Bilinear RC building models identified from telemetry; 24-hour zone-temperature
+    forecasts."""
+    # One BLAS thread unless OPENBLAS_NUM_THREADS says otherwise, for every command: the
+    # model's matrices are a few hundred wide, the identification already runs its Jacobian
+    # columns on two threads and the service one runner per building, so BLAS threads only
+    # contend (office6 identification 33.5 s -> 25.5 s on the 2-core machine under load 2;
+    # docs/benchmarks.md)
+    if "OPENBLAS_NUM_THREADS" not in os.environ:
+        threadpool_limits(1, user_api="blas")
+
 Disable = Annotated[list[str] | None, typer.Option(
     "--disable", help="Withhold an effect: reheat, infiltration, gains, gains.ZONE, "
                       "window_solar, sensor_noise, sensor_bias (repeatable).")]
@@ -410,11 +423,7 @@ def serve(config: Annotated[Path | None, typer.Option(
     from zonecast.service.settings import load_settings
     try:
         configure_logging(log_format, log_level)
-        settings = load_settings(config)
-        # one BLAS thread unless OPENBLAS_NUM_THREADS says otherwise: the runners' products
-        # are small, and threads of several buildings only contend (docs/service.md)
-        if "OPENBLAS_NUM_THREADS" not in os.environ:
-            threadpool_limits(1, user_api="blas")
+        settings = load_settings(config)  # one BLAS thread: the app callback above
     except ValueError as exc:
         _fail(exc)
     # log_config=None: uvicorn keeps the handlers configure_logging installed

@@ -268,3 +268,32 @@ def test_horizon_output_variances_equal_explicit_propagation():
     for h in range(12):
         P = F @ P @ F.T + Q
         np.testing.assert_allclose(got[h], np.diag(H @ P @ H.T), rtol=1e-12, atol=1e-14)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 12), m=st.integers(1, 5),
+       p_missing=st.floats(0.0, 0.9))
+def test_update_equals_filterpys_joseph_update(seed, n, m, p_missing):
+    """The rank-m evaluation of the Joseph form gives filterpy's update (state, covariance,
+    innovation and its covariance) to rounding."""
+    from filterpy.kalman import KalmanFilter
+
+    rng = np.random.default_rng(seed)
+    F, H, Q, R = random_system(rng, n, m, stable=False)
+    A = rng.normal(0, 1, (n, n))
+    P0 = A @ A.T + 0.1 * np.eye(n)
+    x0 = rng.normal(20, 2, n)
+    y = rng.normal(20, 2, m)
+    y[rng.random(m) < p_missing] = np.nan
+    obs = ~np.isnan(y)
+    f = K.ZoneStateFilter(x0, P0, H, Q, R)
+    inn = f.update(y)
+    ref = KalmanFilter(dim_x=n, dim_z=int(obs.sum()) or 1)
+    ref.x, ref.P = x0.copy(), P0.copy()
+    if obs.any():
+        ref.update(y[obs], R=R[np.ix_(obs, obs)], H=H[obs])
+        np.testing.assert_allclose(inn.innovation, ref.y, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(inn.S, ref.S, rtol=1e-9, atol=1e-9)
+    scale = max(1.0, np.abs(P0).max())
+    np.testing.assert_allclose(f.x, ref.x, rtol=1e-9, atol=1e-9 * scale)
+    np.testing.assert_allclose(f.P, 0.5 * (ref.P + ref.P.T), rtol=1e-8, atol=1e-9 * scale)

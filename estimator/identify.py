@@ -133,7 +133,7 @@ X0_WINDOW = STEPS_PER_DAY
 
 
 def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
-                 sigma_air: float = SIGMA_AIR_X0) -> np.ndarray:
+                 sigma_air: float = SIGMA_AIR_X0, f_ig: np.ndarray | None = None) -> np.ndarray:
     """x_KF at row ``stop``: the Kalman filter (f_IG = 0) over rows [start, stop].
 
     The filter runs the model with f_IG = 0 through a day of regular operation, whose
@@ -155,7 +155,8 @@ def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
     def step(k):
         u = data.u[start + k]
         phi, gv, gi = model.step_matrices(u)
-        return phi, gv @ data.v[start + k] + gi @ gains + model.reheat_step(u, data.reheat[start + k])
+        g = gains if f_ig is None else gains + f_ig[start + k]
+        return phi, gv @ data.v[start + k] + gi @ g + model.reheat_step(u, data.reheat[start + k])
 
     res = run_filter(x0, default_initial_covariance(model.n, air), step, y, model.C,
                      default_process_noise(model.n, air, sigma_air=sigma_air),
@@ -337,7 +338,8 @@ class _Problem:
     kernel releases the GIL).
     """
 
-    def __init__(self, model: BilinearModel, data: ModelData, spans, x0s, threads: int = 2):
+    def __init__(self, model: BilinearModel, data: ModelData, spans, x0s, threads: int = 2,
+                 f_ig: np.ndarray | None = None):
         self.model, self.data, self.spans, self.x0s = model, data, spans, x0s
         self.threads = threads
         self.n_evaluations = 0
@@ -375,6 +377,8 @@ class _Problem:
         self.C = model.C
         # the discharge air's known forcing does not depend on theta (room air capacity fixed)
         self.rh = [model.reheat_forcing(data.u[a:b], data.reheat[a:b]) for a, b in spans]
+        if f_ig is not None:  # known time-varying gains (identify(gains=...)): fixed forcing
+            self.rh = [r + f_ig[a:b] @ model.B_ig.T for r, (a, b) in zip(self.rh, spans)]
 
     def bound(self, theta: np.ndarray) -> float:
         """Spectral bound L [1/s] of A(theta) at the spans' largest airflows."""
@@ -477,7 +481,8 @@ def _fit_rms(problem: _Problem, theta: np.ndarray, zones) -> dict:
 def identify(model: BilinearModel, data: ModelData, train: Sequence, validation: Sequence = (),
              n_starts: int = 3, seed: int = 0, max_nfev: int = 60,
              progress=lambda msg: None, priors: Mapping[str, Prior] | None = None,
-             sigma_e: float = 0.3, window: str = "weekend") -> IdentificationResult:
+             sigma_e: float = 0.3, window: str = "weekend", f_ig: np.ndarray | None = None,
+             start: np.ndarray | None = None) -> IdentificationResult:
     """Identify the parameters of ``model`` (paper section 4-A).
 
     Parameters
@@ -497,6 +502,13 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     window : {"weekend", "experiments"}
         What of each weekend is fitted (:func:`identification_spans`); the result says
         which hours (``spans``).
+    f_ig : ndarray (N, n_zones), optional
+        Internal gains [W/m2] known at every row of ``data``, added to c_IG in the fit,
+        the x(0) filter and Table 2 (the paper: none, f_IG = 0 on weekends; used by
+        :meth:`~zonecast.estimator.pipeline.Pipeline.identify` with
+        ``weekend_gains=True`` for buildings occupied at weekends).
+    start : ndarray, optional
+        The one starting point (instead of ``n_starts`` drawn ones).
     """
     t0 = time.perf_counter()
     rng = np.random.default_rng([seed, 11])
@@ -515,8 +527,8 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     def x0s(m, spans):
         # one Kalman filter per span, on two threads (the dense products release the GIL)
         with ThreadPoolExecutor(max_workers=2) as pool:
-            return list(pool.map(lambda sp: kalman_state(m, data, sp[0] - x0_window, sp[0]),
-                                 spans))
+            return list(pool.map(lambda sp: kalman_state(m, data, sp[0] - x0_window, sp[0],
+                                                         f_ig=f_ig), spans))
 
     names = list(model.params.param_names)
     if priors is not None:
@@ -539,9 +551,11 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     starts_report = []
     progress("x(0) of the training weekends")
     # round 1, every start: x_KF(0) of the start model
-    first = _Problem(model, data, train_spans, x0s(model, train_spans))
-    for i, theta0 in enumerate(_starts(model.params, n_starts, rng)):
-        progress(f"start {i + 1}/{n_starts}")
+    first = _Problem(model, data, train_spans, x0s(model, train_spans), f_ig=f_ig)
+    thetas = ([np.clip(np.asarray(start, float), lo, hi)] if start is not None
+              else _starts(model.params, n_starts, rng))
+    for i, theta0 in enumerate(thetas):
+        progress(f"start {i + 1}/{len(thetas)}")
         sol = fit(first, theta0)
         cost = float(np.sum(sol.fun ** 2))
         starts_report.append({"start": theta0.tolist(), "end": sol.x.tolist(), "cost": cost,
@@ -550,7 +564,8 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
             best = (cost, sol)
     # round 2, the best start only: x(0) re-estimated with its parameters, then refitted
     progress("x(0) at the best start's parameters, refit")
-    problem = _Problem(model, data, train_spans, x0s(model.with_params(best[1].x), train_spans))
+    problem = _Problem(model, data, train_spans, x0s(model.with_params(best[1].x), train_spans),
+                       f_ig=f_ig)
     sol = fit(problem, best[1].x)
     theta = sol.x
     cost = float(np.sum(sol.fun ** 2))
@@ -571,11 +586,11 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     # model, the same for training and validation weekends (the last refit started from
     # x(0) of the parameters before it)
     spans_x0 = x0s(fitted, train_spans + val_spans)
-    train_rms = _fit_rms(_Problem(model, data, train_spans, spans_x0[:len(train_spans)]),
-                         theta, data.zones)
+    train_rms = _fit_rms(_Problem(model, data, train_spans, spans_x0[:len(train_spans)],
+                                  f_ig=f_ig), theta, data.zones)
     val_rms = None
     if val_spans:
-        vp = _Problem(model, data, val_spans, spans_x0[len(train_spans):])
+        vp = _Problem(model, data, val_spans, spans_x0[len(train_spans):], f_ig=f_ig)
         val_rms = _fit_rms(vp, theta, data.zones)
     local = data.local_times()
     step = data.times[1] - data.times[0]

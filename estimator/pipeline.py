@@ -23,6 +23,7 @@ import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 from zonecast.estimator.artifact import (
     ModelBundle,
@@ -187,7 +188,8 @@ class Pipeline:
     def identify(self, data: ModelData, train: Sequence[str] | None = None,
                  validation: Sequence[str] | None = None, *, n_starts: int = 3, seed: int = 0,
                  progress: Progress = _quiet, priors: bool | Mapping[str, Prior] = False,
-                 sigma_e: float = 0.3, window: str = "weekend") -> IdentificationResult:
+                 sigma_e: float = 0.3, window: str = "weekend", weekend_gains: bool = False,
+                 gains_weeks: Sequence[int] | None = None) -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -196,6 +198,14 @@ class Pipeline:
         building (window U and SHGC from its IDF), or a mapping of priors; ``sigma_e`` [K]
         the MAP residual scale. ``window``: fit whole weekends (the paper) or the site's
         declared ``experiments`` with a lead-in (:func:`~.identify.identification_spans`).
+
+        ``weekend_gains``: a building occupied at weekends has internal gains on the
+        identification weekends that the paper's fit (f_IG = 0) leaves to the parameters.
+        With it the fit runs twice: the paper's, then the weekly internal-gains profile of
+        the whole weeks ``gains_weeks`` (indices into :func:`~.forecast.whole_weeks`;
+        default all) that hold no experiment row, with those parameters, then the fit
+        again from them (one start) with the profile as known f_IG on every row
+        (docs/identification.md).
         """
         sats = [str(s.date()) for s in excitation_saturdays(data)]
         train = list(train) if train else sats[1:3]
@@ -209,16 +219,33 @@ class Pipeline:
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
                        seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,
                        window=window)
+        if weekend_gains:
+            self.params = res.model.params
+            progress("weekly internal-gains profile for the weekends' gains")
+            # never the identification weekends themselves: their excitation misfit would
+            # come back as known gains; whole weeks without an experiment row only
+            pick = range(len(whole_weeks(data))) if gains_weeks is None else gains_weeks
+            quiet = [i for i in pick
+                     if not data.excitation[slice(*whole_weeks(data)[i]["rows"])].any()]
+            prof = self.weekly_profile(data, weeks=quiet) if quiet else None
+            if prof is not None:
+                f_ig = np.nan_to_num(prof(data.times))
+                res = identify(self.model(res.model.params), data, train, validation,
+                               seed=seed, progress=progress, priors=priors or None,
+                               sigma_e=sigma_e, window=window, f_ig=f_ig,
+                               start=res.model.params.values)
         self.identification = res
         self.params = res.model.params
         self._bundle = None
         return res
 
-    def weekly_profile(self, data: ModelData, *, progress: Progress = _quiet
-                       ) -> WeeklyProfile | None:
+    def weekly_profile(self, data: ModelData, *, progress: Progress = _quiet,
+                       weeks: Sequence[int] | None = None) -> WeeklyProfile | None:
         """The fixed weekly internal-gains profile (paper Eq:fixed_ig) from every whole
-        week of ``data`` with the current parameters; None without a whole week."""
-        weeks = whole_weeks(data)
+        week of ``data`` (or the whole weeks of index ``weeks``) with the current
+        parameters; None without a whole week."""
+        every = whole_weeks(data)
+        weeks = every if weeks is None else [every[i] for i in weeks]
         if not weeks:
             return None
         fitted = self.model()

@@ -244,6 +244,10 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  infiltration: Annotated[str, typer.Option(
                      help="'none' (the paper) or 'idf': the IDF's infiltration objects as a "
                           "fixed outdoor-air conductance (docs/model.md)")] = "none",
+                 weekend_gains: Annotated[bool, typer.Option(
+                     help="identify again with the weekly gains profile of the weeks without "
+                          "experiments as known f_IG (buildings occupied at weekends; "
+                          "docs/identification.md)")] = False,
                  seed: Seed = 0) -> None:
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the
@@ -254,7 +258,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
             done = identify_site(site, data, out, train=train, validate=validate, starts=starts,
                                  profile_weeks=profile_weeks, window_solar=window_solar,
                                  seed=seed, priors=priors, sigma_e=sigma_e, window=window,
-                                 infiltration=infiltration,
+                                 infiltration=infiltration, weekend_gains=weekend_gains,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -321,7 +325,11 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                       help="also identify the paper's window-solar placement")] = True,
                   infiltration: Annotated[str, typer.Option(
                       help="'none' (the paper) or 'idf': the IDF's infiltration as a fixed "
-                           "outdoor-air conductance")] = "none") -> None:
+                           "outdoor-air conductance")] = "none",
+                  weekend_gains: Annotated[bool, typer.Option(
+                      help="identify again with the weekly gains profile of the training "
+                           "weeks as known f_IG (buildings occupied at weekends)")] = False
+                  ) -> None:
     """The paper's tables and figures on the virtual building: campaign, identification,
     internal gains, forecasts; writes results.json, figures and report.md."""
     try:
@@ -330,7 +338,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
             res = reproduce.run(out, campaign, seed, starts,
                                 progress=lambda m: prog.update(task, description=f"reproduce: {m}"),
                                 priors=priors, sigma_e=sigma_e, window=window,
-                                sensitivity=sensitivity, infiltration=infiltration)
+                                sensitivity=sensitivity, infiltration=infiltration,
+                                weekend_gains=weekend_gains)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

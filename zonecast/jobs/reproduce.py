@@ -123,6 +123,10 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                   f"`{results.identification.get('window', 'weekend')}`: "
                   + "; ".join(f"{s['role']} {s['start'][:16]} to {s['end'][:16]}"
                               for s in spans) + ".", ""]
+    if (results.identification or {}).get("weekend_gains"):
+        lines += ["Fitted with the weekly internal-gains profile of the training weeks without "
+                  "experiments as known f_IG (`--weekend-gains`), so Table 2 is the model with "
+                  "that profile, not the paper's f_IG = 0.", ""]
     lines += _table(results.table2, zones, PAPER["table2"])
     if results.table2_window_solar_air:
         lines += ["", (f"Model options: {json.dumps(results.model_options)}. Sensitivity, the same "
@@ -339,11 +343,13 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
 def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
         progress=lambda s: None, *, priors: bool = False, sigma_e: float = 0.3,
         window: str = "weekend", sensitivity: bool = True,
-        infiltration: str = "none") -> Results:
+        infiltration: str = "none", weekend_gains: bool = False) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
-    ``infiltration``: :class:`~zonecast.estimator.rc.network.ModelOptions` ``infiltration``."""
+    ``infiltration``: :class:`~zonecast.estimator.rc.network.ModelOptions` ``infiltration``;
+    ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
+    the forecast study's split (never its validation weeks)."""
     out.mkdir(parents=True, exist_ok=True)
     timings = {}
     t0 = time.perf_counter()
@@ -360,7 +366,9 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
     t = time.perf_counter()
     progress("identification")
     ident = pipe.identify(data, n_starts=starts, seed=seed, priors=priors, sigma_e=sigma_e,
-                          window=window, progress=lambda s: progress(f"identification: {s}"))
+                          window=window, progress=lambda s: progress(f"identification: {s}"),
+                          weekend_gains=weekend_gains,
+                          gains_weeks=week_split(data, seed)["train"] if weekend_gains else None)
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
     progress("identification with window solar on the room air (paper's placement)")
@@ -402,7 +410,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
                                   "bounds": bd, "at_bound": n in pinned}
                               for n, v, u, s, bd in zip(ident.param_names, ident.params,
                                                         ident.units, ident.stderr, ident.bounds)},
-                  identification=ident.to_dict(),
+                  identification={**ident.to_dict(), "weekend_gains": weekend_gains},
                   table2={"training": ident.train_rms, "validation": ident.validation_rms},
                   table2_window_solar_air=None if ident_air is None else
                   {"training": ident_air.train_rms, "validation": ident_air.validation_rms},

@@ -347,16 +347,15 @@ class Storage(ABC):
         new (the normal case: one statement per building and commit, not per message);
         otherwise (a redelivery or a key repeated across messages) the statement is undone
         and each batch is stored by itself, so every batch's counts stay exact."""
-        if len(members) > 1:
+        if len(members) > 1 or self._new_rows_cheaper:
             combined = [row for _, (_, unique, *_) in members for row in unique]
             # batches with disjoint times (one message, one time) cannot share a key; else
             # compare the keys themselves
             times = [b[4] for _, b in members]
-            if sum(map(len, times)) == len(set().union(*times)) or \
+            if len(members) == 1 or sum(map(len, times)) == len(set().union(*times)) or \
                     len({(p, t) for p, t, _ in combined}) == len(combined):
                 cur.execute("SAVEPOINT zonecast_group")
-                inserted, _ = self._insert_unique(cur, building, combined, received)
-                if inserted == len(combined):
+                if self._insert_new(cur, building, combined, received):
                     cur.execute("RELEASE SAVEPOINT zonecast_group")
                     for i, (_, unique, repeats, repeat_conflicts, _) in members:
                         results[i] = PutResult(len(unique), repeats, repeat_conflicts)
@@ -367,6 +366,19 @@ class Storage(ABC):
             inserted, conflicts = self._insert_unique(cur, building, unique, received)
             results[i] = PutResult(inserted, len(unique) - inserted + repeats,
                                    conflicts + repeat_conflicts)
+
+    #: True if :meth:`_insert_new` is cheaper than :meth:`_insert_unique` (PostgreSQL: a
+    #: plain INSERT instead of ON CONFLICT's speculative insertion), so that even a single
+    #: batch tries it first
+    _new_rows_cheaper = False
+
+    def _insert_new(self, cur: Any, building: str, rows: list[tuple[str, datetime, float]],
+                    received_at: datetime) -> bool:
+        """Insert key-unique rows expected to be new, inside a savepoint the caller rolls
+        back on False: True if every row went in, False if some key was already stored (the
+        transaction may then be in error until the rollback)."""
+        inserted, _ = self._insert_unique(cur, building, rows, received_at)
+        return inserted == len(rows)
 
     def reading_bounds(self, building: str, since: Any = None, until: Any = None
                        ) -> tuple[datetime | None, datetime | None, datetime | None]:
@@ -815,6 +827,8 @@ _PG_INSERT = (
     "SELECT %(b)s, i.point, i.time, i.value, %(r)s FROM unnest(%(p)s::text[], "
     "%(t)s::timestamptz[], %(v)s::float8[]) AS i(point, time, value) "
     "ON CONFLICT (building, point, time) DO NOTHING")
+#: the same for rows expected to be new (a stored key raises unique_violation)
+_PG_INSERT_NEW = _PG_INSERT.removesuffix(" ON CONFLICT (building, point, time) DO NOTHING")
 #: how many of the readings differ from the stored value of their key. Runs after the
 #: insert in the same transaction: a key inserted just now holds its own value, so only
 #: keys stored before count. LATERAL ... LIMIT 1 makes it one primary-key look-up per
@@ -901,8 +915,10 @@ class PostgresStorage(Storage):
     def _unsynced_transaction(self, cur: Any) -> None:
         cur.execute("SET LOCAL synchronous_commit TO OFF")
 
-    def _insert_unique(self, cur: Any, building: str, rows: list[tuple[str, datetime, float]],
-                       received_at: datetime) -> tuple[int, int]:
+    _new_rows_cheaper = True
+
+    def _array_params(self, building: str, rows: list[tuple[str, datetime, float]],
+                      received_at: datetime) -> dict[str, Any]:
         # the three columns as array literals built with str.join: psycopg adapts a
         # Python list item by item (about 4 us per reading, the largest CPU cost of ingest)
         quoted = self._quoted
@@ -920,8 +936,25 @@ class PostgresStorage(Storage):
                 stamp = stamps[when] = when.isoformat()
             times.append(stamp)
             values.append(repr(float(value)))  # shortest repr: read back exactly
-        params = {"p": "{" + ",".join(points) + "}", "t": "{" + ",".join(times) + "}",
-                  "v": "{" + ",".join(values) + "}", "b": building, "r": received_at}
+        return {"p": "{" + ",".join(points) + "}", "t": "{" + ",".join(times) + "}",
+                "v": "{" + ",".join(values) + "}", "b": building, "r": received_at}
+
+    def _insert_new(self, cur: Any, building: str, rows: list[tuple[str, datetime, float]],
+                    received_at: datetime) -> bool:
+        # A plain INSERT: ON CONFLICT's speculative insertion costs PostgreSQL ~2 us more
+        # per row (~100 us of its CPU per 47-reading message, docs/benchmarks.md); a stored
+        # key raises unique_violation and the caller falls back to _insert_unique.
+        from psycopg.errors import UniqueViolation
+
+        try:
+            cur.execute(_PG_INSERT_NEW, self._array_params(building, rows, received_at))
+        except UniqueViolation:
+            return False
+        return True
+
+    def _insert_unique(self, cur: Any, building: str, rows: list[tuple[str, datetime, float]],
+                       received_at: datetime) -> tuple[int, int]:
+        params = self._array_params(building, rows, received_at)
         # The primary key (building, point, time) is the idempotency rule: each row is one
         # probe of its index, whatever the size of the history.
         cur.execute(_PG_INSERT, params)

@@ -331,6 +331,28 @@ def test_put_many_counts_each_batch_when_one_statement_cannot(storage):
     assert [tuple(r) for r in results] == [(2, 0), (2, 0)]
 
 
+def test_partly_stored_batch_falls_back_with_exact_counts_and_keeps_the_letter(storage):
+    """A batch that is new except for one stored key (PostgreSQL: the plain INSERT raises
+    unique_violation inside its savepoint) is stored by the keep-first insert instead: exact
+    counts, the stored value kept, and the dead letter of the same transaction committed."""
+    calls = []
+    unique = storage._insert_unique
+    storage._insert_unique = lambda *a: calls.append(len(a[2])) or unique(*a)
+    storage.put_readings("office6", [("T_NW", T0, 20.0)])
+    postgres = not isinstance(storage, SQLiteStorage)
+    assert calls == ([] if postgres else [1])  # PostgreSQL: new rows by the plain INSERT
+    calls.clear()
+    rows = [("T_NW", T0, 25.0), ("T_NE", T0, 21.0), ("T_SW", T0, 22.0)]
+    letter = {"topic": "zonecast/office6/telemetry", "payload": b"{}", "reason": "x: y",
+              "building": "office6"}
+    [result] = storage.put_many([("office6", rows)], [letter])
+    assert (tuple(result), result.conflicts) == ((2, 1), 1)
+    assert calls == [3]
+    got = storage.readings("office6", T0, T0 + timedelta(minutes=15))
+    assert got.iloc[0][["T_NW", "T_NE", "T_SW"]].tolist() == [20.0, 21.0, 22.0]
+    assert [d.reason for d in storage.dead_letters(building="office6")] == ["x: y"]
+
+
 def _pg_key_columns(conn) -> list[str]:
     return [r[0] for r in conn.execute(
         "SELECT a.attname FROM pg_index i JOIN pg_class c ON c.oid = i.indrelid "

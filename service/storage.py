@@ -38,7 +38,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 import numpy as np
 import pandas as pd
-from zonecast.service.ingest import parse_time
+from zonecast.service.ingest import CheckedReadings, parse_time
 from zonecast.service.settings import DEFAULT_URL
 
 __all__ = [
@@ -161,6 +161,8 @@ def _unique_rows(rows: Iterable[Sequence[Any]]
     Returns the unique rows, the number of repeats, how many of those repeats carried a
     different value, and the distinct times.
     """
+    if type(rows) is CheckedReadings:  # validated by ingest with distinct keys
+        return list(rows), 0, 0, {row[1] for row in rows}
     seen: dict[tuple[str, datetime], float] = {}
     times: set[datetime] = set()
     repeats = conflicts = 0
@@ -185,6 +187,24 @@ def _unique_rows(rows: Iterable[Sequence[Any]]
             seen[key] = float(value)
             times.add(key[1])
     return [(p, t, v) for (p, t), v in seen.items()], repeats, conflicts, times
+
+
+def _distinct_keys(prepared: list[tuple]) -> bool:
+    """True if no key (point, time) repeats across these prepared batches of one building
+    (each batch's keys are distinct already)."""
+    if len(prepared) == 1:
+        return True
+    # batches with disjoint times (one message, one time) cannot share a key; else compare
+    # the keys themselves
+    times = [b[4] for b in prepared]
+    if sum(map(len, times)) == len(set().union(*times)):
+        return True
+    keys = [(p, t) for b in prepared for p, t, _ in b[1]]
+    return len(set(keys)) == len(keys)
+
+
+class _KeyStored(Exception):
+    """Internal: a reading's key is stored already (rolls back the fast path of put_many)."""
 
 
 class Storage(ABC):
@@ -320,9 +340,26 @@ class Storage(ABC):
             _check_name(building, "building")
             prepared.append((building, *_unique_rows(rows)))
         letters = [self._dead_letter_row(**kw) for kw in dead_letters]
+        groups = self._by_building(prepared)
+        if self._new_rows_cheaper and all(_distinct_keys([prepared[i] for i in members])
+                                          for members in groups.values()):
+            # the normal case first, without savepoints (two round trips less per commit):
+            # every reading new, one plain INSERT per building
+            try:
+                with self._transaction() as cur:
+                    for building, members in groups.items():
+                        rows = [row for i in members for row in prepared[i][1]]
+                        if not self._insert_new(cur, building, rows, received):
+                            raise _KeyStored
+                    self._insert_dead_letters(cur, letters)
+            except _KeyStored:
+                pass  # rolled back: some key is stored already (a redelivery); see below
+            else:
+                return [PutResult(len(unique), repeats, repeat_conflicts)
+                        for _, unique, repeats, repeat_conflicts, _ in prepared]
         results: list[PutResult] = [PutResult(0, 0)] * len(prepared)
         with self._transaction() as cur:
-            for building, members in self._by_building(prepared).items():
+            for building, members in groups.items():
                 self._insert_group(cur, building, [(i, prepared[i]) for i in members],
                                    received, results)
             self._insert_dead_letters(cur, letters)
@@ -349,11 +386,7 @@ class Storage(ABC):
         and each batch is stored by itself, so every batch's counts stay exact."""
         if len(members) > 1 or self._new_rows_cheaper:
             combined = [row for _, (_, unique, *_) in members for row in unique]
-            # batches with disjoint times (one message, one time) cannot share a key; else
-            # compare the keys themselves
-            times = [b[4] for _, b in members]
-            if len(members) == 1 or sum(map(len, times)) == len(set().union(*times)) or \
-                    len({(p, t) for p, t, _ in combined}) == len(combined):
+            if _distinct_keys([b for _, b in members]):
                 cur.execute("SAVEPOINT zonecast_group")
                 if self._insert_new(cur, building, combined, received):
                     cur.execute("RELEASE SAVEPOINT zonecast_group")
@@ -922,22 +955,21 @@ class PostgresStorage(Storage):
         # the three columns as array literals built with str.join: psycopg adapts a
         # Python list item by item (about 4 us per reading, the largest CPU cost of ingest)
         quoted = self._quoted
-        stamps: dict[datetime, str] = {}
-        points, times, values = [], [], []
-        for point, when, value in rows:
-            q = quoted.get(point)
-            if q is None:
-                if len(quoted) > 100_000:  # bounded: point names come from catalogues
-                    quoted.clear()
-                q = quoted[point] = _pg_quote(point)
-            points.append(q)
-            stamp = stamps.get(when)
-            if stamp is None:  # ISO form: no character that needs quoting in an array
-                stamp = stamps[when] = when.isoformat()
-            times.append(stamp)
-            values.append(repr(float(value)))  # shortest repr: read back exactly
-        return {"p": "{" + ",".join(points) + "}", "t": "{" + ",".join(times) + "}",
-                "v": "{" + ",".join(values) + "}", "b": building, "r": received_at}
+        points, times, values = zip(*rows) if rows else ((), (), ())
+        missing = set(points).difference(quoted)
+        if missing:
+            if len(quoted) + len(missing) > 100_000:  # bounded: names come from catalogues
+                quoted.clear()
+                missing = set(points)
+            quoted.update((p, _pg_quote(p)) for p in missing)
+        # ISO form of each distinct time: no character that needs quoting in an array
+        stamps = {when: when.isoformat() for when in set(times)}
+        # all of it in C-level joins and maps: ~1 us per reading less than a Python loop
+        return {"p": "{" + ",".join(map(quoted.__getitem__, points)) + "}",
+                "t": "{" + ",".join(map(stamps.__getitem__, times)) + "}",
+                # shortest repr of each float: read back exactly
+                "v": "{" + ",".join(map(float.__repr__, map(float, values))) + "}",
+                "b": building, "r": received_at}
 
     def _insert_new(self, cur: Any, building: str, rows: list[tuple[str, datetime, float]],
                     received_at: datetime) -> bool:

@@ -353,15 +353,20 @@ class Storage(ABC):
                             raise _KeyStored
                     self._insert_dead_letters(cur, letters)
             except _KeyStored:
-                pass  # rolled back: some key is stored already (a redelivery); see below
+                # rolled back: some key is stored already (a redelivery). Below, by the
+                # keep-first insert only: a second plain INSERT would write (and undo) rows
+                # again, and a transaction that wrote nothing commits without a disk sync
+                plain = False
             else:
                 return [PutResult(len(unique), repeats, repeat_conflicts)
                         for _, unique, repeats, repeat_conflicts, _ in prepared]
+        else:
+            plain = True
         results: list[PutResult] = [PutResult(0, 0)] * len(prepared)
         with self._transaction() as cur:
             for building, members in groups.items():
                 self._insert_group(cur, building, [(i, prepared[i]) for i in members],
-                                   received, results)
+                                   received, results, plain)
             self._insert_dead_letters(cur, letters)
         for (building, *_), result in zip(prepared, results, strict=True):
             if result.conflicts:
@@ -378,17 +383,20 @@ class Storage(ABC):
         return groups
 
     def _insert_group(self, cur: Any, building: str, members: list[tuple[int, tuple]],
-                      received: datetime, results: list[PutResult]) -> None:
+                      received: datetime, results: list[PutResult], plain: bool = True) -> None:
         """Store the batches of one building (``members``: index, prepared batch) and set
         their results. One statement for all of them when their keys are distinct and all
         new (the normal case: one statement per building and commit, not per message);
         otherwise (a redelivery or a key repeated across messages) the statement is undone
-        and each batch is stored by itself, so every batch's counts stay exact."""
-        if len(members) > 1 or self._new_rows_cheaper:
+        and each batch is stored by itself, so every batch's counts stay exact. ``plain``
+        False: the one statement is the keep-first insert even where a plain INSERT would be
+        cheaper (a key is known to be stored)."""
+        if len(members) > 1 or (plain and self._new_rows_cheaper):
             combined = [row for _, (_, unique, *_) in members for row in unique]
             if _distinct_keys([b for _, b in members]):
+                insert_new = self._insert_new if plain else Storage._insert_new.__get__(self)
                 cur.execute("SAVEPOINT zonecast_group")
-                if self._insert_new(cur, building, combined, received):
+                if insert_new(cur, building, combined, received):
                     cur.execute("RELEASE SAVEPOINT zonecast_group")
                     for i, (_, unique, repeats, repeat_conflicts, _) in members:
                         results[i] = PutResult(len(unique), repeats, repeat_conflicts)

@@ -21,6 +21,13 @@ Three measurements for each history size (``--history 0 1000000 10000000``):
    in the table afterwards: lost = expected - stored (the broker drops what exceeds its
    queue, so a falling-behind ingester shows up as loss).
 
+With ``--workers N`` the ingesting side is this process and N-1 more (as ``zonecast ingest
+--worker``), members of one MQTT shared subscription (``mqtt.share_group``). CPU per stored
+message is reported for each component over publish + drain: the ingesting processes, their
+PostgreSQL backends, the broker (``--private-broker``: a mosquitto of our own, configured as
+the machine's) and the publisher; unlike wall throughput, these hardly depend on what else
+runs on the machine.
+
 The broker is the one at ``--host:--port`` as configured there (the project machine's
 Mosquitto runs with defaults: ``max_queued_messages`` 1000), else a private ``mosquitto``
 on a free port with the defaults. Run the same script against other code with
@@ -29,7 +36,8 @@ on a free port with the defaults. Run the same script against other code with
 Usage::
 
     python benchmarks/bench_pg_ingest.py --url postgresql://postgres@127.0.0.1/test \
-        [--history 0 1000000 10000000] [--rate 1500 --seconds 60] [--json out.json]
+        [--history 0 1000000 10000000] [--rate 1500 --seconds 60] [--json out.json] \
+        [--workers 2] [--private-broker]
 """
 
 from __future__ import annotations
@@ -185,7 +193,7 @@ def ingest_worker(url: str, host: str, port: int, building: str, options: dict, 
     """Child process: ``zonecast ingest --worker N`` as the benchmark needs it (one more
     member of the share group, storing into the same schema); publishes its counters, its
     PostgreSQL backend's pid (``state[0]``), readiness (``state[1]``) and at the end its
-    own CPU seconds (``state[2]``)."""
+    own CPU seconds since it was ready (``state[2]``; start-up and imports excluded)."""
     from zonecast.service.ingest import PointSpec
     from zonecast.service.mqtt import Ingester
     from zonecast.service.settings import MqttSettings
@@ -196,6 +204,7 @@ def ingest_worker(url: str, host: str, port: int, building: str, options: dict, 
     ingester = Ingester(MqttSettings(host=host, port=port, **options), store,
                         {building: {p: PointSpec("temperature") for p in POINTS}},
                         worker=worker, weather=False).start()
+    ready_cpu = time.process_time()
     if ingester.wait_ready(10):
         state[1] = 1.0
     while not stop.wait(0.05):
@@ -205,7 +214,7 @@ def ingest_worker(url: str, host: str, port: int, building: str, options: dict, 
     c = ingester.counters()
     received.value, stored.value = c["messages_in"], c["messages_stored"]
     store.close()
-    state[2] = time.process_time()
+    state[2] = time.process_time() - ready_cpu
 
 
 def mqtt_at_rate(store, conn, url: str, building: str, host: str, port: int, rate: float,

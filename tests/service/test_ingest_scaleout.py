@@ -5,6 +5,8 @@ without a second check. Against the real broker of the ``broker`` fixture."""
 from __future__ import annotations
 
 import json
+import logging
+import sqlite3
 import threading
 import time
 import uuid
@@ -193,3 +195,49 @@ def test_concurrent_members_on_one_storage_do_not_lose_a_commit(storage, buildin
     for t in threads:
         t.join(60)
     assert count(storage, building) == 400
+
+
+def test_ingest_worker_command_stores_its_share_and_needs_a_group(broker, building, publisher,
+                                                                   tmp_path, monkeypatch):
+    """``zonecast ingest --worker 1``: refuses to run without mqtt.share_group; with one, it
+    stores (here: dead-letters, no model is configured) what the group hands it and stops
+    on request after acknowledging."""
+    from typer.testing import CliRunner
+    from zonecast.service.context import run_ingest_worker
+    from zonecast.service.settings import load_settings
+
+    from zonecast.cli import app
+
+    url = f"sqlite:///{tmp_path / 'zc.db'}"
+    monkeypatch.setenv("ZONECAST_STORAGE_URL", url)
+    root = logging.getLogger()
+    handlers, level = root.handlers[:], root.level
+    try:  # the command points logging at the runner's output, closed afterwards
+        res = CliRunner().invoke(app, ["ingest", "--worker", "1"])
+    finally:
+        root.handlers[:], root.level = handlers, level
+    assert res.exit_code == 2 and "share_group" in res.output
+    _mosquitto_only(broker)
+    settings = load_settings(storage_url=url, mqtt=_settings(
+        broker, client_id=None, share_group=f"g{uuid.uuid4().hex[:6]}").model_dump())
+    stop = threading.Event()
+    done: list = []
+    worker = threading.Thread(target=lambda: done.append(run_ingest_worker(settings, 1, stop)))
+    worker.start()
+    store = open_storage(url)
+    try:
+        def has_id() -> bool:  # read only: instance_value would store a default
+            with sqlite3.connect(tmp_path / "zc.db") as db:
+                return bool(db.execute("SELECT count(*) FROM instance WHERE key = "
+                                       "'mqtt_client_id:1'").fetchone()[0])
+
+        wait_until(has_id, 15, "the worker's client id")
+        time.sleep(1.5)  # connected and subscribed
+        _send_all(publisher, building, range(10))
+        wait_until(lambda: len(store.dead_letters(building=building)) == 10, 15,
+                   "10 dead letters (unknown building)")
+    finally:
+        stop.set()
+        worker.join(30)
+        store.close()
+    assert done and done[0].counters()["messages_stored"] == 10

@@ -358,16 +358,18 @@ class Storage(ABC):
                 # again, and a transaction that wrote nothing commits without a disk sync
                 plain = False
             else:
-                return [PutResult(len(unique), repeats, repeat_conflicts)
-                        for _, unique, repeats, repeat_conflicts, _ in prepared]
+                results = [PutResult(len(unique), repeats, repeat_conflicts)
+                           for _, unique, repeats, repeat_conflicts, _ in prepared]
+                plain = None
         else:
             plain = True
-        results: list[PutResult] = [PutResult(0, 0)] * len(prepared)
-        with self._transaction() as cur:
-            for building, members in groups.items():
-                self._insert_group(cur, building, [(i, prepared[i]) for i in members],
-                                   received, results, plain)
-            self._insert_dead_letters(cur, letters)
+        if plain is not None:
+            results = [PutResult(0, 0)] * len(prepared)
+            with self._transaction() as cur:
+                for building, members in groups.items():
+                    self._insert_group(cur, building, [(i, prepared[i]) for i in members],
+                                       received, results, plain)
+                self._insert_dead_letters(cur, letters)
         for (building, *_), result in zip(prepared, results, strict=True):
             if result.conflicts:
                 log.warning("building %s: %d readings conflict with stored values (kept the "
@@ -984,12 +986,12 @@ class PostgresStorage(Storage):
         # A plain INSERT: ON CONFLICT's speculative insertion costs PostgreSQL ~2 us more
         # per row (~100 us of its CPU per 47-reading message, docs/benchmarks.md); a stored
         # key raises unique_violation and the caller falls back to _insert_unique.
-        from psycopg.errors import UniqueViolation
-
         try:
             cur.execute(_PG_INSERT_NEW, self._array_params(building, rows, received_at))
-        except UniqueViolation:
-            return False
+        except Exception as exc:
+            if getattr(exc, "sqlstate", None) == "23505":  # unique_violation
+                return False
+            raise
         return True
 
     def _insert_unique(self, cur: Any, building: str, rows: list[tuple[str, datetime, float]],

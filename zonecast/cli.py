@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import datetime as dt
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 from typing import Annotated
 
@@ -436,9 +438,6 @@ def ingest_cmd(worker: Annotated[int, typer.Option(
     subscription mqtt.share_group, storing telemetry into the service's storage (with the
     same validation, dead letters and acknowledgement after commit). Stops on SIGTERM or
     Ctrl-C after storing and acknowledging what it received."""
-    import signal
-    import threading
-
     from zonecast.service.context import run_ingest_worker
     from zonecast.service.logs import configure_logging
     from zonecast.service.settings import load_settings

@@ -127,9 +127,10 @@ def test_same_key_other_value_keeps_first_and_counts_conflict(storage):
     assert storage.readings("b", T0, T0 + timedelta(minutes=1))["T"].tolist() == [20.0]
 
 
-def test_repeats_within_one_batch(storage):
+def test_repeats_within_one_batch(storage, caplog):
     result = storage.put_readings("b", [("T", T0, 1.0), ("T", T0, 1.0), ("T", T0, 2.0)])
     assert tuple(result) == (1, 2) and result.conflicts == 1
+    assert "1 readings conflict" in caplog.text  # also when the batch went in as new
     assert storage.readings("b", T0, T0 + timedelta(minutes=1))["T"].tolist() == [1.0]
 
 

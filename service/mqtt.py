@@ -335,11 +335,13 @@ class Ingester:
         p, group = self.settings.topic_prefix, self.settings.share_group
         data = [f"{p}/+/telemetry", f"{p}/+/points/#"]
         weather = [f"{p}/+/{WEATHER_SUFFIX}"]
+        if not self.weather:
+            weather = []
         if group is None:
             return data + weather, []
         shared = [f"$share/{group}/{t}" for t in data]
-        return shared + (weather if self.weather else []), \
-            data + ([] if self.weather else weather)
+        stale = data if self.weather else data + [f"{p}/+/{WEATHER_SUFFIX}"]
+        return shared + weather, stale
 
     def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
         if reason_code.is_failure:

@@ -54,15 +54,22 @@ def ensure_broker(host: str, port: int, workdir: Path) -> tuple[int, subprocess.
         return port, None
     except OSError:
         pass
+    started, proc = start_mosquitto(workdir, "allow_anonymous true\n")
+    return (started, proc) if proc is not None else (port, None)
+
+
+def start_mosquitto(workdir: Path, conf: str) -> tuple[int, subprocess.Popen | None]:
+    """mosquitto on a free local port with the configuration lines ``conf`` (port,
+    process), or (0, None) when mosquitto is not installed."""
     exe = shutil.which("mosquitto") or shutil.which("/usr/sbin/mosquitto")
     if exe is None:
-        return port, None
+        return 0, None
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    conf = workdir / "mosquitto.conf"
-    conf.write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\n")
-    proc = subprocess.Popen([exe, "-c", str(conf)], stdout=subprocess.DEVNULL,
+    path = workdir / "mosquitto.conf"
+    path.write_text(f"listener {port} 127.0.0.1\n{conf}")
+    proc = subprocess.Popen([exe, "-c", str(path)], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     for _ in range(100):
         try:
@@ -70,7 +77,7 @@ def ensure_broker(host: str, port: int, workdir: Path) -> tuple[int, subprocess.
             break
         except OSError:
             time.sleep(0.05)
-    print(f"no broker at {host}; started mosquitto on port {port}")
+    print(f"started mosquitto on port {port}")
     return port, proc
 
 

@@ -21,6 +21,13 @@ Three measurements for each history size (``--history 0 1000000 10000000``):
    in the table afterwards: lost = expected - stored (the broker drops what exceeds its
    queue, so a falling-behind ingester shows up as loss).
 
+With ``--workers N`` the ingesting side is this process and N-1 more (as ``zonecast ingest
+--worker``), members of one MQTT shared subscription (``mqtt.share_group``). CPU per stored
+message is reported for each component over publish + drain: the ingesting processes, their
+PostgreSQL backends, the broker (``--private-broker``: a mosquitto of our own, configured as
+the machine's) and the publisher; unlike wall throughput, these hardly depend on what else
+runs on the machine.
+
 The broker is the one at ``--host:--port`` as configured there (the project machine's
 Mosquitto runs with defaults: ``max_queued_messages`` 1000), else a private ``mosquitto``
 on a free port with the defaults. Run the same script against other code with
@@ -29,7 +36,8 @@ on a free port with the defaults. Run the same script against other code with
 Usage::
 
     python benchmarks/bench_pg_ingest.py --url postgresql://postgres@127.0.0.1/test \
-        [--history 0 1000000 10000000] [--rate 1500 --seconds 60] [--json out.json]
+        [--history 0 1000000 10000000] [--rate 1500 --seconds 60] [--json out.json] \
+        [--workers 2] [--private-broker]
 """
 
 from __future__ import annotations
@@ -170,64 +178,165 @@ class _Timed:
         return getattr(self._store, name)
 
 
-def mqtt_at_rate(store, conn, building: str, host: str, port: int, rate: float,
-                 seconds: float, options: dict) -> dict[str, float]:
+def cpu_seconds(pid: int) -> float | None:
+    """User + system CPU seconds of process ``pid`` so far (Linux ``/proc``), or None."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def ingest_worker(url: str, host: str, port: int, building: str, options: dict, worker: int,
+                  received, stored, state, stop) -> None:
+    """Child process: ``zonecast ingest --worker N`` as the benchmark needs it (one more
+    member of the share group, storing into the same schema); publishes its counters, its
+    PostgreSQL backend's pid (``state[0]``), readiness (``state[1]``) and at the end its
+    own CPU seconds since it was ready (``state[2]``; start-up and imports excluded)."""
+    from zonecast.service.ingest import PointSpec
+    from zonecast.service.mqtt import Ingester
+    from zonecast.service.settings import MqttSettings
+    from zonecast.service.storage import open_storage
+
+    store = open_storage(url)
+    state[0] = float(store._conn.execute("SELECT pg_backend_pid()").fetchone()[0])
+    ingester = Ingester(MqttSettings(host=host, port=port, **options), store,
+                        {building: {p: PointSpec("temperature") for p in POINTS}},
+                        worker=worker, weather=False).start()
+    ready_cpu = time.process_time()
+    if ingester.wait_ready(10):
+        state[1] = 1.0
+    while not stop.wait(0.05):
+        c = ingester.counters()
+        received.value, stored.value = c["messages_in"], c["messages_stored"]
+    ingester.stop()
+    c = ingester.counters()
+    received.value, stored.value = c["messages_in"], c["messages_stored"]
+    store.close()
+    state[2] = time.process_time() - ready_cpu
+
+
+def mqtt_at_rate(store, conn, url: str, building: str, host: str, port: int, rate: float,
+                 seconds: float, options: dict, workers: int = 1,
+                 broker_pid: int | None = None) -> dict[str, float]:
     from zonecast.service.ingest import PointSpec
     from zonecast.service.mqtt import Ingester
     from zonecast.service.settings import MqttSettings
 
     timed = _Timed(store)
-    settings = MqttSettings(host=host, port=port, client_id=f"zonecast-bench-{uuid.uuid4().hex[:6]}",
-                            **options)
+    options = dict(options, client_id=f"zonecast-bench-{uuid.uuid4().hex[:6]}")
+    if workers > 1:
+        options["share_group"] = f"bench{uuid.uuid4().hex[:6]}"
+    settings = MqttSettings(host=host, port=port, **options)
     ingester = Ingester(settings, timed, {building: {p: PointSpec("temperature")
                                                      for p in POINTS}}).start()
     if not ingester.wait_ready(10):
         ingester.abort()
         raise ConnectionError(f"no MQTT broker answered at {host}:{port}")
     ctx = mp.get_context("spawn")
+    stop = ctx.Event()
+    procs = []
+    for w in range(1, workers):
+        counts = (ctx.Value("l", 0), ctx.Value("l", 0), ctx.Array("d", 3))
+        proc = ctx.Process(target=ingest_worker, args=(url, host, port, building, options, w,
+                                                       *counts, stop))
+        proc.start()
+        procs.append((proc, *counts))
+    deadline = time.perf_counter() + 30
+    while any(state[1] == 0.0 for *_, state in procs) and time.perf_counter() < deadline:
+        time.sleep(0.05)
+    if any(state[1] == 0.0 for *_, state in procs):
+        stop.set()
+        ingester.abort()
+        raise ConnectionError("an ingest worker did not subscribe within 30 s")
+
+    def counts() -> tuple[int, int]:
+        c = ingester.counters()
+        return (c["messages_in"] + sum(r.value for _, r, _, _ in procs),
+                c["messages_stored"] + sum(s_.value for _, _, s_, _ in procs))
+
+    backends = [int(store._conn.execute("SELECT pg_backend_pid()").fetchone()[0])] + \
+        [int(state[0]) for *_, state in procs]
     published, done = ctx.Value("l", 0), ctx.Value("d", 0.0)
     proc = ctx.Process(target=publisher, args=(host, port, f"zonecast/{building}/telemetry",
                                                rate, seconds, published, done))
     cpu0 = time.process_time()
+    pg0 = [cpu_seconds(b) for b in backends]
+    broker0 = cpu_seconds(broker_pid) if broker_pid else None
     proc.start()
     backlog = []
     start = None
+    pub_cpu = None
     while proc.is_alive() and done.value == 0.0:
         time.sleep(1.0)
         if published.value and start is None:
             start = time.perf_counter()
-        backlog.append(published.value - ingester.counters()["messages_stored"])
+        pub_cpu = cpu_seconds(proc.pid) if proc.is_alive() else pub_cpu
+        backlog.append(published.value - counts()[1])
     total = published.value
     end_pub = time.perf_counter()
     deadline = end_pub + 60
-    while ingester.counters()["messages_stored"] < total and time.perf_counter() < deadline:
-        if ingester.counters()["messages_in"] >= total or proc.is_alive():
-            time.sleep(0.01)
-        else:  # nothing more is coming: the broker dropped the rest
-            time.sleep(0.5)
-            if ingester.counters()["messages_in"] < total and \
-                    ingester.unacknowledged_for() == 0:
-                time.sleep(2.0)
-                if ingester.counters()["messages_in"] < total:
-                    break
+    last, idle_since = counts(), time.perf_counter()
+    while counts()[1] < total and time.perf_counter() < deadline:
+        time.sleep(0.05)
+        now = counts()
+        if now != last:
+            last, idle_since = now, time.perf_counter()
+        elif not proc.is_alive() and time.perf_counter() - idle_since > 3.0 \
+                and ingester.unacknowledged_for() == 0:
+            break  # nothing more is coming: the broker dropped the rest
     drain = time.perf_counter() - end_pub
     cpu = time.process_time() - cpu0
+    pg = [cpu_seconds(b) for b in backends]
+    broker_cpu = cpu_seconds(broker_pid) - broker0 if broker0 is not None else None
     proc.join(10)
+    stop.set()
+    for p_, *_ in procs:
+        p_.join(30)
+    worker_cpu = sum(state[2] for *_, state in procs)
     counters = ingester.counters()
     ingester.stop()
+    received, stored_messages = counts()
     stored = conn.execute("SELECT count(*) FROM readings WHERE building = %s AND time >= %s "
                           "AND time < %s", (building, T0,
                                             T0 + timedelta(minutes=15 * total))).fetchone()[0]
     expected = total * len(POINTS)
-    stored_msgs = max(counters["messages_stored"], 1)
+    n = max(stored_messages, 1)
+    pg_cpu = sum(b - a for a, b in zip(pg0, pg, strict=True)) \
+        if None not in pg0 and None not in pg else None
+    us = 1e6 / n
     return {"published": total, "publish_seconds": done.value,
             "rate_published": total / done.value if done.value else 0.0,
             "expected_readings": expected, "stored_readings": int(stored),
             "lost_readings": expected - int(stored),
-            "messages_received": counters["messages_in"],
+            "messages_received": received, "workers": workers,
             "backlog_max": max(backlog or [0]), "drain_seconds": drain,
-            "storage_ms_per_message": timed.seconds / stored_msgs * 1e3,
-            "commits": timed.calls, "process_cpu_ms_per_message": cpu / stored_msgs * 1e3}
+            "rate_stored": stored_messages / (end_pub + drain - start) if start else 0.0,
+            "storage_ms_per_message": timed.seconds / max(counters["messages_stored"], 1) * 1e3,
+            "commits": timed.calls,
+            # CPU per stored message [us] of each component over publish + drain: the
+            # ingesting processes (this one, which also polls, and the workers), their
+            # PostgreSQL backends, the broker (only when the benchmark started it) and the
+            # publisher (sampled up to its last second)
+            "cpu_us_ingest": (cpu + worker_cpu) * us,
+            "cpu_us_postgres": pg_cpu * us if pg_cpu is not None else None,
+            "cpu_us_broker": broker_cpu * us if broker_cpu is not None else None,
+            "cpu_us_publisher": pub_cpu / max(total, 1) * 1e6 if pub_cpu else None,
+            "process_cpu_ms_per_message": cpu / max(counters["messages_stored"], 1) * 1e3}
+
+
+def private_broker(workdir: Path):
+    """A mosquitto of our own on a free port, configured as the machine's (defaults,
+    persistence on): (host, port, process)."""
+    from bench_ingest import start_mosquitto
+
+    workdir.chmod(0o777)  # mosquitto started as root runs as user mosquitto
+    port, proc = start_mosquitto(workdir, f"allow_anonymous true\npersistence true\n"
+                                          f"persistence_location {workdir}/\n")
+    if proc is None:
+        raise ConnectionError("--private-broker: mosquitto is not installed")
+    return "127.0.0.1", port, proc
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -246,6 +355,13 @@ def main(argv: list[str] | None = None) -> int:
                     help="MqttSettings.receive_maximum (default: the code's default)")
     ap.add_argument("--batch", type=int, default=None,
                     help="MqttSettings.batch_max_messages (default: the code's default)")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="ingesting processes: this one and N-1 more (zonecast ingest "
+                         "--worker), members of one MQTT shared subscription")
+    ap.add_argument("--private-broker", action="store_true",
+                    help="start a mosquitto of our own on a free port (configured as the "
+                         "machine's: defaults, persistence on), so that its CPU can be "
+                         "measured and nobody else's traffic shares it")
     args = ap.parse_args(argv)
 
     import psycopg
@@ -261,7 +377,9 @@ def main(argv: list[str] | None = None) -> int:
               "skipped; pass --url")
         return 0
     tmp = tempfile.TemporaryDirectory()
-    if not args.no_mqtt:
+    if args.private_broker and not args.no_mqtt:
+        args.host, args.port, broker = private_broker(Path(tmp.name))
+    elif not args.no_mqtt:
         args.port, broker = ensure_broker(args.host, args.port, Path(tmp.name))
     else:
         broker = None
@@ -286,8 +404,9 @@ def main(argv: list[str] | None = None) -> int:
             if not args.no_mqtt:
                 options = {k: v for k, v in (("receive_maximum", args.receive_maximum),
                                              ("batch_max_messages", args.batch)) if v}
-                res.update(mqtt_at_rate(store, conn, building, args.host, args.port,
-                                        args.rate, args.seconds, options))
+                res.update(mqtt_at_rate(store, conn, url, building, args.host, args.port,
+                                        args.rate, args.seconds, options, args.workers,
+                                        broker.pid if broker is not None else None))
             res.update(single_message_cost(store, building, args.single))
             res["load_after"] = os.getloadavg()[0]
             results.append(res)

@@ -28,7 +28,7 @@ from zonecast.service.runner import Runner
 from zonecast.service.settings import ServiceSettings
 from zonecast.service.storage import Storage, open_storage
 
-__all__ = ["ServiceContext", "catalogue_for_site"]
+__all__ = ["ServiceContext", "catalogue_for_site", "load_buildings", "run_ingest_worker"]
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +65,57 @@ def _log_refused_publish(client, userdata, mid, reason_code, properties) -> None
                   "ACL, docs/security.md)", reason_code)
 
 
+def load_buildings(s: ServiceSettings) -> tuple[dict[str, ModelBundle], dict[str, Catalogue],
+                                                dict[str, str]]:
+    """The model bundles and point catalogues of the configured buildings, and the
+    buildings whose model did not load with the reason (logged)."""
+    bundles: dict[str, ModelBundle] = {}
+    catalogues: dict[str, Catalogue] = {}
+    errors: dict[str, str] = {}
+    for bid, path in s.buildings.items():
+        try:
+            bundle = Pipeline.from_model_file(path).bundle
+            if bundle.building != bid:
+                log.info("building %s: site names it %s; serving it as %s", bid,
+                         bundle.building, bid)
+                bundle.building = bid
+            bundles[bid] = bundle
+            catalogues[bid] = cat = catalogue_for_site(bundle.site)
+            log.info("building %s: model %s loaded (%d points; readings accepted from %s)",
+                     bid, bundle.version, len(cat),
+                     (s.mqtt.earliest_time or cat.earliest or "1970-01-01"),
+                     extra={"building": bid, "model_version": bundle.version})
+        except ValueError as exc:
+            errors[bid] = str(exc)
+            log.error("building %s: model not loaded: %s", bid, exc, extra={"building": bid})
+    return bundles, catalogues, errors
+
+
+def run_ingest_worker(s: ServiceSettings, worker: int, stop: threading.Event) -> Ingester:
+    """``zonecast ingest --worker N``: one more member of ``mqtt.share_group``, storing
+    telemetry into the service's storage until ``stop`` is set (then what was received is
+    stored and acknowledged before disconnecting); returns the stopped ingester."""
+    if s.mqtt.share_group is None:
+        raise ValueError("set mqtt.share_group (ZONECAST_MQTT__SHARE_GROUP) for the service "
+                         "and its ingest workers: without it every worker receives every "
+                         "message")
+    storage = open_storage(s.storage_url)
+    try:
+        _, catalogues, _ = load_buildings(s)
+        ingester = Ingester(s.mqtt, storage, catalogues, worker=worker, weather=False).start()
+        log.info("ingest worker %d started (client id %s, share group %s)", worker,
+                 ingester.client_id, s.mqtt.share_group,
+                 extra={"client_id": ingester.client_id, "worker": worker})
+        try:
+            stop.wait()
+        finally:
+            ingester.stop()
+            log.info("ingest worker %d stopped: %s", worker, ingester.counters())
+        return ingester
+    finally:
+        storage.close()
+
+
 class ServiceContext:
     """Everything the running service holds (``app.state.zc``)."""
 
@@ -88,23 +139,7 @@ class ServiceContext:
         s = self.settings
         self.metrics = ServiceMetrics(self)
         self.storage = open_storage(s.storage_url)
-        for bid, path in s.buildings.items():
-            try:
-                bundle = Pipeline.from_model_file(path).bundle
-                if bundle.building != bid:
-                    log.info("building %s: site names it %s; serving it as %s", bid,
-                             bundle.building, bid)
-                    bundle.building = bid
-                self.bundles[bid] = bundle
-                self.catalogues[bid] = cat = catalogue_for_site(bundle.site)
-                log.info("building %s: model %s loaded (%d points; readings accepted from %s)",
-                         bid, bundle.version, len(cat),
-                         (s.mqtt.earliest_time or cat.earliest or "1970-01-01"),
-                         extra={"building": bid, "model_version": bundle.version})
-            except ValueError as exc:
-                self.load_errors[bid] = str(exc)
-                log.error("building %s: model not loaded: %s", bid, exc,
-                          extra={"building": bid})
+        self.bundles, self.catalogues, self.load_errors = load_buildings(s)
         if s.mqtt_enabled:
             self.ingester = Ingester(s.mqtt, self.storage, self.catalogues,
                                      on_weather=self._weather_received).start()

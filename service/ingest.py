@@ -51,6 +51,7 @@ __all__ = [
     "EPOCH",
     "Accepted",
     "Catalogue",
+    "CheckedReadings",
     "IngestLimits",
     "MessageRejected",
     "PointCatalogue",
@@ -220,6 +221,18 @@ class Reading(NamedTuple):
     point: str
     time: datetime
     value: float
+
+
+_new_reading = tuple.__new__  # Reading without its Python-level __new__ (the hot path)
+
+
+class CheckedReadings(tuple):
+    """Readings of one message as :func:`validate_message` returns them when their keys
+    ``(point, time)`` are distinct (the map and point forms): every item a :class:`Reading`
+    of a catalogue point, a UTC ``datetime`` and a finite ``float``. Storage then skips
+    checking them again (``zonecast.service.storage``); any other sequence is checked."""
+
+    __slots__ = ()
 
 
 @dataclass(frozen=True)
@@ -547,6 +560,7 @@ def validate_message(
     # Normalise every form to a list of (point, raw time, raw value) triples;
     # a per-item structural problem becomes a RejectedReading.
     items: list[tuple[str, Any, Any]] = []
+    accepted: list[Reading] = []
     rejected: list[RejectedReading] = []
     if topic_point is not None:
         if isinstance(body, dict):
@@ -578,7 +592,16 @@ def validate_message(
                          f"{limits.max_readings}: split it")
         if isinstance(raw, dict):
             when = message_time(body.get("time"))
-            items.extend((str(point), when, value) for point, value in raw.items())
+            # the common case here: a float inside its point's range (JSON keys are str;
+            # NaN and infinities fail the comparison); the rest goes through the checks below
+            get = catalogue.get
+            for point, value in raw.items():
+                spec = get(point)
+                if spec is not None and type(value) is float and \
+                        spec.low <= value <= spec.high:
+                    accepted.append(_new_reading(Reading, (point, when, value)))
+                else:
+                    items.append((point, when, value))
         else:
             # the top-level time only concerns the items without their own: a bad one
             # rejects those items, not the items that carry a good time
@@ -598,7 +621,6 @@ def validate_message(
                     continue
                 items.append((item["point"], item.get("time", shared), item["value"]))
 
-    accepted: list[Reading] = []
     for point, when, value in items:
         spec = catalogue.get(point)
         # the common case first: a float inside the point's range with a parsed time; the
@@ -620,7 +642,9 @@ def validate_message(
             accepted.append(Reading(point, when, number))
         except _Bad as bad:
             rejected.append(RejectedReading(point, bad.reason, bad.detail))
-    return ValidatedMessage(building, tuple(accepted), tuple(rejected))
+    # distinct keys: one reading (point topic), or one time and a JSON object's keys
+    checked = CheckedReadings if topic_point is not None or isinstance(raw, dict) else tuple
+    return ValidatedMessage(building, checked(accepted), tuple(rejected))
 
 
 @dataclass(frozen=True, slots=True)

@@ -34,6 +34,7 @@ import json
 import logging
 import queue
 import sqlite3
+import struct
 import threading
 import time
 from collections import Counter, deque
@@ -74,15 +75,22 @@ def dead_letter_topic(building: str | None, prefix: str = DEFAULT_PREFIX) -> str
     return f"{prefix}/{building}/deadletter" if building else f"{prefix}/deadletter"
 
 
-def ingester_client_id(settings: MqttSettings, storage: Storage) -> str:
+def ingester_client_id(settings: MqttSettings, storage: Storage, worker: int = 0) -> str:
     """The ingester's MQTT client id: ``settings.client_id`` if set, else the id kept in
     ``storage`` under :data:`CLIENT_ID_KEY`, generated on first use as
     ``zonecast-ingest-<host>-<16 hex>``. Stable across restarts on the same storage (the
     broker's queued messages are keyed on it), different for every storage, so two service
-    instances with their own databases never take over each other's session."""
+    instances with their own databases never take over each other's session.
+
+    ``worker`` > 0 (``zonecast ingest --worker N``, a member of ``settings.share_group``):
+    its own id, kept under ``<CLIENT_ID_KEY>:<N>`` (``<client_id>-w<N>`` when
+    ``settings.client_id`` is set), so each worker resumes its own session."""
+    if worker < 0:
+        raise ValueError(f"worker {worker} must be 0 (the service) or a positive number")
     if settings.client_id is not None:
-        return settings.client_id
-    return storage.instance_value(CLIENT_ID_KEY, unique_client_id("ingest", random_hex=16))
+        return settings.client_id if worker == 0 else f"{settings.client_id}-w{worker}"
+    key = CLIENT_ID_KEY if worker == 0 else f"{CLIENT_ID_KEY}:{worker}"
+    return storage.instance_value(key, unique_client_id("ingest", random_hex=16))
 
 
 def _notice(message: mqtt.MQTTMessage, received: datetime, acc: Accepted) -> dict[str, Any]:
@@ -120,6 +128,29 @@ def _is_data_error(exc: BaseException) -> bool:
     return isinstance(state, str) and state[:2] in ("22", "23")
 
 
+def _ack_all(client: mqtt.Client, messages: list[mqtt.MQTTMessage]) -> None:
+    """Acknowledge ``messages`` in order. QoS 1 PUBACKs go to paho's outgoing queue as ONE
+    write (one wake-up of its network thread and one ``send`` instead of one each per
+    message, ~20 us of CPU per message in the ingester and the broker, docs/benchmarks.md);
+    paho's ``ack`` when its private ``_packet_queue`` is not there (another paho version)."""
+    mids = [m.mid for m in messages if m.qos == 1]
+    queue_packet = getattr(client, "_packet_queue", None)
+    if len(mids) > 1 and queue_packet is not None:
+        # PUBACK: type 4 (0x40), remaining length 2, packet id; v5 allows omitting the
+        # reason code when it is 0 (success), as paho's own ack does
+        queue_packet(PUBACK_BYTE, b"".join(_PUBACK.pack(PUBACK_BYTE, 2, mid) for mid in mids),
+                     0, 0)
+        rest = [m for m in messages if m.qos > 1]
+    else:
+        rest = [m for m in messages if m.qos > 0]
+    for message in rest:
+        client.ack(message.mid, message.qos)
+
+
+PUBACK_BYTE = 0x40
+_PUBACK = struct.Struct("!BBH")
+
+
 class Ingester:
     """Subscribe to BMS telemetry and store it durably.
 
@@ -132,6 +163,14 @@ class Ingester:
     catalogues : Mapping[str, PointCatalogue]
         Known buildings -> point catalogues. Read on every message, so a
         mutable mapping may be updated while running.
+    on_weather : callable, optional
+        Called with (building, WeatherForecast) for each accepted weather forecast.
+    worker : int
+        0 for the service's own ingester; N > 0 for ``zonecast ingest --worker N`` (its own
+        client id, :func:`ingester_client_id`).
+    weather : bool
+        Subscribe to weather forecasts (default True; an ingest worker has no runner to
+        hand them to and leaves them to the service).
 
     Examples
     --------
@@ -142,15 +181,20 @@ class Ingester:
 
     def __init__(self, settings: MqttSettings, storage: Storage,
                  catalogues: Mapping[str, PointCatalogue], *,
-                 on_weather: Callable[[str, Any], None] | None = None):
+                 on_weather: Callable[[str, Any], None] | None = None, worker: int = 0,
+                 weather: bool = True):
+        if worker and settings.share_group is None:
+            raise ValueError("an ingest worker needs mqtt.share_group: without a shared "
+                             "subscription every worker would receive every message")
         self.settings = settings
+        self.weather = weather
         #: called with (building, WeatherForecast) for each accepted weather forecast
         self.on_weather = on_weather
         self.storage = storage
         self.catalogues = catalogues
         self._limits = settings.limits
         #: the MQTT client id (:func:`ingester_client_id`)
-        self.client_id = ingester_client_id(settings, storage)
+        self.client_id = ingester_client_id(settings, storage, worker)
         self._queue: queue.Queue[tuple[_Checked, datetime]] = queue.Queue()
         self._stopping = threading.Event()
         self._aborted = False
@@ -282,9 +326,22 @@ class Ingester:
         else:
             self._client.connect_async(s.host, s.port, s.keepalive)
 
-    def _topics(self) -> list[str]:
-        p = self.settings.topic_prefix
-        return [f"{p}/+/telemetry", f"{p}/+/points/#", f"{p}/+/{WEATHER_SUFFIX}"]
+    def _topics(self) -> tuple[list[str], list[str]]:
+        """(topics to subscribe, topics to unsubscribe): telemetry and point topics as
+        ``$share/<group>/...`` with a share group, else plain; weather forecasts plain (or
+        not at all for a worker). The other form is unsubscribed because a persistent
+        session keeps the subscriptions of earlier runs: a plain one left over from before
+        the share group would deliver every message to this member as well."""
+        p, group = self.settings.topic_prefix, self.settings.share_group
+        data = [f"{p}/+/telemetry", f"{p}/+/points/#"]
+        weather = [f"{p}/+/{WEATHER_SUFFIX}"]
+        if not self.weather:
+            weather = []
+        if group is None:
+            return data + weather, []
+        shared = [f"$share/{group}/{t}" for t in data]
+        stale = data if self.weather else data + [f"{p}/+/{WEATHER_SUFFIX}"]
+        return shared + weather, stale
 
     def _on_connect(self, client, userdata, flags, reason_code, properties) -> None:
         if reason_code.is_failure:
@@ -297,12 +354,15 @@ class Ingester:
                  extra={"broker": f"{self.settings.host}:{self.settings.port}",
                         "client_id": self.client_id,
                         "session_present": bool(flags.session_present)})
+        topics, stale = self._topics()
         if self.settings.protocol == "5":
             # retainHandling=1: retained messages only for a new subscription.
             options = SubscribeOptions(qos=1, retainHandling=1)
-            client.subscribe([(t, options) for t in self._topics()])
+            client.subscribe([(t, options) for t in topics])
         else:
-            client.subscribe([(t, 1) for t in self._topics()])
+            client.subscribe([(t, 1) for t in topics])
+        if stale and flags.session_present:  # after the new ones: no moment without either
+            client.unsubscribe(stale)
 
     def _on_subscribe(self, client, userdata, mid, reason_codes, properties) -> None:
         failed = [rc for rc in reason_codes if rc.is_failure]
@@ -445,9 +505,8 @@ class Ingester:
                                    json.dumps(notice), qos=1)
                 except Exception:  # never hold back the acknowledgement
                     log.exception("publishing a dead-letter notice failed")
-        for (message, _, _), _ in batch:
-            if message.qos > 0:
-                client.ack(message.mid, message.qos)
+        _ack_all(client, [message for (message, _, _), _ in batch])
+        for _ in batch:
             try:
                 self._pending.popleft()
             except IndexError:

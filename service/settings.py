@@ -151,6 +151,13 @@ class MqttSettings(BaseModel):
     stall_after : float
         ``/readyz`` reports ingest not ready when a received message has waited longer
         than this for its acknowledgement [s] (storage unavailable, worker stuck).
+    share_group : str, optional
+        Subscribe to telemetry and point topics as a member of the MQTT v5 shared
+        subscription ``$share/<share_group>/...``: the broker hands each message to one
+        member, so several ingesting processes (``zonecast serve`` and ``zonecast ingest
+        --worker N``, each with its own persistent session) share the load. Default None:
+        an ordinary subscription (this process receives every message). Weather forecasts
+        are never shared: ``zonecast serve``'s ingester receives all of them.
     """
 
     host: str = "127.0.0.1"
@@ -170,6 +177,8 @@ class MqttSettings(BaseModel):
     max_future: float = Field(600.0, ge=0)
     earliest_time: AwareDatetime | None = None
     stall_after: float = Field(60.0, gt=0)
+    share_group: str | None = Field(None, min_length=1, max_length=64,
+                                    pattern=r"^[A-Za-z0-9_.-]+$")
 
     @property
     def limits(self) -> IngestLimits:

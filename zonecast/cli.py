@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import datetime as dt
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 from typing import Annotated
 
@@ -438,6 +440,33 @@ def serve(config: Annotated[Path | None, typer.Option(
     # log_config=None: uvicorn keeps the handlers configure_logging installed
     uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level.lower(),
                 log_config=None)
+
+
+@app.command("ingest")
+def ingest_cmd(worker: Annotated[int, typer.Option(
+                   min=1, help="Worker number (1, 2, ...): selects this worker's persistent "
+                               "MQTT session; keep it the same across restarts.")],
+               config: Annotated[Path | None, typer.Option(
+                   help="The service's settings YAML (the environment overrides it); "
+                        "mqtt.share_group must be set.")] = None,
+               log_level: Annotated[str, typer.Option(help="Log level.")] = "info",
+               log_format: Annotated[str, typer.Option(help="text or json.")] = "text"
+               ) -> None:
+    """Run one more MQTT ingest process beside `zonecast serve`: a member of the shared
+    subscription mqtt.share_group, storing telemetry into the service's storage (with the
+    same validation, dead letters and acknowledgement after commit). Stops on SIGTERM or
+    Ctrl-C after storing and acknowledging what it received."""
+    from zonecast.service.context import run_ingest_worker
+    from zonecast.service.logs import configure_logging
+    from zonecast.service.settings import load_settings
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    try:
+        configure_logging(log_format, log_level)
+        run_ingest_worker(load_settings(config), worker, stop)
+    except (ValueError, ConnectionError) as exc:
+        _fail(exc)
 
 
 @app.command("replay")

@@ -413,3 +413,97 @@ def test_tls_listener_of_the_shipped_config_with_the_service_tls_settings(tmp_pa
         ingester.stop()
         store.close()
         broker.stop()
+
+
+def two_listener_config(workdir: Path, auth: Path, service_port: int,
+                        building_port: int) -> Path:
+    """The shipped config split into two listeners (docs/security.md, "Client ids"): the
+    service's, whose password file holds the service user alone, and the buildings', where
+    ``use_username_as_clientid`` replaces every client id by the user name."""
+    base = shipped_config(workdir, auth, service_port).read_text().splitlines()
+    keep = [line for line in base if line.split(" ", 1)[0] not in (
+        "per_listener_settings", "allow_anonymous", "password_file", "acl_file", "listener")]
+    service_users = [line for line in (auth / "passwd").read_text().splitlines()
+                     if line.startswith("zonecast:")]
+    (auth / "passwd-service").write_text("\n".join(service_users) + "\n")
+    (auth / "passwd-service").chmod(0o600)
+    conf = workdir / "mosquitto-2l.conf"
+    conf.write_text("\n".join(keep + [
+        "per_listener_settings true",
+        f"listener {service_port} 127.0.0.1",
+        "allow_anonymous false",
+        f"password_file {auth}/passwd-service",
+        f"acl_file {auth}/acl",
+        f"listener {building_port} 127.0.0.1",
+        "allow_anonymous false",
+        f"password_file {auth}/passwd",
+        f"acl_file {auth}/acl",
+        "use_username_as_clientid true"]) + "\n")
+    return conf
+
+
+def test_a_listener_for_the_service_and_user_names_as_ids_for_buildings_keep_its_session(
+        tmp_path, vb):
+    """Closes the session takeover the ACL leaves open: a building user with the ingester's
+    client id cannot disconnect it (its id becomes its user name), cannot log in on the
+    service's listener, replays still work, and the service's persistent session keeps what
+    is published while it is down."""
+    from zonecast.service.brokerconf import write_broker_files
+    from zonecast.service.replay import replay
+    from zonecast.service.settings import MqttSettings
+
+    files = write_broker_files(BUILDINGS, tmp_path / "auth")
+    service_port, building_port = free_port(), free_port()
+    broker = Mosquitto(tmp_path, two_listener_config(tmp_path, tmp_path / "auth", service_port,
+                                                     building_port),
+                       [service_port, building_port])
+    pw = files.passwords
+    hardened = type("B", (), {"port": service_port, "passwords": pw})
+    clients = []
+    app = start_service(tmp_path, hardened, {})
+    try:
+        zc = app.app.state.zc
+        ingest_id = zc.ingester.client_id
+        connects = zc.ingester.counters()["connects"]
+        # on the service's listener a building user is refused
+        refused = Client(service_port, "office7", pw["office7"], client_id=ingest_id)
+        clients.append(refused)
+        assert refused.refused
+        # on the buildings' listener the id is replaced by the user name
+        thief = Client(building_port, "office7", pw["office7"], client_id=ingest_id,
+                       persistent=True)
+        clients.append(thief)
+        assert not thief.refused and thief.connack[2] is False  # not the service's session
+        pub6 = Client(building_port, "office6", pw["office6"])
+        clients.append(pub6)
+        for i in range(20):
+            assert pub6.publish("zonecast/office6/telemetry", {"i": i}) == "Success"
+        wait_until(lambda: len(zc.storage.dead_letters(building="office6")) == 20, 15,
+                   "20 messages at the service")  # unknown building: each a dead letter
+        assert zc.ingester.counters()["connects"] == connects  # never disconnected
+        # a replay with a building's credentials through the buildings' listener
+        res = replay(vb, MqttSettings(host="127.0.0.1", port=building_port, username="office6",
+                                      password=pw["office6"]), "office6",
+                     end="2015-04-13T01:00:00-07:00")
+        assert res["messages"] == 4
+        wait_until(lambda: len(zc.storage.dead_letters(building="office6")) == 24, 15,
+                   "the replayed messages")
+        # the replay connected as "office6" too and so disconnected pub6 (the price of user
+        # names as client ids, docs/security.md): a new connection of the building
+        pub6.close()
+        pub6 = Client(building_port, "office6", pw["office6"])
+        clients.append(pub6)
+        # the persistent session: published while the service is down, stored after
+        app.__exit__(None, None, None)
+        for i in range(5):
+            assert pub6.publish("zonecast/office6/telemetry", {"down": i}) == "Success"
+        app = start_service(tmp_path, hardened, {})
+        zc = app.app.state.zc
+        assert zc.ingester.client_id == ingest_id
+        wait_until(lambda: len(zc.storage.dead_letters(building="office6")) == 29, 15,
+                   "the 5 messages published while the service was down")
+    finally:
+        for c in clients:
+            c.close()
+        app.__exit__(None, None, None)
+        broker.stop()

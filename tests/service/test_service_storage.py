@@ -127,9 +127,10 @@ def test_same_key_other_value_keeps_first_and_counts_conflict(storage):
     assert storage.readings("b", T0, T0 + timedelta(minutes=1))["T"].tolist() == [20.0]
 
 
-def test_repeats_within_one_batch(storage):
+def test_repeats_within_one_batch(storage, caplog):
     result = storage.put_readings("b", [("T", T0, 1.0), ("T", T0, 1.0), ("T", T0, 2.0)])
     assert tuple(result) == (1, 2) and result.conflicts == 1
+    assert "1 readings conflict" in caplog.text  # also when the batch went in as new
     assert storage.readings("b", T0, T0 + timedelta(minutes=1))["T"].tolist() == [1.0]
 
 
@@ -329,6 +330,34 @@ def test_put_many_counts_each_batch_when_one_statement_cannot(storage):
                                 ("office6", rows_at(2, point="T_NE",
                                                     start=T0 + timedelta(days=1)))])
     assert [tuple(r) for r in results] == [(2, 0), (2, 0)]
+
+
+def test_partly_stored_batch_falls_back_with_exact_counts_and_keeps_the_letter(storage):
+    """A batch that is new except for one stored key (PostgreSQL: the plain INSERT raises
+    unique_violation inside its savepoint) is stored by the keep-first insert instead: exact
+    counts, the stored value kept, and the dead letter of the same transaction committed."""
+    calls, plain = [], []
+    unique, new = storage._insert_unique, storage._insert_new
+    storage._insert_unique = lambda *a: calls.append(len(a[2])) or unique(*a)
+    storage._insert_new = lambda *a: plain.append(len(a[2])) or new(*a)
+    storage.put_readings("office6", [("T_NW", T0, 20.0)])
+    postgres = not isinstance(storage, SQLiteStorage)
+    assert calls == ([] if postgres else [1])  # PostgreSQL: new rows by the plain INSERT
+    calls.clear()
+    rows = [("T_NW", T0, 25.0), ("T_NE", T0, 21.0), ("T_SW", T0, 22.0)]
+    letter = {"topic": "zonecast/office6/telemetry", "payload": b"{}", "reason": "x: y",
+              "building": "office6"}
+    plain.clear()
+    [result] = storage.put_many([("office6", rows)], [letter])
+    assert (tuple(result), result.conflicts) == ((2, 1), 1)
+    assert calls == [3]
+    # PostgreSQL: the plain INSERT is tried once; after its unique violation only the
+    # keep-first insert (a second plain one would write rows again, and a transaction that
+    # wrote nothing commits without a disk sync)
+    assert plain == ([3] if postgres else [])
+    got = storage.readings("office6", T0, T0 + timedelta(minutes=15))
+    assert got.iloc[0][["T_NW", "T_NE", "T_SW"]].tolist() == [20.0, 21.0, 22.0]
+    assert [d.reason for d in storage.dead_letters(building="office6")] == ["x: y"]
 
 
 def _pg_key_columns(conn) -> list[str]:

@@ -130,8 +130,8 @@ class HvacInputForecaster:
     n_channels : int
         Channels forecast (box airflows [kg/s] then the supply-air temperature [degC]).
     n_regressors : int
-        Regressors x (the served forecast uses outdoor temperature [degC] and the sum of
-        the four facade irradiances [W/m2]).
+        Regressors x (the served forecast uses outdoor temperature [degC] and the
+        irradiance of each of the building's four facades [W/m2]: five).
     shrink : array (n_regressors,)
         Ridge prior scale sigma0 of each regressor, in its unit ([K], [W/m2]): a slope
         counts once the regressor spreads by about this much within the slot.
@@ -215,8 +215,8 @@ class HvacInputForecaster:
         times_ns : array (H,) of int
             Interval starts, UTC ns; times_ns[0] is the issue row.
         x : array (H, n_regressors)
-            Forecast regressors (outdoor temperature [degC], facade irradiance sum
-            [W/m2]); NaN: the slot mean.
+            Forecast regressors (the served forecast: outdoor temperature [degC], then the
+            irradiance of each facade [W/m2]); NaN: the slot mean.
         current : array (n_channels,)
             Measured channels of the issue row.
         fallback : array (H, n_channels)

@@ -455,8 +455,12 @@ class OnlineEstimator:
         # the six disturbances (e.g. a discharge-air rise); all but T_s are >= 0
         self._hv_cols = np.array(list(range(nb)) + [nb + 1] + list(range(nb + 6, self._nin)))
         nonneg = [c != nb + 1 for c in self._hv_cols]
-        self.inputs_fc = HvacInputForecaster(self.calendar, len(self._hv_cols), n_regressors=2,
-                                             shrink=[d["sigma0"], d["sigma0_solar"]],
+        # regressors: outdoor temperature and the irradiance of each of the building's
+        # four facades (a box's cooling airflow follows the sun on its own zone's facade:
+        # docs/forecasts.md "Served forecast")
+        self._wx_cols = np.array([nb] + list(range(nb + 2, nb + 6)))
+        self.inputs_fc = HvacInputForecaster(self.calendar, len(self._hv_cols), n_regressors=5,
+                                             shrink=[d["sigma0"]] + [d["sigma0_solar"]] * 4,
                                              nonnegative=nonneg)
         self.weather_fb = DiurnalWeather(self.calendar.per_day)
         self.calibrator = IntervalCalibrator(self._nz, HORIZON, self.calendar.per_day,
@@ -479,8 +483,7 @@ class OnlineEstimator:
         tn = t.value
         operating = not any(a <= tn < b for a, b in self._experiments)
         if operating:
-            self.inputs_fc.update(tn, [inputs[nb], inputs[nb + 2:nb + 6].sum()],
-                                  inputs[self._hv_cols])
+            self.inputs_fc.update(tn, inputs[self._wx_cols], inputs[self._hv_cols])
             tod = int(self.calendar.slots([tn])[0]) % self.calendar.per_day
             self.weather_fb.update(tod, inputs[nb], inputs[nb + 2:nb + 6])
         k = tn // STEP.value
@@ -571,8 +574,7 @@ class OnlineEstimator:
         wx, _ = self.weather_inputs()
         times = self.time.value + STEP.value * np.arange(HORIZON, dtype=np.int64)
         hv_cols = self._hv_cols
-        x = np.column_stack([wx[:, 0], wx[:, 1:].sum(axis=1)])
-        hv = self.inputs_fc.forecast(times, x, pers[0, hv_cols], pers[:, hv_cols])
+        hv = self.inputs_fc.forecast(times, wx, pers[0, hv_cols], pers[:, hv_cols])
         ins = np.empty((HORIZON, self._nin))
         ins[:, hv_cols] = hv
         ins[:, nb] = wx[:, 0]

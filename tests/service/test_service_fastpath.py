@@ -133,3 +133,21 @@ def test_discharge_air_enters_the_online_step_and_a_silent_point_means_no_rise(b
     assert np.array_equal(silent.forecast(ins).mean, zero.forecast(ins).mean)
     assert np.abs(with_rh.forecast(with_rh.persistence_inputs()).mean
                   - zero.forecast(ins).mean).max() > 0.05
+
+
+def test_hvac_inputs_regress_on_each_facade_irradiance(bundle, telemetry):
+    """The HVAC-input learner's regressors are the outdoor temperature and the irradiance
+    of each of the building's four facades (not their sum): a slot learned once holds
+    exactly that row's five values as its regressor means."""
+    from zonecast.estimator.streaming import OnlineEstimator, model_rows
+
+    d = model_rows(bundle, si_frame(bundle, telemetry.iloc[40:44]))
+    tt, v = d.times, d.v
+    a = OnlineEstimator(bundle)
+    for k in range(4):
+        a.advance(tt[k], d.u[k], v[k], d.y[k], d.reheat[k])
+    assert a.inputs_fc.p == 5
+    for k in range(4):
+        slot = int(a.calendar.slots([tt[k].value])[0])
+        assert a.inputs_fc.w[slot] == 1.0
+        np.testing.assert_array_equal(a.inputs_fc.mx[slot], v[k][[0, 2, 3, 4, 5]])

@@ -13,23 +13,15 @@ from zonecast.estimator.identify import (
 from zonecast.estimator.telemetry import segments_of
 
 
-@pytest.fixture(scope="module")
-def truth_and_data(five_zone):
+def _model_and_inputs(five_zone, seed):
+    """The five-zone model and three days of inputs (2-h airflow blocks, a sunny day)."""
     from zonecast.estimator.model import build_model
 
     zones = {"South": ["SPACE1-1"], "East": ["SPACE2-1"], "North": ["SPACE3-1"],
              "West": ["SPACE4-1"], "Core": ["SPACE5-1"]}
     boxes = {f"VAV-{i}": f"SPACE{i}-1" for i in range(1, 6)}
     model = build_model(five_zone, zones, boxes)
-    true = model.params.start_params.copy()
-    names = model.params.param_names
-    true[names.index("gamma_IW")] *= 1.6
-    true[names.index("U_win")] *= 0.7
-    for z in zones:
-        true[names.index(f"c_IG[{z}]")] = {"South": 6.0, "East": 3.0, "North": 1.0,
-                                           "West": 4.0, "Core": 9.0}[z]
-    truth = model.with_params(true)
-    rng = np.random.default_rng(5)
+    rng = np.random.default_rng(seed)
     times = pd.date_range("2015-04-17 00:00", periods=3 * 96, freq="15min",
                           tz="America/Los_Angeles").tz_convert("UTC")
     n = len(times)
@@ -38,6 +30,21 @@ def truth_and_data(five_zone):
     sun = np.clip(600 * np.sin(2 * np.pi * (day - 0.25)), 0, None)
     v = np.column_stack([15 + 5 * np.sin(2 * np.pi * (day - 0.375)), np.full(n, 13.5),
                          0.6 * sun, sun, 0.6 * sun, 0.2 * sun])
+    return model, zones, boxes, rng, times, u, v, day
+
+
+@pytest.fixture(scope="module")
+def truth_and_data(five_zone):
+    model, zones, boxes, rng, times, u, v, _ = _model_and_inputs(five_zone, 5)
+    n = len(times)
+    true = model.params.start_params.copy()
+    names = model.params.param_names
+    true[names.index("gamma_IW")] *= 1.6
+    true[names.index("U_win")] *= 0.7
+    for z in zones:
+        true[names.index(f"c_IG[{z}]")] = {"South": 6.0, "East": 3.0, "North": 1.0,
+                                           "West": 4.0, "Core": 9.0}[z]
+    truth = model.with_params(true)
     x0 = truth.steady_state(u[0], v[0])
     sim = truth.simulate(x0, u, v)
     y = sim.y[:-1] + rng.normal(0.0, 0.05, (n, 5))
@@ -204,25 +211,12 @@ def test_known_weekend_gains_enter_the_fit(five_zone):
     """Data simulated with time-varying gains on the weekend: the paper's fit (f_IG = 0)
     leaves them to the parameters and misses; the fit told the gains (``f_ig``) recovers
     the parameters and reaches the noise level, from the given start."""
-    from zonecast.estimator.model import build_model
-
-    zones = {"South": ["SPACE1-1"], "East": ["SPACE2-1"], "North": ["SPACE3-1"],
-             "West": ["SPACE4-1"], "Core": ["SPACE5-1"]}
-    boxes = {f"VAV-{i}": f"SPACE{i}-1" for i in range(1, 6)}
-    model = build_model(five_zone, zones, boxes)
+    model, zones, boxes, rng, times, u, v, day = _model_and_inputs(five_zone, 7)
+    n = len(times)
     true = model.params.start_params.copy()
     names = model.params.param_names
     true[names.index("gamma_IW")] *= 1.6
     truth = model.with_params(true)
-    rng = np.random.default_rng(7)
-    times = pd.date_range("2015-04-17 00:00", periods=3 * 96, freq="15min",
-                          tz="America/Los_Angeles").tz_convert("UTC")
-    n = len(times)
-    u = np.repeat(rng.uniform(0.05, 0.6, (n // 8, 5)), 8, axis=0)
-    day = np.arange(n) / 96.0
-    sun = np.clip(600 * np.sin(2 * np.pi * (day - 0.25)), 0, None)
-    v = np.column_stack([15 + 5 * np.sin(2 * np.pi * (day - 0.375)), np.full(n, 13.5),
-                         0.6 * sun, sun, 0.6 * sun, 0.2 * sun])
     occupied = ((day % 1) > 0.4) & ((day % 1) < 0.7)  # weekend occupancy, 10:00-17:00
     f_ig = np.where(occupied, 12.0, 0.0)[:, None] * rng.uniform(0.5, 1.5, 5)
     sim = truth.simulate(truth.steady_state(u[0], v[0]), u, v, f_ig)

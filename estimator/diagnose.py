@@ -25,6 +25,8 @@ Pipeline (docs/diagnosis.md has the method and the measured numbers):
    with fewer parameters, :func:`_rank`); each with its confident zones refitted on all
    training weeks and scored on the held-out weeks, which no step above has read. With a
    :class:`Reference` the base keeps the reference period's profile and adds its effects.
+6. :func:`forward_selection` — from the ranking's first effect, which others are still
+   confident once it is in the model (refitted together); the best of them is added next.
 """
 
 from __future__ import annotations
@@ -62,6 +64,7 @@ from zonecast.estimator.model import BilinearModel
 
 __all__ = [
     "CONFIDENCE",
+    "FORWARD_STEPS",
     "MIN_SCORE",
     "TIE_CONFIDENCE",
     "Baseline",
@@ -71,6 +74,7 @@ __all__ = [
     "baseline",
     "bias_offset_states",
     "diagnose",
+    "forward_selection",
     "load_reference",
     "reference_terms",
     "scaled_capacity",
@@ -86,6 +90,8 @@ MIN_SCORE = 0.02
 #: two confident effects are tied when the better one's per-day reductions exceed the
 #: other's with less than this one-sided confidence (then the simpler one ranks first)
 TIE_CONFIDENCE = 0.95
+#: effects the forward selection adds at most (the ranking's first included)
+FORWARD_STEPS = 3
 #: relative capacity step of the thermal-mass finite difference
 MASS_STEP = 0.1
 #: state kinds whose capacity the thermal-mass effect scales
@@ -530,6 +536,175 @@ def _rank(cands: list[Candidate]) -> list[Candidate]:
     return [first] + [c for c in ranked if c is not first]
 
 
+# --------------------------------------------------------------------------- forward selection
+
+
+def _solve_normal(H: np.ndarray, g: np.ndarray, nonneg: np.ndarray) -> np.ndarray:
+    """argmin |A θ - b|² from H = A'A and g = A'b, with θ_i ≥ 0 where ``nonneg``: the same
+    minimiser as on A and b, solved on the Cholesky factor of H (k x k)."""
+    k = len(g)
+    if k == 0:
+        return np.zeros(0)
+    Hr = H + 1e-12 * max(np.trace(H), 1e-300) / k * np.eye(k)
+    if not nonneg.any():
+        return np.linalg.lstsq(Hr, g, rcond=None)[0]
+    L = np.linalg.cholesky(Hr)
+    A2, b2 = L.T, np.linalg.solve(L, g)  # |A θ - b|² = |L' θ - L⁻¹ g|² + const
+    if nonneg.all():
+        return optimize.nnls(A2, b2)[0]
+    lo = np.where(nonneg, 0.0, -np.inf)
+    return optimize.lsq_linear(A2, b2, bounds=(lo, np.full(k, np.inf))).x
+
+
+class _Given:
+    """Leave-one-week-out fits of the terms already selected (the columns ``G`` (N, nz, m)):
+    per training week, the residual of the other weeks' fit on that week's issues, and the
+    base SSE the scores are shares of."""
+
+    def __init__(self, base: Baseline, resid: np.ndarray, G: np.ndarray, nonneg: np.ndarray,
+                 total: float):
+        self.base, self.resid, self.G, self.nonneg, self.total = base, resid, G, nonneg, total
+        m = G.shape[2]
+        self.train = list(base.split["train"])
+        self.folds = []
+        for w in self.train + [None]:  # None: all training weeks (the reported parameters)
+            fit_rows = base.rows_of([x for x in self.train if x != w])
+            r = resid[fit_rows].reshape(-1)
+            Gf = G[fit_rows].reshape(-1, m)
+            ok = np.isfinite(r) & np.isfinite(Gf).all(axis=1)
+            r, Gf = r[ok], Gf[ok]
+            # rows of the flattened (N * nz, k) columns that enter this fit
+            flat = np.flatnonzero(np.repeat(fit_rows, G.shape[1]))[ok]
+            fold = {"flat": flat, "r": r, "G": Gf, "GG": Gf.T @ Gf, "Gr": Gf.T @ r}
+            if w is not None:
+                theta = _solve_normal(fold["GG"], fold["Gr"], nonneg)
+                test = np.flatnonzero(base.rows_of([w]))
+                fold["groups"] = [test[base.issue_of_row[test] == i]
+                                  for i in np.unique(base.issue_of_row[test])]
+                fold["e0"] = [resid[g] - G[g] @ theta for g in fold["groups"]]
+            self.folds.append(fold)
+
+    def _theta(self, fold: dict, C: np.ndarray, nonneg: np.ndarray) -> np.ndarray:
+        Cf = C.reshape(-1, C.shape[2])[fold["flat"]]
+        bad = ~np.isfinite(Cf).all(axis=1)
+        if bad.any():  # rows without a sensitivity: left out of this fit
+            Cf = np.where(bad[:, None], 0.0, Cf)
+        GC = fold["G"].T @ Cf
+        H = np.block([[fold["GG"], GC], [GC.T, Cf.T @ Cf]])
+        g = np.concatenate([fold["Gr"], Cf.T @ fold["r"]])
+        return _solve_normal(H, g, nonneg)
+
+    def evaluate(self, C: np.ndarray, sign: int) -> tuple[float, float, int, np.ndarray]:
+        """Score, confidence, days and θ (all training weeks) of the columns ``C`` (N, nz, k)
+        added to the given terms, both refitted together in every fold."""
+        m = self.G.shape[2]
+        nonneg = np.concatenate([self.nonneg, np.full(C.shape[2], sign > 0)])
+        red = []
+        for fold in self.folds[:-1]:
+            th = self._theta(fold, C, nonneg)
+            for rows, e0 in zip(fold["groups"], fold["e0"]):
+                e1 = self.resid[rows] - self.G[rows] @ th[:m] - C[rows] @ th[m:]
+                ok = np.isfinite(e0) & np.isfinite(e1)
+                red.append(float(np.sum(e0[ok] ** 2)) - float(np.sum(e1[ok] ** 2)))
+        red = np.array(red)
+        score = float(red.sum() / self.total) if self.total > 0 else 0.0
+        if len(red) > 1 and red.std(ddof=1) > 0:
+            t = red.mean() / (red.std(ddof=1) / np.sqrt(len(red)))
+            conf = float(stats.t.cdf(t, len(red) - 1))
+        else:
+            conf = 0.0
+        theta = self._theta(self.folds[-1], C, nonneg)
+        return score, conf, len(red), theta[m:]
+
+
+def _columns(sens: dict, effect: str, variant, cols: list[int]) -> np.ndarray:
+    s = sens[(effect, variant)]
+    if SPECS[effect].scope == "system":
+        return s.sum(axis=2, keepdims=True)
+    return s[:, :, cols]
+
+
+def forward_selection(base: Baseline, sens: dict, resid: np.ndarray, ranked: list[Candidate],
+                      zones: Sequence[str], max_steps: int = FORWARD_STEPS) -> dict:
+    """Forward selection from the ranking's first effect: with the effects selected so far
+    in the model (their parameters refitted with each candidate's in every leave-one-week-out
+    fold), every other effect is scored again in every zone and variant as in
+    :func:`score_candidates`, and in its confident zones together; the best confident one is
+    added next. Scores stay shares of the base's training SSE, so a step's score is what the
+    effect removes *beyond* the ones before it. Stops when nothing more is confident.
+
+    Returns
+    -------
+    dict
+        ``steps``: the selected effects in order (``effect``, ``variant``, ``zones``,
+        ``parameters`` of the effect's own fit given the ones before, ``score``,
+        ``confidence``); ``confident_after``: for k = 0, 1, ... effects selected, the effects
+        still confident (k = 0: the ranking's confident effects).
+    """
+    zones = list(zones)
+    out = {"steps": [], "confident_after": [[c.effect for c in ranked if c.confident]]}
+    if not ranked or not ranked[0].confident:
+        return out
+    top = ranked[0]
+    total = 0.0
+    for w in base.split["train"]:
+        e = resid[base.rows_of([w])]
+        total += float(np.nansum(e ** 2))
+    cols = [zones.index(z) for z in top.zones]
+    G = _columns(sens, top.effect, top.variant, cols)
+    nonneg = np.full(G.shape[2], SPECS[top.effect].sign > 0)
+    chosen = [top.effect]
+    out["steps"].append({"effect": top.effect, "variant": top.variant, "zones": top.zones,
+                         "parameters": top.parameters, "score": top.score,
+                         "confidence": top.confidence})
+    while True:
+        given = _Given(base, resid, G, nonneg, total)
+        best_by_effect = {}
+        for (effect, variant), s in sens.items():
+            if effect in chosen:
+                continue
+            spec = SPECS[effect]
+            per_zone = best_by_effect.setdefault(effect, {})
+            if spec.scope == "system":
+                sc, cf, _, th = given.evaluate(s.sum(axis=2, keepdims=True), spec.sign)
+                if "*" not in per_zone or sc > per_zone["*"][0]:
+                    per_zone["*"] = (sc, cf, variant, [0], th)
+                continue
+            for j, z in enumerate(zones):
+                sc, cf, _, th = given.evaluate(s[:, :, [j]], spec.sign)
+                if z not in per_zone or sc > per_zone[z][0]:
+                    per_zone[z] = (sc, cf, variant, [j], th)
+        picks = []
+        for effect, per_zone in best_by_effect.items():
+            conf = {z: v for z, v in per_zone.items() if v[1] >= CONFIDENCE and v[0] >= MIN_SCORE}
+            if not conf:
+                continue
+            if "*" in conf or len(conf) == 1:
+                sc, cf, variant, c, th = next(iter(conf.values()))
+                zs = zones if "*" in conf else list(conf)
+            else:
+                variant = max(conf.values(), key=lambda v: v[0])[2]
+                c = [zones.index(z) for z in conf]
+                sc, cf, _, th = given.evaluate(sens[(effect, variant)][:, :, c],
+                                               SPECS[effect].sign)
+                zs = list(conf)
+            if cf >= CONFIDENCE and sc >= MIN_SCORE:
+                picks.append((sc, cf, effect, variant, zs, c, th))
+        picks.sort(key=lambda p: p[0], reverse=True)
+        out["confident_after"].append([p[2] for p in picks])
+        if not picks or len(out["steps"]) >= max_steps:
+            return out
+        sc, cf, effect, variant, zs, c, th = picks[0]
+        params = ({z: float(th[0]) for z in zones} if SPECS[effect].scope == "system"
+                  else {z: float(t) for z, t in zip(zs, th)})
+        out["steps"].append({"effect": effect, "variant": variant, "zones": zs,
+                             "parameters": params, "score": sc, "confidence": cf})
+        chosen.append(effect)
+        C = _columns(sens, effect, variant, c)
+        G = np.concatenate([G, C], axis=2)
+        nonneg = np.concatenate([nonneg, np.full(C.shape[2], SPECS[effect].sign > 0)])
+
+
 # --------------------------------------------------------------------------- where
 
 
@@ -623,6 +798,8 @@ class Diagnosis:
     seconds: float
     base: Baseline | None = None
     reference: list[dict] = field(default_factory=list)
+    #: :func:`forward_selection` (None when not run)
+    forward: dict | None = None
 
     def to_dict(self) -> dict:
         return {
@@ -637,6 +814,7 @@ class Diagnosis:
                 "zones": list(self.per_zone), "step": str(self.base.profile.step),
                 "values": np.round(self.base.profile.values, 4).tolist()},
             "thresholds": {"confidence": CONFIDENCE, "min_score": MIN_SCORE},
+            "forward_selection": self.forward,
             "seconds": self.seconds,
         }
 
@@ -735,7 +913,7 @@ def _apply_reference(resid: np.ndarray, sens: dict, terms: Sequence[dict],
 def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str = "profile",
              effects: Sequence[str] | None = None,
              reference: Reference | Sequence[dict] | None = None,
-             heating_setpoint: np.ndarray | None = None,
+             heating_setpoint: np.ndarray | None = None, forward: bool = True,
              progress: Callable[[str], None] | None = None) -> Diagnosis:
     """Where, which and how much (module docstring); ``seed`` draws the week split.
 
@@ -751,6 +929,9 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
 
     ``heating_setpoint`` (N,) [degC]: the site's scheduled heating set point
     (:meth:`~.site.Thermostat.heating_setpoint`), for the reheat variant ``"schedule"``.
+
+    ``forward``: also run :func:`forward_selection` from the ranking's first effect (which
+    other effects remain confident once it is in the model); it does not change the ranking.
     """
     t0 = time.perf_counter()
     zones = list(data.zones)
@@ -807,5 +988,8 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
     ranked = _rank(ranked)
     per_zone = {z: sorted((per[e][z] for e in per), key=lambda c: c.score, reverse=True)
                 for z in zones}
+    if progress:
+        progress("forward selection")
+    fwd = forward_selection(base, sens, resid, ranked, zones) if forward else None
     return Diagnosis(wh, ranked, per_zone, base.split, base.gains, time.perf_counter() - t0,
-                     base, reference=terms)
+                     base, reference=terms, forward=fwd)

@@ -136,7 +136,9 @@ def test_effect_simulated_by_the_model_is_found_and_recovered(effect, model, inp
     if gains == "constant":
         f = np.zeros_like(f)
     y, theta = _case(effect, model, (times, u, v, f))
-    res = diagnose(model, _data(times, u, v, y), seed=0, gains=gains)
+    # forward=False: the forward selection does not change the ranking and is tested below
+    res = diagnose(model, _data(times, u, v, y), seed=0, gains=gains, forward=False)
+    assert res.forward is None
     top = res.ranked[0]
     assert top.effect == effect, [(c.effect, c.zones, round(c.score, 3)) for c in res.ranked]
     assert list(ZONES)[ZONE] in top.zones
@@ -162,20 +164,45 @@ def test_clean_model_data_give_no_confident_attribution(model, inputs):
     y = _simulate(model, times, u, v, f)
     res = diagnose(model, _data(times, u, v, y), seed=0)
     assert not [c.effect for c in res.ranked if c.confident]
+    assert res.forward == {"steps": [], "confident_after": [[]]}  # nothing to add
+
+
+def test_forward_selection_adds_both_of_two_effects_and_then_stops(model, inputs):
+    """Two effects in different zones: both are selected (each in its own zone), then
+    nothing more is confident (one effect and clean data: in the tests of the reference and
+    of clean data)."""
+    times, u, v, f = inputs
+    d0 = _data(times, u, v, np.zeros((len(u), 5)))
+    west = list(ZONES).index("West")
+    sol = heat_regressor("window_solar", SPECS["window_solar"].variants[0], model, d0,
+                         np.zeros((len(u), 5)))
+
+    def extra(k, yk):
+        q = np.zeros(5)
+        q[ZONE] = 60.0 * (v[k, 0] - yk[ZONE])
+        q[west] = 0.3 * sol[k, west]
+        return q
+
+    y2 = _simulate(model, times, u, v, f, extra)
+    two = diagnose(model, _data(times, u, v, y2), seed=0).forward
+    steps = {s["effect"]: s for s in two["steps"]}
+    assert set(steps) == {"infiltration", "window_solar"}, two
+    assert "East" in steps["infiltration"]["zones"] and "West" in steps["window_solar"]["zones"]
+    assert two["confident_after"][2] == [], two
 
 
 def test_search_never_reads_the_heldout_weeks(model, inputs):
     times, u, v, f = inputs
     y = _simulate(model, times, u, v, f)
     y[:, ZONE] += 0.4
-    a = diagnose(model, _data(times, u, v, y), seed=3)
+    a = diagnose(model, _data(times, u, v, y), seed=3, forward=False)
     base = a.base
     val = base.rows_of(base.split["validation"])
     assert not (val & base.rows_of(base.split["train"])).any()
     rows = np.isin(base.week_of_row, base.split["validation"])
     y2 = y.copy()
     y2[rows] += np.random.default_rng(0).normal(0, 5, y2[rows].shape)  # corrupt held-out
-    b = diagnose(model, _data(times, u, v, y2), seed=3)
+    b = diagnose(model, _data(times, u, v, y2), seed=3, forward=False)
     for ca, cb in zip(a.ranked, b.ranked):
         assert (ca.effect, ca.zones, ca.variant) == (cb.effect, cb.zones, cb.variant)
         assert ca.parameters == cb.parameters and ca.score == cb.score
@@ -210,6 +237,9 @@ def test_reference_terms_absorb_a_known_gap_and_leave_a_new_effect(model, inputs
     y, _ = _case("infiltration", model, inputs)
     ref = diagnose(model, _data(times, u, v, y), seed=0)
     assert ref.ranked[0].effect == "infiltration" and ref.ranked[0].confident
+    # forward selection: once infiltration is in the model, nothing else is confident
+    assert [s["effect"] for s in ref.forward["steps"]] == ["infiltration"], ref.forward
+    assert ref.forward["confident_after"][1] == [], ref.forward
     terms = reference_terms(ref.to_dict()["ranked_effects"])
     assert [t["effect"] for t in terms if t["effect"] == "infiltration"]
     again = diagnose(model, _data(times, u, v, y), seed=0, reference=terms)

@@ -173,6 +173,20 @@ def _write_md(res: Diagnosis, out: Path, figs: list[str]) -> None:
                  f"{', '.join(c.zones)} | {c.variant if c.variant is not None else ''} | "
                  f"{par} {SPECS[c.effect].unit} | {c.score:.3f} | {c.confidence:.3f} | "
                  f"{c.heldout_rms_before['mean']:.3f} -> {c.heldout_rms_after['mean']:.3f} |")
+    fwd = res.forward
+    if fwd is not None and fwd["steps"]:
+        L += ["", "## Forward selection", "",
+              ("From the top effect: with the effects above it in the model (refitted together "
+               "in every leave-one-week-out fold), which others are still confident; the best "
+               "is added next. Scores are shares of the base's training SSE removed beyond the "
+               "effects before."), "",
+              "| step | effect added | zones | score | confidence | still confident after it |",
+              "|---|---|---|---|---|---|"]
+        after = fwd["confident_after"]
+        for i, st in enumerate(fwd["steps"], 1):
+            left = after[i] if i < len(after) else []
+            L.append(f"| {i} | {st['effect']} | {', '.join(st['zones'])} | {st['score']:.3f} | "
+                     f"{st['confidence']:.3f} | {', '.join(left) or 'none'} |")
     L += ["", "## Where the error lies (slices carrying more than their share)", "",
           "| residual | dimension | slice | RMS [K] | share of error | share of rows |",
           "|---|---|---|---|---|---|"]

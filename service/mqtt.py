@@ -135,14 +135,17 @@ def _ack_all(client: mqtt.Client, messages: list[mqtt.MQTTMessage]) -> None:
     paho's ``ack`` when its private ``_packet_queue`` is not there (another paho version)."""
     mids = [m.mid for m in messages if m.qos == 1]
     queue_packet = getattr(client, "_packet_queue", None)
+    rest = [m for m in messages if m.qos > 0]
     if len(mids) > 1 and queue_packet is not None:
         # PUBACK: type 4 (0x40), remaining length 2, packet id; v5 allows omitting the
         # reason code when it is 0 (success), as paho's own ack does
-        queue_packet(PUBACK_BYTE, b"".join(_PUBACK.pack(PUBACK_BYTE, 2, mid) for mid in mids),
-                     0, 0)
-        rest = [m for m in messages if m.qos > 1]
-    else:
-        rest = [m for m in messages if m.qos > 0]
+        try:
+            queue_packet(PUBACK_BYTE,
+                         b"".join(_PUBACK.pack(PUBACK_BYTE, 2, mid) for mid in mids), 0, 0)
+        except TypeError:  # a paho whose private method takes other arguments: one by one
+            pass
+        else:
+            rest = [m for m in messages if m.qos > 1]
     for message in rest:
         client.ack(message.mid, message.qos)
 

@@ -241,3 +241,31 @@ def test_ingest_worker_command_stores_its_share_and_needs_a_group(broker, buildi
         worker.join(30)
         store.close()
     assert done and done[0].counters()["messages_stored"] == 10
+
+
+def test_grouped_acks_fall_back_to_one_by_one_when_paho_differs():
+    """The group PUBACK uses paho's private queue; a paho whose method takes other
+    arguments (TypeError) gets every QoS 1 and 2 message acknowledged one by one, none lost;
+    with the queue, QoS 1 goes as one write and only QoS 2 one by one."""
+    from types import SimpleNamespace
+
+    from zonecast.service.mqtt import _ack_all
+
+    messages = [SimpleNamespace(mid=m, qos=q) for m, q in ((1, 1), (2, 1), (3, 0), (4, 2))]
+
+    class Client:
+        def __init__(self, queue):
+            self.acked, self.queued = [], []
+            if queue == "other":
+                self._packet_queue = lambda *a: (_ for _ in ()).throw(TypeError("signature"))
+            elif queue:
+                self._packet_queue = lambda cmd, packet, mid, qos: self.queued.append(packet)
+
+        def ack(self, mid, qos):
+            self.acked.append(mid)
+
+    other, paho = Client("other"), Client(True)
+    _ack_all(other, messages)
+    _ack_all(paho, messages)
+    assert other.acked == [1, 2, 4] and other.queued == []
+    assert paho.acked == [4] and len(paho.queued) == 1 and len(paho.queued[0]) == 8

@@ -224,8 +224,10 @@ def test_ingest_worker_command_stores_its_share_and_needs_a_group(broker, buildi
     done: list = []
     worker = threading.Thread(target=lambda: done.append(run_ingest_worker(settings, 1, stop)))
     worker.start()
-    store = open_storage(url)
-    try:
+    store = None
+    try:  # opened while the worker opens and migrates the same file (SQLite's WAL switch)
+        store = open_storage(url)
+
         def has_id() -> bool:  # read only: instance_value would store a default
             with sqlite3.connect(tmp_path / "zc.db") as db:
                 return bool(db.execute("SELECT count(*) FROM instance WHERE key = "
@@ -239,7 +241,8 @@ def test_ingest_worker_command_stores_its_share_and_needs_a_group(broker, buildi
     finally:
         stop.set()
         worker.join(30)
-        store.close()
+        if store is not None:
+            store.close()
     assert done and done[0].counters()["messages_stored"] == 10
 
 

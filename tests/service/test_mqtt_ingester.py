@@ -20,6 +20,8 @@ from zonecast.service.mqtt import Ingester
 from zonecast.service.settings import MqttSettings
 from zonecast.service.storage import open_storage
 
+from tests.service.helpers import wait_until as _wait_until
+
 pytestmark = pytest.mark.timeout(120)
 
 T0 = datetime(2015, 4, 11, 17, 0, tzinfo=UTC)
@@ -81,12 +83,8 @@ def telemetry(step: int, points=POINTS, base=20.0):
 
 
 def wait_until(condition, timeout=30.0, what="condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
+    """:func:`tests.service.helpers.wait_until` with this module's 30 s default."""
+    _wait_until(condition, timeout, what)
 
 
 @pytest.fixture

@@ -94,7 +94,12 @@ from zonecast.estimator.kalman import (
 from zonecast.estimator.solar import SKY_MODELS, SolarGeometryCache, transpose
 from zonecast.estimator.telemetry import Telemetry, load_telemetry, segments_of
 from zonecast.estimator.units import to_si
-from zonecast.estimator.weather_forecast import WEATHER_DEFAULTS, DiurnalWeather, WeatherForecast
+from zonecast.estimator.weather_forecast import (
+    WEATHER_DEFAULTS,
+    DiurnalWeather,
+    WeatherForecast,
+    observation_correction,
+)
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
            "StepReport", "checkpoint_header", "has_discharge", "model_rows", "offline_forecasts",
@@ -466,6 +471,7 @@ class OnlineEstimator:
         self.calibrator = IntervalCalibrator(self._nz, HORIZON, self.calendar.per_day,
                                              step_ns=STEP.value)
         self.weather_max_age = pd.Timedelta(hours=WEATHER_DEFAULTS["max_age_h"])
+        self.weather_obs_tau_h = WEATHER_DEFAULTS["obs_tau_h"]
         self._experiments = [(pd.Timestamp(e.start).value, pd.Timestamp(e.end).value)
                              for e in site.experiments]
         loc = site.location
@@ -561,6 +567,9 @@ class OnlineEstimator:
             rows = np.where(inside, idx, 0)
             good = inside & np.isfinite(vals[rows]).all(axis=1)
             out[good] = vals[rows[good]]
+            if 0 <= idx[0] < len(vals):  # the measured temperature corrects the forecast's
+                out[good, 0] += observation_correction(vals[idx[0], 0], pers[0, cols[0]],
+                                                       lead_h[good], self.weather_obs_tau_h)
             from_wf = good
         return out, from_wf
 

@@ -15,6 +15,14 @@ temperature and of the four facade irradiances over the days seen (forgetting fa
 ``lam`` per day); the forecast is that shape, with the outdoor temperature shifted by the
 current deviation from the shape, decaying as exp(-lead / tau). O(1) per step.
 
+A received forecast is corrected by the newest measurement the same way
+(:func:`observation_correction`): its outdoor temperature is shifted by the difference
+between the measured value and the forecast's value for the current interval, decaying as
+exp(-lead / obs_tau) (a forecast's error persists over hours; the measurement is the one
+value of the next day that is known exactly). ``obs_tau`` is the fallback's ``tau``, not a
+separate knob. The irradiance is not corrected (its error is cloud cover, which the current
+value says little about a few hours ahead).
+
 :func:`from_open_meteo` reads Open-Meteo's JSON forecast format (``hourly`` arrays
 ``time``, ``temperature_2m``, ``shortwave_radiation``, ``direct_normal_irradiance``,
 ``diffuse_radiation``; the radiation values are means over the preceding hour, so they are
@@ -36,11 +44,12 @@ __all__ = [
     "WeatherForecast",
     "WeatherForecastError",
     "from_open_meteo",
+    "observation_correction",
     "parse_weather_forecast",
 ]
 
 #: fallback defaults, chosen on the training weeks (docs/forecasts.md "Served forecast")
-WEATHER_DEFAULTS = {"lam": 0.5, "tau_h": 6.0, "max_age_h": 24.0}
+WEATHER_DEFAULTS = {"lam": 0.5, "tau_h": 6.0, "max_age_h": 24.0, "obs_tau_h": 6.0}
 
 #: plausible ranges of the values [degC], [W/m2]
 TEMPERATURE_RANGE = (-60.0, 60.0)
@@ -109,6 +118,18 @@ class WeatherForecast:
                 "times": [t.isoformat() for t in self.times],
                 "temperature": self.temperature.tolist(), "ghi": self.ghi.tolist(),
                 "dni": self.dni.tolist(), "dhi": self.dhi.tolist()}
+
+
+def observation_correction(forecast_now: float, measured_now: float, lead_h: np.ndarray,
+                           tau_h: float = WEATHER_DEFAULTS["obs_tau_h"]) -> np.ndarray:
+    """Additive correction of a forecast's outdoor temperature [K] at leads ``lead_h`` [h]:
+    (measured - forecast) at lead 0, decaying as exp(-lead / tau_h). Zero where either
+    value is missing or ``tau_h`` <= 0 (no correction)."""
+    lead_h = np.asarray(lead_h, float)
+    d = float(measured_now) - float(forecast_now)
+    if tau_h <= 0 or not math.isfinite(d):
+        return np.zeros_like(lead_h)
+    return d * np.exp(-lead_h / tau_h)
 
 
 def _time(value, what: str) -> pd.Timestamp:

@@ -154,6 +154,17 @@ def test_diurnal_fallback_learns_the_shape_and_shifts_temperature():
     assert out[50, 1] == pytest.approx(100.0)
 
 
+def test_observation_correction_shifts_the_forecast_by_the_measured_error_and_decays():
+    from zonecast.estimator.weather_forecast import observation_correction
+
+    lead = np.array([0.0, 6.0, 24.0])
+    got = observation_correction(10.0, 12.0, lead, tau_h=6.0)
+    np.testing.assert_allclose(got, [2.0, 2.0 * np.exp(-1.0), 2.0 * np.exp(-4.0)])
+    assert not observation_correction(10.0, np.nan, lead).any()  # nothing measured
+    assert not observation_correction(np.nan, 12.0, lead).any()  # forecast has no value now
+    assert not observation_correction(10.0, 12.0, lead, tau_h=0.0).any()  # switched off
+
+
 def test_calibrated_intervals_cover_on_stationary_errors():
     """Scores from a known error law: the calibrated half-widths converge to the error's
     90 % quantile (about 1.645 sigma for a normal error) and cover about 90 %."""

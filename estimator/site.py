@@ -189,15 +189,38 @@ class Thermostat(_Strict):
     def heating_setpoint(self, times, timezone: str, experiment=None):
         """Scheduled heating set point at each time [degC], shape (N,); ``experiment``
         (N,) bool marks rows of experiments (they take ``experiment_heating`` if given)."""
+        occ = self.occupied(times, timezone)
+        out = np.where(occ, self.heating_occupied, self.heating_unoccupied).astype(float)
+        if experiment is not None and self.experiment_heating is not None:
+            out[np.asarray(experiment, bool)] = self.experiment_heating
+        return out
+
+    def occupied(self, times, timezone: str) -> np.ndarray:
+        """Whether each time lies in the occupied hours of a working day that is not a
+        holiday (N,) bool."""
         local = pd.DatetimeIndex(times).tz_convert(timezone)
         hour = np.asarray(local.hour + local.minute / 60.0)
         h0, h1 = self.occupied_hours
         occ = np.isin(np.asarray(local.day_of_week), self.working_days) & (hour >= h0) \
             & (hour < h1)
-        out = np.where(occ, self.heating_occupied, self.heating_unoccupied).astype(float)
-        if experiment is not None and self.experiment_heating is not None:
-            out[np.asarray(experiment, bool)] = self.experiment_heating
-        return out
+        if self.holidays:
+            occ &= ~np.isin(np.asarray(local.date), np.array(self.holidays))
+        return occ
+
+    def band(self, times, timezone: str, experiment=None) -> tuple[np.ndarray, np.ndarray]:
+        """Scheduled heating and cooling set points at each time [degC], two (N,) arrays:
+        the band a zone's controllers hold the room air in while they have the capacity.
+        Where a set point is not declared, and in experiments (``experiment`` (N,) bool;
+        their set points are widened), the band is open (-inf or +inf)."""
+        occ = self.occupied(times, timezone)
+        heat = np.where(occ, self.heating_occupied, self.heating_unoccupied).astype(float)
+        cool = np.full(len(heat), np.inf)
+        if self.cooling_occupied is not None and self.cooling_unoccupied is not None:
+            cool = np.where(occ, self.cooling_occupied, self.cooling_unoccupied).astype(float)
+        if experiment is not None:
+            exp = np.asarray(experiment, bool)
+            heat[exp], cool[exp] = -np.inf, np.inf
+        return heat, cool
 
 
 _STEP = re.compile(r"^\s*(\d+)\s*(s|sec|min|h)\s*$")

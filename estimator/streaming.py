@@ -39,7 +39,11 @@ temperature and facade irradiance from the weather forecast in use
 (:mod:`zonecast.estimator.weather_forecast`), the airflows and supply-air temperature from
 :class:`~zonecast.estimator.inputs_forecast.HvacInputForecaster`, learned online per row.
 :meth:`OnlineEstimator.persistence_inputs` (the values measured 24 h earlier) is the
-earlier reference. ``std`` is the model's: ``sqrt(v_h)``, with ``v_h`` the variance of
+earlier reference. Where the site declares a thermostat, the forecast zone temperatures are
+held in its band (:meth:`Thermostat.band <zonecast.estimator.site.Thermostat.band>`: a
+temperature above the cooling or below the heating set point is the set point, which the
+boxes hold while they have the capacity), the band keeping the previous set point for
+:data:`HOLD_RECOVERY_H` after each set-point step. ``std`` is the model's: ``sqrt(v_h)``, with ``v_h`` the variance of
 ``C x`` after h steps of the nominal model from the steady-state posterior covariance
 (state uncertainty; measurement noise not added; the same table gives the state's standard
 deviation after steps without measurements); the served 90 % interval (``lower``,
@@ -100,6 +104,13 @@ from zonecast.estimator.weather_forecast import (
     WeatherForecast,
     observation_correction,
 )
+
+#: hold forecast zone temperatures in the thermostat's band (docs/forecasts.md "Set
+#: points"); the default of :attr:`OnlineEstimator.hold_setpoints`
+HOLD_SETPOINTS = True
+#: time a room needs to follow a set-point step [h]: the band keeps the previous set
+#: point this long after a step (chosen on the family's training members, docs/forecasts.md)
+HOLD_RECOVERY_H = 0.25
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
            "StepReport", "checkpoint_header", "has_discharge", "model_rows", "offline_forecasts",
@@ -446,7 +457,30 @@ class OnlineEstimator:
         if self._rh:  # the boxes' discharge-air rise (docs/model.md "Discharge air")
             forcing = forcing + m.reheat_forcing(u, ins[:, nb + 6:])
         xs = self._ladder.for_airflows(u).run(self._x, u, forcing, v[:, 1])
-        return xs[1:] @ m.C.T
+        mean = xs[1:] @ m.C.T
+        if self.hold_setpoints and self._band is not None:
+            lo, hi = self._setpoint_band()
+            mean = np.minimum(np.maximum(mean, lo[:, None]), hi[:, None])
+        return mean
+
+    def _setpoint_band(self) -> tuple[np.ndarray, np.ndarray]:
+        """(HORIZON,) heating and cooling set points over the forecast intervals [degC]
+        (the site's thermostat; open inside the site's experiments). Cached per issue."""
+        t = self.time.value
+        if self._band_at != t:
+            times = t + STEP.value * np.arange(1, HORIZON + 1, dtype=np.int64)
+            exp = np.zeros(HORIZON, dtype=bool)
+            for a, b in self._experiments:
+                exp |= (times >= a) & (times < b)
+            tz = self.bundle.site.timezone
+            heat, cool = self._band.band(pd.DatetimeIndex(times, tz="UTC"), tz, exp)
+            if HOLD_RECOVERY_H > 0:  # after a set-point step the room needs time to follow
+                back = times - int(HOLD_RECOVERY_H * 3.6e12)
+                h0, c0 = self._band.band(pd.DatetimeIndex(back, tz="UTC"), tz, exp)
+                heat, cool = np.minimum(heat, h0), np.maximum(cool, c0)
+            self._band_cache = heat, cool
+            self._band_at = t
+        return self._band_cache
 
     # --- input forecasts (docs/forecasts.md "Served forecast") ---------------------------
     def _init_input_forecasts(self) -> None:
@@ -479,6 +513,12 @@ class OnlineEstimator:
                                             site.step, max_days=4)
         self.weather: WeatherForecast | None = None
         self._wx: tuple[int, np.ndarray] | None = None  # (first grid ns, (N, 5) Ta, sol x 4)
+        # the thermostat's band: a forecast zone temperature outside it is held at the set
+        # point it crossed (docs/forecasts.md "Set points")
+        self._band = site.thermostat
+        self.hold_setpoints = HOLD_SETPOINTS
+        self._band_at: int | None = None
+        self._band_cache: tuple[np.ndarray, np.ndarray] | None = None
 
     def _learn_inputs(self, t: pd.Timestamp, inputs: np.ndarray, y: np.ndarray) -> None:
         """Online learning of row t (after the filter step): HVAC-input and weather

@@ -151,3 +151,60 @@ def test_hvac_inputs_regress_on_each_facade_irradiance(bundle, telemetry):
         slot = int(a.calendar.slots([tt[k].value])[0])
         assert a.inputs_fc.w[slot] == 1.0
         np.testing.assert_array_equal(a.inputs_fc.mx[slot], v[k][[0, 2, 3, 4, 5]])
+
+
+def test_forecast_is_held_in_the_thermostat_band_after_the_recovery_time(bundle, telemetry):
+    """The served forecast is the free model forecast clipped to the site's set-point band
+    (Thermostat.band), the band opened for HOLD_RECOVERY_H after each set-point step and
+    inside experiments; without a thermostat, or with hold_setpoints off, it is the free
+    forecast."""
+    import dataclasses
+
+    from zonecast.estimator import streaming
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    site = bundle.site
+    assert site.thermostat is not None
+    tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:2 * 96 + 30]))
+    est = OnlineEstimator(bundle)
+    for k in range(len(tt)):
+        est.advance(tt[k], u[k], v[k], y[k])
+    ins = est.persistence_inputs()
+    held = est.forecast(ins).mean
+    est.hold_setpoints = False
+    free = est.forecast(ins).mean
+    est.hold_setpoints = True
+    times = est.time + streaming.STEP * np.arange(1, streaming.HORIZON + 1)
+    exp = np.array([any(pd.Timestamp(e.start) <= t < pd.Timestamp(e.end)
+                        for e in site.experiments) for t in times])
+    heat, cool = site.thermostat.band(times, site.timezone, exp)
+    h0, c0 = site.thermostat.band(times - pd.Timedelta(hours=streaming.HOLD_RECOVERY_H),
+                                  site.timezone, exp)
+    lo, hi = np.minimum(heat, h0), np.maximum(cool, c0)
+    np.testing.assert_array_equal(held, np.clip(free, lo[:, None], hi[:, None]))
+    assert (held != free).any()  # the band acts on this day (a working day's morning)
+    # the set point steps up at the start of occupancy: held at the old value for the
+    # recovery time, then at the new one
+    step_up = np.flatnonzero(np.diff(heat) > 0)
+    assert len(step_up) and lo[step_up[0] + 1] < heat[step_up[0] + 1]
+    no_tstat = dataclasses.replace(bundle, site=site.model_copy(update={"thermostat": None}))
+    bare = OnlineEstimator(no_tstat)
+    for k in range(len(tt)):
+        bare.advance(tt[k], u[k], v[k], y[k])
+    np.testing.assert_array_equal(bare.forecast(ins).mean, free)
+
+
+def test_thermostat_band_is_open_where_nothing_is_declared():
+    from zonecast.estimator.site import Thermostat
+
+    times = pd.date_range("2015-04-20T00:00-07:00", periods=6, freq="4h")  # a Monday
+    t = Thermostat(heating_occupied=21, heating_unoccupied=17, occupied_hours=(8, 18))
+    heat, cool = t.band(times, "America/Los_Angeles")
+    np.testing.assert_array_equal(heat, [17, 17, 21, 21, 21, 17])
+    assert np.isinf(cool).all() and (cool > 0).all()  # no cooling set point declared
+    t2 = t.model_copy(update={"cooling_occupied": 24.0, "cooling_unoccupied": 28.0,
+                              "holidays": [pd.Timestamp("2015-04-20").date()]})
+    exp = np.array([False, True, False, False, False, False])
+    heat, cool = t2.band(times, "America/Los_Angeles", exp)
+    np.testing.assert_array_equal(heat, [17, -np.inf, 17, 17, 17, 17])  # a holiday
+    np.testing.assert_array_equal(cool, [28, np.inf, 28, 28, 28, 28])

@@ -187,15 +187,17 @@ class Pipeline:
     # --- identification ----------------------------------------------------------------
     def identify(self, data: ModelData, train: Sequence[str] | None = None,
                  validation: Sequence[str] | None = None, *, n_starts: int = 3, seed: int = 0,
-                 progress: Progress = _quiet, priors: bool | Mapping[str, Prior] = False,
+                 progress: Progress = _quiet, priors: bool | Mapping[str, Prior] = True,
                  sigma_e: float = 0.3, window: str = "weekend", weekend_gains: bool = False,
                  gains_weeks: Sequence[int] | None = None) -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
         ``experiments``): training on the second and third, validation on the first.
-        ``priors``: True for a MAP fit with :func:`~.priors.building_priors` of this
-        building (window U and SHGC from its IDF), or a mapping of priors; ``sigma_e`` [K]
+        ``priors``: True (the default since 2026-11-24, chosen on the family's training
+        members with the IDF's infiltration, docs/identification.md) for a MAP fit with
+        :func:`~.priors.building_priors` of this building (window U and SHGC from its IDF),
+        a mapping of priors, or False for the paper's least squares; ``sigma_e`` [K]
         the MAP residual scale. ``window``: fit whole weekends (the paper) or the site's
         declared ``experiments`` with a lead-in (:func:`~.identify.identification_spans`).
 

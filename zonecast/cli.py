@@ -235,8 +235,9 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  window_solar: WindowSolar = "surfaces",
                  priors: Annotated[bool, typer.Option(
                      help="maximum-a-posteriori fit with priors from the IDF (window U, SHGC) "
-                          "and handbook values (docs/identification.md); default: the paper's "
-                          "least squares")] = False,
+                          "and handbook values (docs/identification.md; the default, chosen "
+                          "on the building family); --no-priors: the paper's least "
+                          "squares")] = True,
                  sigma_e: Annotated[float, typer.Option(
                      min=1e-3, help="residual scale [K] of the MAP cost (with --priors)")] = 0.3,
                  window: Annotated[str, typer.Option(
@@ -244,8 +245,9 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "paper) or 'experiments' (the site's declared experiment periods "
                           "with 2 h before and after)")] = "weekend",
                  infiltration: Annotated[str, typer.Option(
-                     help="'none' (the paper) or 'idf': the IDF's infiltration objects as a "
-                          "fixed outdoor-air conductance (docs/model.md)")] = "none",
+                     help="'idf' (the default, chosen on the building family): the IDF's "
+                          "infiltration objects as a fixed outdoor-air conductance "
+                          "(docs/model.md), or 'none' (the paper)")] = "idf",
                  weekend_gains: Annotated[bool, typer.Option(
                      help="identify again with the weekly gains profile of the weeks without "
                           "experiments as known f_IG (buildings occupied at weekends; "
@@ -318,7 +320,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   seed: Seed = 0,
                   starts: Annotated[int, typer.Option(min=1, help="identification starts")] = 3,
                   priors: Annotated[bool, typer.Option(
-                      help="MAP identification with priors (as zonecast identify)")] = False,
+                      help="MAP identification with priors (as zonecast identify; the "
+                           "default); --no-priors: the paper's least squares")] = True,
                   sigma_e: Annotated[float, typer.Option(
                       min=1e-3, help="residual scale [K] of the MAP cost")] = 0.3,
                   window: Annotated[str, typer.Option(
@@ -326,8 +329,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   sensitivity: Annotated[bool, typer.Option(
                       help="also identify the paper's window-solar placement")] = True,
                   infiltration: Annotated[str, typer.Option(
-                      help="'none' (the paper) or 'idf': the IDF's infiltration as a fixed "
-                           "outdoor-air conductance")] = "none",
+                      help="'idf' (the default): the IDF's infiltration as a fixed "
+                           "outdoor-air conductance, or 'none' (the paper)")] = "idf",
                   weekend_gains: Annotated[bool, typer.Option(
                       help="identify again with the weekly gains profile of the training "
                            "weeks as known f_IG (buildings occupied at weekends)")] = False

@@ -129,11 +129,12 @@ class ModelOptions:
         four directions (:func:`facade_rotation`; a rotated plan's facades get their own
         sun), or facing E/S/W/N whatever the plan (the paper; each facade takes the
         nearest).
-    infiltration : {"none", "idf"}
-        Outdoor air leaking into the rooms: none (the paper), or the IDF's
-        ZoneInfiltration:DesignFlowRate objects as a fixed conductance rho c_p q between
-        the outdoor air and the room air (:class:`~zonecast.estimator.idf.Infiltration`;
-        no parameter).
+    infiltration : {"idf", "none"}
+        Outdoor air leaking into the rooms: the IDF's ZoneInfiltration:DesignFlowRate
+        objects as a fixed conductance rho c_p q between the outdoor air and the room air
+        (:class:`~zonecast.estimator.idf.Infiltration`; no parameter; the default since
+        2026-11-24, chosen on the family's training members, docs/identification.md), or
+        none (the paper). Model files written before carry their own choice.
     """
 
     roof_solar: str = "mean"
@@ -142,7 +143,7 @@ class ModelOptions:
     cp_air: float = CP_AIR
     window_solar: str = "surfaces"
     floor_share: float = 0.25
-    infiltration: str = "none"
+    infiltration: str = "idf"
     facades: str = "building"
 
     def __post_init__(self):

@@ -373,8 +373,10 @@ def test_infiltration_read_and_modelled_as_outdoor_air_conductance(fields, flow)
     b = _wall_building(LAYERS, extra={"ZoneInfiltration:DesignFlowRate": {"Leak": obj},
                                       "Schedule:Constant": {"Half": {"hourly_value": 0.5}}})
     assert b.infiltration["Leak"].flow == pytest.approx(flow, rel=1e-12)
-    plain = build_structure(b, {"Z": ["room"]}, {})
+    plain = build_structure(b, {"Z": ["room"]}, {}, ModelOptions(infiltration="none"))
     leaky = build_structure(b, {"Z": ["room"]}, {}, ModelOptions(infiltration="idf"))
+    default = build_structure(b, {"Z": ["room"]}, {})  # the IDF's infiltration by default
+    assert (default.A0 != leaky.A0).nnz == 0 and (default.Bv0 != leaky.Bv0).nnz == 0
     g = 1.2 * 1005.0 * flow / leaky.capacity[0]
     dA = (leaky.A0 - plain.A0).toarray()
     dB = (leaky.Bv0 - plain.Bv0).toarray()

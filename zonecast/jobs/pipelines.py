@@ -71,8 +71,8 @@ class IdentifyOutcome:
 def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None = None,
                   validate: list[str] | None = None, starts: int = 3,
                   profile_weeks: bool = True, window_solar: str = "surfaces", seed: int = 0,
-                  priors: bool = False, sigma_e: float = 0.3, window: str = "weekend",
-                  infiltration: str = "none", weekend_gains: bool = False,
+                  priors: bool = True, sigma_e: float = 0.3, window: str = "weekend",
+                  infiltration: str = "idf", weekend_gains: bool = False,
                   progress: Progress = _quiet) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``: as

@@ -341,9 +341,9 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
 
 
 def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
-        progress=lambda s: None, *, priors: bool = False, sigma_e: float = 0.3,
+        progress=lambda s: None, *, priors: bool = True, sigma_e: float = 0.3,
         window: str = "weekend", sensitivity: bool = True,
-        infiltration: str = "none", weekend_gains: bool = False) -> Results:
+        infiltration: str = "idf", weekend_gains: bool = False) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);

@@ -39,14 +39,15 @@ temperature and facade irradiance from the weather forecast in use
 (:mod:`zonecast.estimator.weather_forecast`), the airflows and supply-air temperature from
 :class:`~zonecast.estimator.inputs_forecast.HvacInputForecaster`, learned online per row.
 :meth:`OnlineEstimator.persistence_inputs` (the values measured 24 h earlier) is the
-earlier reference. Where the site declares a thermostat, the forecast zone temperatures are
-held in its band (:meth:`Thermostat.band <zonecast.estimator.site.Thermostat.band>`: a
-temperature above the cooling or below the heating set point is the set point, which the
-boxes hold while they have the capacity), the band keeping the previous set point for
-:data:`HOLD_RECOVERY_H` after each set-point step. ``std`` is the model's: ``sqrt(v_h)``, with ``v_h`` the variance of
-``C x`` after h steps of the nominal model from the steady-state posterior covariance
-(state uncertainty; measurement noise not added; the same table gives the state's standard
-deviation after steps without measurements); the served 90 % interval (``lower``,
+earlier reference. Where the site declares a thermostat, the forecast zone temperatures
+are held in its band (:meth:`Thermostat.band <zonecast.estimator.site.Thermostat.band>`:
+a temperature above the cooling or below the heating set point is the set point, which
+the boxes hold while they have the capacity), the band keeping the previous set point for
+:data:`HOLD_RECOVERY_H` after each set-point step. ``std`` is the model's: ``sqrt(v_h)``,
+with ``v_h`` the variance of ``C x`` after h steps of the nominal model from the
+steady-state posterior covariance (state uncertainty; measurement noise not added; the
+same table gives the state's standard deviation after steps without measurements); the
+served 90 % interval (``lower``,
 ``upper``) is calibrated on the building's recent errors
 (:class:`~zonecast.estimator.calibration.IntervalCalibrator`, scored each row).
 """

@@ -212,11 +212,11 @@ class Thermostat(_Strict):
         the band a zone's controllers hold the room air in while they have the capacity.
         Where a set point is not declared, and in experiments (``experiment`` (N,) bool;
         their set points are widened), the band is open (-inf or +inf)."""
-        occ = self.occupied(times, timezone)
-        heat = np.where(occ, self.heating_occupied, self.heating_unoccupied).astype(float)
+        heat = self.heating_setpoint(times, timezone)
         cool = np.full(len(heat), np.inf)
         if self.cooling_occupied is not None and self.cooling_unoccupied is not None:
-            cool = np.where(occ, self.cooling_occupied, self.cooling_unoccupied).astype(float)
+            cool = np.where(self.occupied(times, timezone), self.cooling_occupied,
+                            self.cooling_unoccupied).astype(float)
         if experiment is not None:
             exp = np.asarray(experiment, bool)
             heat[exp], cool[exp] = -np.inf, np.inf

@@ -482,7 +482,7 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
              n_starts: int = 3, seed: int = 0, max_nfev: int = 60,
              progress=lambda msg: None, priors: Mapping[str, Prior] | None = None,
              sigma_e: float = 0.3, window: str = "weekend", f_ig: np.ndarray | None = None,
-             start: np.ndarray | None = None) -> IdentificationResult:
+             start: np.ndarray | None = None, agree_rtol: float = 1e-3) -> IdentificationResult:
     """Identify the parameters of ``model`` (paper section 4-A).
 
     Parameters
@@ -490,7 +490,9 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     model : the model with its starting parameters
     data : telemetry in model terms (:func:`zonecast.estimator.dataset.model_data`)
     train, validation : Saturdays of the training and validation weekends
-    n_starts : number of starting points (the best fit is kept)
+    n_starts : the most starting points tried (the best fit is kept); the starts stop
+        early once the two best fits so far reach the same cost within ``agree_rtol``
+        (two starts that meet are taken as the optimum; a third would only confirm it)
     seed : seeds the perturbed starts
     max_nfev : function evaluations per start and round
     priors : mapping, optional
@@ -509,6 +511,9 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         ``weekend_gains=True`` for buildings occupied at weekends).
     start : ndarray, optional
         The one starting point (instead of ``n_starts`` drawn ones).
+    agree_rtol : float
+        Relative cost difference [-] under which two starts count as the same optimum;
+        0 runs every start.
     """
     t0 = time.perf_counter()
     rng = np.random.default_rng([seed, 11])
@@ -562,6 +567,12 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
                               "status": int(sol.status), "nfev": int(sol.nfev)})
         if best is None or cost < best[0]:
             best = (cost, sol)
+        costs = sorted(s["cost"] for s in starts_report)
+        if (len(costs) >= 2 and i + 1 < len(thetas)
+                and costs[1] - costs[0] <= agree_rtol * max(costs[0], 1e-300)):
+            progress(f"starts {len(costs)} agree within {agree_rtol:g} of the cost: the "
+                     f"remaining {len(thetas) - i - 1} skipped")
+            break
     # round 2, the best start only: x(0) re-estimated with its parameters, then refitted
     progress("x(0) at the best start's parameters, refit")
     problem = _Problem(model, data, train_spans, x0s(model.with_params(best[1].x), train_spans),

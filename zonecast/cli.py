@@ -269,7 +269,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     res, used = done.result, done.profile_weeks
     t2 = res.to_dict()["table2"]
     typer.echo(f"identified on {', '.join(res.train_weekends)} in {res.seconds:.1f} s "
-               f"({res.n_evaluations} evaluations, {starts} starts); hours fitted ({res.window}): "
+               f"({res.n_evaluations} evaluations, {len(res.starts)} of at most {starts} starts); hours fitted ({res.window}): "
                + ", ".join(f"{s['start'][:16]} to {s['end'][:16]}" for s in res.spans
                            if s["role"] == "training"))
     typer.echo("training RMS [degC]: " + ", ".join(f"{k} {v:.3f}" for k, v in t2["training"].items()))

@@ -231,3 +231,19 @@ def test_known_weekend_gains_enter_the_fit(five_zone):
     assert told.train_rms["mean"] < 0.08 < blind.train_rms["mean"]
     i = names.index("gamma_IW")
     assert told.params[i] == pytest.approx(true[i], rel=0.15)
+
+
+def test_starts_stop_once_two_agree(truth_and_data):
+    """Two starts that reach the same cost end the multi-start (the third is skipped) with
+    the optimum every start finds; ``agree_rtol=0`` runs every start."""
+    model, _, data = truth_and_data
+    msgs = []
+    early = identify(model, data, train=["2015-04-18"], n_starts=3, max_nfev=40,
+                     agree_rtol=1e-3, progress=msgs.append)
+    full = identify(model, data, train=["2015-04-18"], n_starts=3, max_nfev=40, agree_rtol=0.0)
+    assert len(full.starts) == 3
+    first_two = sorted(s["cost"] for s in full.starts[:2])
+    assert first_two[1] - first_two[0] <= 1e-3 * first_two[0]   # this problem has one optimum
+    assert len(early.starts) == 2 and any("1 skipped" in m for m in msgs)
+    assert early.n_evaluations < full.n_evaluations
+    assert early.train_rms["mean"] == pytest.approx(full.train_rms["mean"], rel=1e-2)

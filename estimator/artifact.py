@@ -339,8 +339,8 @@ def _stored_structure(doc: dict, path: Path, site: Site,
     if list(structure.zones) != list(site.zones):
         raise ModelFileError(f"{path}: the structure's zones {list(structure.zones)} differ "
                              f"from the site's {list(site.zones)}")
-    if list(structure.boxes) != list(site.boxes):
-        raise ModelFileError(f"{path}: the structure's boxes {list(structure.boxes)} differ "
+    if structure.hvac_boxes != list(site.boxes):
+        raise ModelFileError(f"{path}: the structure's boxes {structure.hvac_boxes} differ "
                              f"from the site's {list(site.boxes)}")
     if structure.options != options:
         raise ModelFileError(f"{path}: model_options {options} differ from the options the "
@@ -394,6 +394,8 @@ def save_structure(path: str | Path, structure: RCStructure,
             "n_Bv_p": len(structure.Bv_p), "options": asdict(structure.options),
             "facade_rotation": structure.facade_rotation,
             "room_volume": {k: float(v) for k, v in room_volume.items()}}
+    if structure.scheduled:  # written only when there are any (older files stay the same)
+        meta["scheduled"] = structure.scheduled
     path = Path(path)
     with path.open("wb") as fh:
         np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)
@@ -424,7 +426,8 @@ def load_structure(path: str | Path) -> tuple[RCStructure, dict[str, float]]:
             notes=list(meta["notes"]), areas=dict(meta["areas"]),
             window_area={r: z[f"window_area.{r}"] for r in meta["window_rooms"]},
             options=ModelOptions(**{**_LEGACY_DEFAULTS, **meta["options"]}),
-            facade_rotation=float(meta.get("facade_rotation", 0.0)))
+            facade_rotation=float(meta.get("facade_rotation", 0.0)),
+            scheduled=dict(meta.get("scheduled", {})))
     return structure, {k: float(v) for k, v in meta["room_volume"].items()}
 
 

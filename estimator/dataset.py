@@ -16,11 +16,12 @@ import numpy as np
 import pandas as pd
 from zonecast.estimator.constants import STEP
 from zonecast.estimator.rc.network import DISTURBANCES
+from zonecast.estimator.schedules import CompactSchedule
 from zonecast.estimator.site import Site
 from zonecast.estimator.solar import FACADE_AZIMUTHS, facade_irradiance
 from zonecast.estimator.telemetry import Telemetry, segments_of
 
-__all__ = ["DISTURBANCES", "ModelData", "model_data", "zone_weights"]
+__all__ = ["DISTURBANCES", "ModelData", "model_data", "scheduled_inputs", "zone_weights"]
 
 
 
@@ -97,9 +98,41 @@ def zone_weights(site: Site, room_volume: Mapping[str, float] | None) -> dict[st
     return out
 
 
+def scheduled_inputs(scheduled: Mapping[str, Mapping], times, site: Site) -> np.ndarray:
+    """(N, len(scheduled)) airflows [kg/s] of the model's scheduled inputs
+    (:attr:`~.rc.network.RCStructure.scheduled`) over the intervals starting at ``times``:
+    each one's flow times its schedule's value in the site's local time, the thermostat's
+    holidays as EnergyPlus ``Holiday`` days (:mod:`~zonecast.estimator.schedules`)."""
+    idx = pd.DatetimeIndex(times)
+    th = site.thermostat
+    holidays = list(th.holidays) if th is not None else []
+    out = np.empty((len(idx), len(scheduled)))
+    cache: dict[str, np.ndarray] = {}
+    for j, spec in enumerate(scheduled.values()):
+        sched = spec["schedule"]
+        key = sched["name"]
+        if key not in cache:
+            cache[key] = CompactSchedule.from_dict(sched).values(idx, site.timezone, holidays)
+        out[:, j] = float(spec["flow"]) * cache[key]
+    return out
+
+
+def with_scheduled(scheduled: Mapping[str, Mapping], times, site: Site, u: np.ndarray,
+                   v: np.ndarray, rise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """u and the discharge-air rise with the scheduled inputs' columns appended: their
+    airflows (:func:`scheduled_inputs`) and their supply air, the outdoor air, as a rise
+    T_a - T_s over the supply air."""
+    if not scheduled:
+        return u, rise
+    flows = scheduled_inputs(scheduled, times, site)
+    sup = np.repeat((v[:, 0] - v[:, 1])[:, None], len(scheduled), axis=1)
+    return np.hstack([u, flows]), np.hstack([rise, sup])
+
+
 def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *,
                sky_model: str = "perez", albedo: float = 0.2,
-               facade_azimuths: Sequence[float] = FACADE_AZIMUTHS) -> ModelData:
+               facade_azimuths: Sequence[float] = FACADE_AZIMUTHS,
+               scheduled: Mapping[str, Mapping] | None = None) -> ModelData:
     """Build :class:`ModelData` from validated telemetry.
 
     Parameters
@@ -110,6 +143,8 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
     sky_model, albedo : passed to the facade irradiance model.
     facade_azimuths : the four facades [deg] of v's solar columns (the model's
         :attr:`~.rc.network.RCStructure.facade_azimuths`; default E, S, W, N).
+    scheduled : the model's scheduled inputs (:attr:`~.rc.network.RCStructure.scheduled`),
+        appended after the site's boxes to u and the rise (:func:`with_scheduled`).
     """
     site = tel.site
     w = tel.weather()
@@ -129,6 +164,8 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
     u = tel.airflow()
     rise = tel.discharge_rise()
     rise[(u == 0) & ~np.isfinite(rise)] = 0.0  # a shut box delivers no heat
+    scheduled = scheduled or {}
+    u, rise = with_scheduled(scheduled, tel.times, site, u, v, rise)
     return ModelData(tel.times, u, v, tel.zone_temperature(zone_weights(site, room_volume)),
-                     list(site.zones), list(site.boxes), list(tel.segments), exc, site.timezone,
-                     rise)
+                     list(site.zones), list(site.boxes) + list(scheduled), list(tel.segments),
+                     exc, site.timezone, rise)

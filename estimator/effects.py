@@ -123,12 +123,14 @@ EFFECTS = tuple(SPECS)
 
 
 def box_zone_matrix(model: BilinearModel) -> np.ndarray:
-    """(n_boxes, n_zones) 1 where a box serves a room of the zone."""
+    """(n_boxes, n_zones) 1 where a box serves a room of the zone (a scheduled input,
+    e.g. an infiltration that follows a schedule, is not a box: a row of zeros)."""
     st = model.structure
     zone_of_room = {r: j for j, z in enumerate(st.zones) for r in st.zones[z]}
     M = np.zeros((len(st.boxes), len(st.zones)))
-    for i, room in enumerate(st.boxes.values()):
-        M[i, zone_of_room[room]] = 1.0
+    for i, (box, room) in enumerate(st.boxes.items()):
+        if box not in st.scheduled:
+            M[i, zone_of_room[room]] = 1.0
     return M
 
 

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from zonecast.estimator.schedules import CompactSchedule, ScheduleError
 
 __all__ = [
     "Building",
@@ -546,31 +547,55 @@ class Window:
     kind: str = "Window"
 
 
-#: conditions at which an infiltration object's flow is taken as a constant (docs/model.md,
-#: "Infiltration"): wind speed [m/s] and indoor-outdoor temperature difference [K]
+#: conditions at which an infiltration object's flow is taken (docs/model.md,
+#: "Infiltration"): wind speed at the weather station [m/s] and indoor-outdoor temperature
+#: difference [K]
 INFILTRATION_WIND = 4.0
 INFILTRATION_DELTA_T = 10.0
+#: wind speed profile exponent and boundary-layer thickness [m] per ``Building`` terrain
+#: (EnergyPlus Engineering Reference, "Local Wind Speed Calculation"); the weather
+#: station's are the "Country" values at 10 m
+WIND_PROFILE = {"country": (0.14, 270.0), "suburbs": (0.22, 370.0), "city": (0.33, 460.0),
+                "ocean": (0.10, 210.0), "urban": (0.22, 370.0)}
+
+
+def local_wind(met_speed: float, height: float, terrain: str = "Suburbs") -> float:
+    """Wind speed [m/s] at ``height`` [m] above ground on ``terrain`` for a weather-station
+    speed ``met_speed`` [m/s] at 10 m over open country, as EnergyPlus computes the wind
+    of an infiltration object at its zone's centroid:
+    V = V_met (delta_met / 10)^alpha_met (z / delta)^alpha."""
+    a_met, d_met = WIND_PROFILE["country"]
+    a, d = WIND_PROFILE.get(str(terrain).lower(), WIND_PROFILE["suburbs"])
+    return float(met_speed * (d_met / 10.0) ** a_met * (max(height, 0.0) / d) ** a)
 
 
 @dataclass(frozen=True)
 class Infiltration:
     """A ZoneInfiltration:DesignFlowRate object as a constant outdoor-air flow into one zone.
 
-    EnergyPlus's flow is I_design F_schedule (A + B |T_zone - T_out| + C w + D w^2); here
-    F_schedule is the value of a constant schedule (1 for any other schedule: the flow
-    when the building's fans are off, which is when it matters most) and the terms are
-    taken at :data:`INFILTRATION_WIND` and :data:`INFILTRATION_DELTA_T`.
+    EnergyPlus's flow is I_design F_schedule (A + B |T_zone - T_out| + C w + D w^2); the
+    terms are taken at :data:`INFILTRATION_DELTA_T` and at the local wind w of a station
+    wind of :data:`INFILTRATION_WIND` at the zone's centroid (:func:`local_wind`, the
+    building's terrain).
+    F_schedule is the value of a constant schedule; a ``Schedule:Compact`` stays a
+    schedule (``schedule``: the model takes the flow times its value at each time step,
+    docs/model.md "Infiltration"); any other schedule is taken as 1 (the flow when the
+    building's fans are off, which is when it matters most).
 
     Attributes
     ----------
     name, zone : str
     flow : float
-        Nominal outdoor-air volume flow [m^3/s].
+        Nominal outdoor-air volume flow [m^3/s] (before ``schedule``).
+    schedule : str
+        Name of the Schedule:Compact the flow follows (:attr:`Building.schedules`); ""
+        for a constant flow.
     """
 
     name: str
     zone: str
     flow: float
+    schedule: str = ""
 
 
 @dataclass(frozen=True)
@@ -621,6 +646,8 @@ class Building:
     unsupported: list[Unsupported] = field(default_factory=list)
     infiltration: dict[str, Infiltration] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    #: Schedule:Compact objects the model follows in time (infiltration), by name
+    schedules: dict[str, CompactSchedule] = field(default_factory=dict)
 
     def zone(self, name: str) -> Zone:
         """Zone by case-insensitive name."""
@@ -1000,20 +1027,25 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
     for z in zones.values():
         if z.geometry_computed:
             notes.append(f"zone {z.name}: {', '.join(z.geometry_computed)} computed from geometry")
-    infiltration = _infiltration(data, zkey, zones, surfaces, unsupported, notes)
+    schedules: dict[str, CompactSchedule] = {}
+    infiltration = _infiltration(data, zkey, zones, surfaces, unsupported, notes, schedules)
     return Building(
         name=bname, version=version_text, north_axis=north, zones=zones, surfaces=surfaces,
         windows=windows, constructions=constructions, internal_masses=masses,
-        unsupported=unsupported, notes=notes, infiltration=infiltration,
+        unsupported=unsupported, notes=notes, infiltration=infiltration, schedules=schedules,
     )
 
 
 def _infiltration(data: Mapping[str, Any], zkey: Mapping[str, str], zones: Mapping[str, Zone],
                   surfaces: Mapping[str, Surface], unsupported: list[Unsupported],
-                  notes: list[str]) -> dict[str, Infiltration]:
-    """ZoneInfiltration:DesignFlowRate objects as nominal constant flows (:class:`Infiltration`)."""
+                  notes: list[str], schedules: dict[str, CompactSchedule]
+                  ) -> dict[str, Infiltration]:
+    """ZoneInfiltration:DesignFlowRate objects as nominal flows (:class:`Infiltration`);
+    the Schedule:Compact objects they follow go to ``schedules``."""
     constants = {k.lower(): _num(f.get("hourly_value"), 1.0)
                  for k, f in data.get("Schedule:Constant", {}).items()}
+    compact = {k.lower(): (k, f) for k, f in data.get("Schedule:Compact", {}).items()}
+    terrain = str(next(iter(data.get("Building", {"": {}}).values())).get("terrain", "Suburbs"))
     out: dict[str, Infiltration] = {}
     for name, f in data.get("ZoneInfiltration:DesignFlowRate", {}).items():
         zname = str(f.get("zone_or_zonelist_or_space_or_spacelist_name")
@@ -1042,14 +1074,33 @@ def _infiltration(data: Mapping[str, Any], zkey: Mapping[str, str], zones: Mappi
             continue
         sched = str(f.get("schedule_name", "")).lower()
         factor = constants.get(sched, 1.0)
-        if sched and sched not in constants:
+        follows = ""
+        if sched in compact and sched not in constants:
+            sname, sfields = compact[sched]
+            try:
+                parsed = schedules.get(sname) or CompactSchedule.from_epjson(sname, sfields)
+            except ScheduleError as exc:
+                notes.append(f"infiltration {name}: {exc}; taken as 1")
+            else:
+                vals = {v for p in parsed.periods for r in p[1] for _, v in r[1]}
+                if len(vals) == 1:      # a compact schedule with one value is a constant
+                    factor = vals.pop()
+                else:
+                    schedules[sname] = parsed
+                    notes.extend(n for n in parsed.notes if n not in notes)
+                    follows = sname
+        elif sched and sched not in constants:
             notes.append(f"infiltration {name}: schedule {f.get('schedule_name')} taken as 1")
+        zs = [float(z) for s in surfaces.values() if s.zone == zone.name
+              for z in np.asarray(s.vertices)[:, 2]]
+        centroid = 0.5 * (min(zs) + max(zs)) if zs else 0.5 * zone.ceiling_height
+        wind = local_wind(INFILTRATION_WIND, centroid, terrain)
         terms = (_num(f.get("constant_term_coefficient"), 1.0)
                  + _num(f.get("temperature_term_coefficient"), 0.0) * INFILTRATION_DELTA_T
-                 + _num(f.get("velocity_term_coefficient"), 0.0) * INFILTRATION_WIND
-                 + _num(f.get("velocity_squared_term_coefficient"), 0.0) * INFILTRATION_WIND**2)
+                 + _num(f.get("velocity_term_coefficient"), 0.0) * wind
+                 + _num(f.get("velocity_squared_term_coefficient"), 0.0) * wind**2)
         flow = max(design * factor * terms, 0.0)
-        out[name] = Infiltration(name, zone.name, flow)
+        out[name] = Infiltration(name, zone.name, flow, follows)
     return out
 
 

@@ -182,7 +182,8 @@ class Pipeline:
         tel = telemetry if isinstance(telemetry, Telemetry) else self.telemetry(telemetry)
         model = self.model()
         return model_data(tel, model.room_weights(),
-                          facade_azimuths=model.structure.facade_azimuths)
+                          facade_azimuths=model.structure.facade_azimuths,
+                          scheduled=model.structure.scheduled)
 
     # --- identification ----------------------------------------------------------------
     def identify(self, data: ModelData, train: Sequence[str] | None = None,

@@ -74,7 +74,14 @@ from zonecast.estimator.constants import (
     STEP,
     Z90,
 )
-from zonecast.estimator.dataset import DISTURBANCES, ModelData, model_data, zone_weights
+from zonecast.estimator.dataset import (
+    DISTURBANCES,
+    ModelData,
+    model_data,
+    scheduled_inputs,
+    with_scheduled,
+    zone_weights,
+)
 from zonecast.estimator.forecast import Forecast
 from zonecast.estimator.gains import (
     DayAheadGains,
@@ -145,7 +152,8 @@ def model_rows(bundle: ModelBundle, frame: pd.DataFrame) -> ModelData:
     frame = frame.reindex(columns=cols).astype(float)
     tel = Telemetry(frame, site, segments_of(frame.index, site.step))
     return model_data(tel, bundle.room_volume,
-                      facade_azimuths=bundle.model.structure.facade_azimuths)
+                      facade_azimuths=bundle.model.structure.facade_azimuths,
+                      scheduled=bundle.model.structure.scheduled)
 
 
 def rows_from_frame(bundle: ModelBundle, frame: pd.DataFrame):
@@ -161,15 +169,18 @@ def rows_from_frame(bundle: ModelBundle, frame: pd.DataFrame):
 
 
 def has_discharge(bundle: ModelBundle) -> bool:
-    """Whether any box of the site reports its discharge-air temperature (then the
-    estimator's inputs carry each box's discharge-air rise after u and v)."""
-    return any(b.discharge_temperature is not None for b in bundle.site.boxes.values())
+    """Whether any box of the site reports its discharge-air temperature, or the model
+    has scheduled inputs (whose supply air is the outdoor air): then the estimator's
+    inputs carry each box's discharge-air rise after u and v."""
+    return (bool(bundle.model.structure.scheduled)
+            or any(b.discharge_temperature is not None for b in bundle.site.boxes.values()))
 
 
 def _input_names(bundle: ModelBundle) -> list[str]:
-    names = [f"u:{b}" for b in bundle.site.boxes] + [f"v:{d}" for d in DISTURBANCES]
+    boxes = list(bundle.model.structure.boxes)
+    names = [f"u:{b}" for b in boxes] + [f"v:{d}" for d in DISTURBANCES]
     if has_discharge(bundle):
-        names += [f"r:{b}" for b in bundle.site.boxes]
+        names += [f"r:{b}" for b in boxes]
     return names
 
 
@@ -629,7 +640,17 @@ class OnlineEstimator:
         ins[:, hv_cols] = hv
         ins[:, nb] = wx[:, 0]
         ins[:, nb + 2:nb + 6] = wx[:, 1:]
+        sched = self.bundle.model.structure.scheduled
+        if sched:  # known ahead: the schedules' airflows, the forecast outdoor air
+            k = len(sched)
+            ins[:, nb - k:nb] = self._scheduled_flows(times)
+            ins[:, self._nin - k:] = (wx[:, 0] - ins[:, nb + 1])[:, None]
         return ins
+
+    def _scheduled_flows(self, times_ns: np.ndarray) -> np.ndarray:
+        """(len(times_ns), n_scheduled) airflows of the scheduled inputs [kg/s]."""
+        return scheduled_inputs(self.bundle.model.structure.scheduled,
+                                pd.DatetimeIndex(times_ns, tz="UTC"), self.bundle.site)
 
     def _bins(self, times_ns: np.ndarray) -> np.ndarray:
         """Time-of-week bin of the profile for UTC grid times (ns since the epoch)."""
@@ -821,6 +842,7 @@ class RowConverter:
         self.solar = SolarGeometryCache(loc.latitude, loc.longitude, loc.elevation, site.step)
         self._facades = np.array([(90.0, az) for az in bundle.model.structure.facade_azimuths])
         self.albedo, self.sky_model = float(albedo), sky_model
+        self._site, self._scheduled = site, bundle.model.structure.scheduled
 
     def convert(self, times_ns, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rows of readings -> (u, v, y) (:meth:`convert_rows` without the discharge air)."""
@@ -868,6 +890,10 @@ class RowConverter:
         if has.any():
             reheat[:, has] = si[:, self._dat[has]] - si[:, [self._ts]]
             reheat[(u == 0) & ~np.isfinite(reheat)] = 0.0  # a shut box delivers no heat
+        if self._scheduled:
+            u, reheat = with_scheduled(self._scheduled,
+                                       pd.DatetimeIndex(np.asarray(times_ns, dtype=np.int64),
+                                                        tz="UTC"), self._site, u, v, reheat)
         return u, v, self._zone_means(si), reheat
 
     def _zone_means(self, si: np.ndarray) -> np.ndarray:

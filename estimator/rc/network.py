@@ -134,7 +134,10 @@ class ModelOptions:
         objects as a fixed conductance rho c_p q between the outdoor air and the room air
         (:class:`~zonecast.estimator.idf.Infiltration`; no parameter; the default since
         2026-11-24, chosen on the family's training members, docs/identification.md), or
-        none (the paper). Model files written before carry their own choice.
+        none (the paper). Model files written before carry their own choice. An
+        infiltration that follows a Schedule:Compact is a scheduled input instead: a
+        box-like airflow rho q F(t) whose supply air is the outdoor air
+        (:attr:`RCStructure.scheduled`).
     """
 
     roof_solar: str = "mean"
@@ -239,6 +242,13 @@ class RCStructure:
     window_area : dict
         Room -> exterior window area seen by each solar column E, S, W, N [m2] (the
         weights of gamma_winSolAbs a_win v_sol, wherever :class:`ModelOptions` puts it).
+    scheduled : dict
+        Scheduled inputs: box id (after the site's boxes in :attr:`boxes`) ->
+        ``{"flow": [kg/s], "schedule": CompactSchedule.to_dict(), "supply": "Ta"}``. Such an
+        input is a box whose airflow is ``flow`` times the schedule's value at the time
+        and whose supply air is the outdoor air (an infiltration that follows a schedule:
+        :func:`~zonecast.estimator.dataset.scheduled_inputs` gives its columns of u and of
+        the discharge-air rise, T_a - T_s).
     """
 
     labels: list[StateLabel]
@@ -259,6 +269,12 @@ class RCStructure:
     window_area: dict[str, np.ndarray] = field(default_factory=dict)
     options: ModelOptions = field(default_factory=ModelOptions)
     facade_rotation: float = 0.0
+    scheduled: dict[str, dict] = field(default_factory=dict)
+
+    @property
+    def hvac_boxes(self) -> list[str]:
+        """The site's VAV boxes (every box that is not a scheduled input)."""
+        return [b for b in self.boxes if b not in self.scheduled]
 
     @property
     def facade_azimuths(self) -> tuple[float, float, float, float]:
@@ -587,12 +603,25 @@ def build_structure(
             notes.append(f"interior window {name}: U_win coupling between rooms")
         else:
             notes.append(f"window {name} on a {parent.boundary} surface: ignored")
+    scheduled: dict[str, dict] = {}
     if opts.infiltration == "idf":
-        for inf in building.infiltration.values():
-            if inf.flow > 0 and inf.zone in room_state:
+        for name in sorted(building.infiltration):
+            inf = building.infiltration[name]
+            if inf.flow <= 0 or inf.zone not in room_state:
+                continue
+            if inf.schedule:
+                # a scheduled input: a box whose airflow follows the schedule and whose
+                # supply air is the outdoor air (rho q F(t) c_p (v_Ta - x_room))
+                box = f"infiltration:{name}"
+                box_rooms[box] = inf.zone
+                scheduled[box] = {"flow": opts.rho_air * inf.flow, "supply": "Ta",
+                                  "schedule": building.schedules[inf.schedule].to_dict()}
+                notes.append(f"infiltration {name}: follows schedule {inf.schedule} "
+                             "(a scheduled input)")
+            else:
                 # outdoor air at v_Ta replacing room air: rho c_p q (v_Ta - x_room), fixed
-                asm.to_temperature(room_state[inf.zone], 0, opts.rho_air * opts.cp_air * inf.flow,
-                                   -1)
+                asm.to_temperature(room_state[inf.zone], 0,
+                                   opts.rho_air * opts.cp_air * inf.flow, -1)
 
 
     cap, a_list, b_list = asm.matrices()
@@ -625,4 +654,5 @@ def build_structure(
         window_area=window_area,
         options=opts,
         facade_rotation=rotation,
+        scheduled=scheduled,
     )

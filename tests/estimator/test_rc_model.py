@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -23,6 +24,10 @@ from zonecast.estimator.rc.parameters import PAPER_TABLE1, ParameterSet
 
 FIVE_ZONES = {"Perim": ["space1-1", "SPACE2-1", "SPACE3-1", "SPACE4-1"], "Core": ["SPACE5-1"]}
 FIVE_BOXES = {f"VAV{i}": f"Space{i}-1" for i in range(1, 6)}
+
+
+#: the RC network alone: NREL's files' scheduled infiltration would add model inputs
+NO_LEAK = ModelOptions(infiltration="none")
 
 
 def _wall_building(layers, area=(4.0, 3.0), extra=None):
@@ -63,7 +68,7 @@ def _wall_building(layers, area=(4.0, 3.0), extra=None):
 
 @pytest.fixture(scope="module")
 def five_model(five_zone):
-    return build_model(five_zone, FIVE_ZONES, FIVE_BOXES)
+    return build_model(five_zone, FIVE_ZONES, FIVE_BOXES, options=NO_LEAK)
 
 
 def _inputs(n_steps, n_boxes, n_zones, seed=0):
@@ -142,7 +147,7 @@ def test_uniform_temperature_equilibrium(five_model, temp, flows):
 def test_metzler_hurwitz(five_zone, scale):
     params = {k: v * scale if k.startswith(("gamma_E", "gamma_IW")) else v
               for k, v in PAPER_TABLE1.items() if not k.startswith("c_IG")}
-    model = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, params)
+    model = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, params, options=NO_LEAK)
     a = model.system_matrix(np.full(5, 1.0))
     off = a - np.diag(np.diag(a))
     assert off.min() >= 0  # Metzler
@@ -306,7 +311,7 @@ def test_parameters():
 
 def test_small_office_builds(small_office):
     zones = {z: [z] for z in small_office.zones if z != "Attic"}
-    model = build_model(small_office, zones, {f"PSZ {z}": z for z in zones})
+    model = build_model(small_office, zones, {f"PSZ {z}": z for z in zones}, options=NO_LEAK)
     counts = model.structure.state_counts()
     assert counts["unmeasured_air"] == 1 and counts["internal_mass"] > 0
     assert np.linalg.eigvals(model.system_matrix(np.ones(5))).real.max() < 0
@@ -364,10 +369,13 @@ LAYERS = [(0.1, 0.72, 1920, 840), (2.0, None, 0, 0), (0.0127, 0.16, 800, 1090)]
     ({"design_flow_rate_calculation_method": "AirChanges/Hour", "air_changes_per_hour": 0.5,
       "schedule_name": "Half"}, 0.5 * 60.0 / 3600.0 * 0.5),
     ({"design_flow_rate_calculation_method": "Flow/Zone", "design_flow_rate": 0.01,
-      "constant_term_coefficient": 0.0, "velocity_term_coefficient": 0.25}, 0.01 * 0.25 * 4.0),
+      "constant_term_coefficient": 0.0, "velocity_term_coefficient": 0.25},
+     # a 4 m/s station wind at the room's centroid (1.5 m) on the default terrain (suburbs):
+     # 4 (270/10)^0.14 (1.5/370)^0.22
+     0.01 * 0.25 * 4.0 * 27.0 ** 0.14 * (1.5 / 370.0) ** 0.22),
 ])
 def test_infiltration_read_and_modelled_as_outdoor_air_conductance(fields, flow):
-    """ZoneInfiltration:DesignFlowRate -> a nominal flow q (schedule constant, wind 4 m/s);
+    """ZoneInfiltration:DesignFlowRate -> a nominal flow q (schedule constant, local wind);
     with infiltration='idf' the room air gains rho c_p q (T_a - x) and nothing else changes."""
     obj = {"zone_or_zonelist_or_space_or_spacelist_name": "Room", **fields}
     b = _wall_building(LAYERS, extra={"ZoneInfiltration:DesignFlowRate": {"Leak": obj},
@@ -385,6 +393,65 @@ def test_infiltration_read_and_modelled_as_outdoor_air_conductance(fields, flow)
     assert all((p - q).nnz == 0 for p, q in zip(leaky.A_p, plain.A_p))
     with pytest.raises(ModelDefinitionError, match="infiltration"):
         ModelOptions(infiltration="wind")
+
+
+SEASONAL_LEAK = {"data": [{"field": f} for f in (
+    "Through: 3/31", "For: AllDays", "Until: 24:00", 1.0, "Through: 10/31", "For: AllDays",
+    "Until: 24:00", 0.0, "Through: 12/31", "For: AllDays", "Until: 24:00", 1.0)]}
+
+
+def test_scheduled_infiltration_is_a_box_of_outdoor_air():
+    """An infiltration that follows a Schedule:Compact is a scheduled input: a box whose
+    airflow is rho q F(t) and whose supply is the outdoor air (rise T_a - T_s). Stepped
+    with F = 1 it is the fixed conductance of a constant schedule; with F = 0, no leak."""
+    from zonecast.estimator.artifact import load_structure, save_structure
+    from zonecast.estimator.dataset import scheduled_inputs
+    from zonecast.estimator.site import Site
+
+    leak = {"zone_or_zonelist_or_space_or_spacelist_name": "Room",
+            "design_flow_rate_calculation_method": "Flow/Zone", "design_flow_rate": 0.02}
+    fixed_b = _wall_building(LAYERS, extra={"ZoneInfiltration:DesignFlowRate": {"Leak": leak}})
+    sched_b = _wall_building(LAYERS, extra={
+        "ZoneInfiltration:DesignFlowRate": {"Leak": {**leak, "schedule_name": "Winter"}},
+        "Schedule:Compact": {"Winter": SEASONAL_LEAK}})
+    assert sched_b.infiltration["Leak"].schedule == "Winter"
+    assert fixed_b.infiltration["Leak"].schedule == ""
+    fixed = build_structure(fixed_b, {"Z": ["room"]}, {})
+    plain = build_structure(fixed_b, {"Z": ["room"]}, {}, ModelOptions(infiltration="none"))
+    sched = build_structure(sched_b, {"Z": ["room"]}, {})
+    assert list(sched.boxes) == ["infiltration:Leak"] and sched.hvac_boxes == []
+    assert sched.scheduled["infiltration:Leak"]["flow"] == pytest.approx(1.2 * 0.02)
+    assert (sched.A0 != plain.A0).nnz == 0          # nothing fixed: it is all in the input
+    rng = np.random.default_rng(3)
+    n = 96
+    v = np.column_stack([5.0 + 3.0 * np.sin(np.arange(n) / 10.0), np.full(n, 13.0),
+                         rng.uniform(0, 300, (n, 4))])
+    x0 = np.full(fixed.n, 20.0)
+    mf, mp, ms = BilinearModel(fixed), BilinearModel(plain), BilinearModel(sched)
+    rise = np.repeat((v[:, 0] - v[:, 1])[:, None], 1, axis=1)
+    on = ms.simulate(x0, np.full((n, 1), 1.2 * 0.02), v, reheat=rise).y
+    off = ms.simulate(x0, np.zeros((n, 1)), v, reheat=rise).y
+    np.testing.assert_allclose(on, mf.simulate(x0, np.zeros((n, 0)), v).y, atol=1e-9)
+    np.testing.assert_allclose(off, mp.simulate(x0, np.zeros((n, 0)), v).y, atol=1e-9)
+    assert np.abs(on - off).max() > 0.5             # the leak matters in this room
+    # the airflow follows the schedule in the site's local time
+    site = Site.model_validate({
+        "building": "b", "idf": "b.idf", "timezone": "America/Chicago", "step": "15min",
+        "location": {"latitude": 41.8, "longitude": -87.7, "elevation": 190.0},
+        "zones": {"Z": ["Room"]}, "boxes": {},
+        "points": {"outdoor_air_temperature": "Ta", "supply_air_temperature": "Ts",
+                   "zone_temperature": {"Z": ["T"]},
+                   "solar": {"global_horizontal": "G", "direct_normal": "B",
+                             "diffuse_horizontal": "D"}}})
+    t = pd.DatetimeIndex(["2015-03-31 12:00", "2015-07-01 12:00", "2015-12-01 12:00"], tz="UTC")
+    flows = scheduled_inputs(sched.scheduled, t, site)
+    np.testing.assert_allclose(flows[:, 0], [0.024, 0.0, 0.024])
+    # and it survives the structure file
+    import tempfile
+    from pathlib import Path
+    with tempfile.TemporaryDirectory() as tmp:
+        back, _ = load_structure(save_structure(Path(tmp) / "s.npz", sched, {"room": 60.0}))
+    assert back.scheduled == sched.scheduled and list(back.boxes) == list(sched.boxes)
 
 
 def test_facade_rotation_follows_the_plan():

@@ -176,3 +176,54 @@ def test_max_block_raises_the_target_airflow(week):
         assert inside > 2.5 * outside, (b.target, inside, outside)
         # the 08:00 row already shows the commanded step (docs/data.md time convention)
         assert tel.loc[sel, col].iloc[0] == pytest.approx(inside, rel=0.02)
+
+
+def test_scheduled_infiltration_flows_through_every_input_path(week, tmp_path):
+    """NREL's 5-zone leaks by a Schedule:Compact: the model takes it as scheduled inputs
+    (after the five VAV boxes), the offline rows and the runner's row conversion give the
+    same u and discharge-air rise, and the served inputs carry the schedule's airflows and
+    the forecast outdoor air exactly. The file's schedule is 0 in this October week, so a
+    daily one (the DOE small office's) stands in for it to see the values move."""
+    from zonecast.estimator.artifact import load_model_file, write_model_file
+    from zonecast.estimator.dataset import scheduled_inputs
+    from zonecast.estimator.schedules import CompactSchedule
+    from zonecast.estimator.streaming import OnlineEstimator, RowConverter, model_rows
+
+    site_file = week.out / "site.yaml"
+    pipe = Pipeline.from_site(site_file)
+    st = pipe.model().structure
+    assert list(st.scheduled) == [f"infiltration:SPACE{i}-1 Infil 1" for i in range(1, 6)]
+    assert st.hvac_boxes == list(pipe.site.boxes) and len(st.boxes) == 10
+    daily = CompactSchedule.from_epjson("Quarter", {"data": [{"field": f} for f in (
+        "Through: 12/31", "For: Weekdays", "Until: 06:00", 1.0, "Until: 22:00", 0.25,
+        "Until: 24:00", 1.0, "For: AllOtherDays", "Until: 24:00", 1.0)]})
+    for spec in st.scheduled.values():
+        spec["schedule"] = daily.to_dict()
+    path = write_model_file(tmp_path / "model.json", site_file, structure=st,
+                            room_volume=pipe.model().room_weights())
+    bundle = load_model_file(path)
+    assert bundle.model.structure.scheduled == st.scheduled
+    tel = load_telemetry(week.out / "telemetry.csv", bundle.site)
+    frame = tel.frame
+    data = model_rows(bundle, frame)
+    assert data.u.shape[1] == 10 and data.boxes[5:] == list(st.scheduled)
+    flows = data.u[:, 5:]
+    assert set(np.round(flows[:, 0] / st.scheduled[data.boxes[5]]["flow"], 6)) == {0.25, 1.0}
+    np.testing.assert_array_equal(data.reheat[:, 5:],
+                                  np.repeat((data.v[:, 0] - data.v[:, 1])[:, None], 5, axis=1))
+    conv = RowConverter(bundle)
+    ns = frame.index.as_unit("ns").asi8
+    u, _, _, rise = conv.convert_rows(ns, frame[conv.points].to_numpy())
+    np.testing.assert_array_equal(u[:, 5:], data.u[:, 5:])
+    np.testing.assert_allclose(rise[:, 5:], data.reheat[:, 5:], rtol=0, atol=1e-12)
+    est = OnlineEstimator(bundle)
+    for k in range(2 * 96):
+        est.advance(data.times[k], data.u[k], data.v[k], data.y[k], data.reheat[k])
+    ins = est.forecast_inputs()
+    ahead = est.time.value + 900 * 10**9 * np.arange(len(ins), dtype=np.int64)
+    want = scheduled_inputs(st.scheduled, pd.DatetimeIndex(ahead, tz="UTC"), bundle.site)
+    np.testing.assert_array_equal(ins[:, 5:10], want)
+    assert len(np.unique(want[:, 0])) == 2                  # the day's two values ahead
+    nb = 10
+    np.testing.assert_allclose(ins[:, -5:], np.repeat((ins[:, nb] - ins[:, nb + 1])[:, None], 5, axis=1),
+                               rtol=0, atol=1e-12)

@@ -279,7 +279,7 @@ def test_update_equals_filterpys_joseph_update(seed, n, m, p_missing):
     from filterpy.kalman import KalmanFilter
 
     rng = np.random.default_rng(seed)
-    F, H, Q, R = random_system(rng, n, m, stable=False)
+    _F, H, Q, R = random_system(rng, n, m, stable=False)
     A = rng.normal(0, 1, (n, n))
     P0 = A @ A.T + 0.1 * np.eye(n)
     x0 = rng.normal(20, 2, n)

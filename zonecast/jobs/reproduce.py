@@ -124,9 +124,9 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                   + "; ".join(f"{s['role']} {s['start'][:16]} to {s['end'][:16]}"
                               for s in spans) + ".", ""]
     if (results.identification or {}).get("weekend_gains"):
-        lines += ["Fitted with the weekly internal-gains profile of the training weeks without "
-                  "experiments as known f_IG (`--weekend-gains`), so Table 2 is the model with "
-                  "that profile, not the paper's f_IG = 0.", ""]
+        lines += [("Fitted with the weekly internal-gains profile of the training weeks without "
+                   "experiments as known f_IG (`--weekend-gains`), so Table 2 is the model with "
+                   "that profile, not the paper's f_IG = 0."), ""]
     lines += _table(results.table2, zones, PAPER["table2"])
     if results.table2_window_solar_air:
         lines += ["", (f"Model options: {json.dumps(results.model_options)}. Sensitivity, the same "

@@ -223,9 +223,9 @@ def _noise(doc: dict, path: Path) -> NoiseSettings:
     return NoiseSettings(**{k: float(v) for k, v in known.items()})
 
 
-_OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration", "facades")
+_OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration", "facades", "ground")
 #: what a model file without an option was built with (options added later)
-_LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal"}
+_LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal", "ground": "adiabatic"}
 #: what a model file without ``model_options`` was built with (files written before the
 #: key existed put window solar on the room air, the paper's placement)
 LEGACY_OPTIONS = {"window_solar": "air"}

@@ -21,7 +21,8 @@ from zonecast.estimator.site import Site
 from zonecast.estimator.solar import FACADE_AZIMUTHS, facade_irradiance
 from zonecast.estimator.telemetry import Telemetry, segments_of
 
-__all__ = ["DISTURBANCES", "ModelData", "model_data", "scheduled_inputs", "zone_weights"]
+__all__ = ["DISTURBANCES", "ModelData", "model_data", "scheduled_inputs", "scheduled_rise",
+           "with_scheduled", "zone_weights"]
 
 
 
@@ -101,15 +102,19 @@ def zone_weights(site: Site, room_volume: Mapping[str, float] | None) -> dict[st
 def scheduled_inputs(scheduled: Mapping[str, Mapping], times, site: Site) -> np.ndarray:
     """(N, len(scheduled)) airflows [kg/s] of the model's scheduled inputs
     (:attr:`~.rc.network.RCStructure.scheduled`) over the intervals starting at ``times``:
-    each one's flow times its schedule's value in the site's local time, the thermostat's
-    holidays as EnergyPlus ``Holiday`` days (:mod:`~zonecast.estimator.schedules`)."""
+    each one's flow, times its schedule's value in the site's local time where it has one
+    (the thermostat's holidays as EnergyPlus ``Holiday`` days,
+    :mod:`~zonecast.estimator.schedules`)."""
     idx = pd.DatetimeIndex(times)
     th = site.thermostat
     holidays = list(th.holidays) if th is not None else []
     out = np.empty((len(idx), len(scheduled)))
     cache: dict[str, np.ndarray] = {}
     for j, spec in enumerate(scheduled.values()):
-        sched = spec["schedule"]
+        sched = spec.get("schedule")
+        if sched is None:
+            out[:, j] = float(spec["flow"])
+            continue
         key = sched["name"]
         if key not in cache:
             cache[key] = CompactSchedule.from_dict(sched).values(idx, site.timezone, holidays)
@@ -117,15 +122,37 @@ def scheduled_inputs(scheduled: Mapping[str, Mapping], times, site: Site) -> np.
     return out
 
 
+def scheduled_rise(scheduled: Mapping[str, Mapping], times, site: Site, ta: np.ndarray,
+                   ts: np.ndarray) -> np.ndarray:
+    """(N, len(scheduled)) supply temperature of each scheduled input over the supply air
+    T_s [K] (the discharge-air rise the model adds to T_s): the outdoor air T_a for an
+    infiltration (``"supply": "Ta"``), the month's ground temperature in the site's local
+    time for a ground contact (``"supply": "ground"``)."""
+    ta, ts = np.asarray(ta, float), np.asarray(ts, float)
+    out = np.empty((len(ts), len(scheduled)))
+    month = None
+    for j, spec in enumerate(scheduled.values()):
+        if spec["supply"] == "Ta":
+            out[:, j] = ta - ts
+        elif spec["supply"] == "ground":
+            if month is None:
+                month = pd.DatetimeIndex(times).tz_convert(site.timezone).month.to_numpy() - 1
+            out[:, j] = np.asarray(spec["monthly"], float)[month] - ts
+        else:
+            raise ValueError(f"scheduled input supply {spec['supply']!r}: expected 'Ta' or "
+                             "'ground'")
+    return out
+
+
 def with_scheduled(scheduled: Mapping[str, Mapping], times, site: Site, u: np.ndarray,
                    v: np.ndarray, rise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """u and the discharge-air rise with the scheduled inputs' columns appended: their
-    airflows (:func:`scheduled_inputs`) and their supply air, the outdoor air, as a rise
-    T_a - T_s over the supply air."""
+    airflows (:func:`scheduled_inputs`) and their supply over the supply air
+    (:func:`scheduled_rise`)."""
     if not scheduled:
         return u, rise
     flows = scheduled_inputs(scheduled, times, site)
-    sup = np.repeat((v[:, 0] - v[:, 1])[:, None], len(scheduled), axis=1)
+    sup = scheduled_rise(scheduled, times, site, v[:, 0], v[:, 1])
     return np.hstack([u, flows]), np.hstack([rise, sup])
 
 

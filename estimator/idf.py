@@ -648,6 +648,9 @@ class Building:
     notes: list[str] = field(default_factory=list)
     #: Schedule:Compact objects the model follows in time (infiltration), by name
     schedules: dict[str, CompactSchedule] = field(default_factory=dict)
+    #: temperature under ground-contact surfaces, January to December [degC]
+    #: (Site:GroundTemperature:BuildingSurface; EnergyPlus's 18 degC without one)
+    ground_temperature: tuple[float, ...] = (18.0,) * 12
 
     def zone(self, name: str) -> Zone:
         """Zone by case-insensitive name."""
@@ -1029,11 +1032,31 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
             notes.append(f"zone {z.name}: {', '.join(z.geometry_computed)} computed from geometry")
     schedules: dict[str, CompactSchedule] = {}
     infiltration = _infiltration(data, zkey, zones, surfaces, unsupported, notes, schedules)
+    ground = _ground_temperature(data, surfaces, notes)
     return Building(
         name=bname, version=version_text, north_axis=north, zones=zones, surfaces=surfaces,
         windows=windows, constructions=constructions, internal_masses=masses,
         unsupported=unsupported, notes=notes, infiltration=infiltration, schedules=schedules,
+        ground_temperature=ground,
     )
+
+
+_MONTHS = ("january", "february", "march", "april", "may", "june", "july", "august",
+           "september", "october", "november", "december")
+
+
+def _ground_temperature(data: Mapping[str, Any], surfaces: Mapping[str, Surface],
+                        notes: list[str]) -> tuple[float, ...]:
+    """Monthly temperatures under ground-contact surfaces [degC]: the file's
+    Site:GroundTemperature:BuildingSurface, else EnergyPlus's default 18 degC."""
+    objs = list(data.get("Site:GroundTemperature:BuildingSurface", {}).values())
+    if not objs:
+        if any(s.boundary == "Ground" for s in surfaces.values()):
+            notes.append("ground-contact surfaces without Site:GroundTemperature:BuildingSurface:"
+                         " 18 degC all year (EnergyPlus's default)")
+        return (18.0,) * 12
+    f = objs[0]
+    return tuple(_num(f.get(f"{m}_ground_temperature"), 18.0) for m in _MONTHS)
 
 
 def _infiltration(data: Mapping[str, Any], zkey: Mapping[str, str], zones: Mapping[str, Zone],

@@ -190,7 +190,8 @@ class Pipeline:
                  validation: Sequence[str] | None = None, *, n_starts: int = 3, seed: int = 0,
                  progress: Progress = _quiet, priors: bool | Mapping[str, Prior] = True,
                  sigma_e: float = 0.3, window: str = "weekend", weekend_gains: bool = False,
-                 gains_weeks: Sequence[int] | None = None) -> IdentificationResult:
+                 gains_weeks: Sequence[int] | None = None,
+                 agree_rtol: float = 1e-3) -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -201,6 +202,9 @@ class Pipeline:
         a mapping of priors, or False for the paper's least squares; ``sigma_e`` [K]
         the MAP residual scale. ``window``: fit whole weekends (the paper) or the site's
         declared ``experiments`` with a lead-in (:func:`~.identify.identification_spans`).
+
+        ``agree_rtol``: the starts stop once two reach the same cost within it
+        (:func:`~.identify.identify`; 0 runs all ``n_starts``).
 
         ``weekend_gains``: a building occupied at weekends has internal gains on the
         identification weekends that the paper's fit (f_IG = 0) leaves to the parameters.
@@ -221,7 +225,7 @@ class Pipeline:
             priors = building_priors(start, self._building_or_none())
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
                        seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,
-                       window=window)
+                       window=window, agree_rtol=agree_rtol)
         if weekend_gains:
             self.params = res.model.params
             progress("weekly internal-gains profile for the weekends' gains")

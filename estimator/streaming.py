@@ -79,6 +79,7 @@ from zonecast.estimator.dataset import (
     ModelData,
     model_data,
     scheduled_inputs,
+    scheduled_rise,
     with_scheduled,
     zone_weights,
 )
@@ -641,16 +642,13 @@ class OnlineEstimator:
         ins[:, nb] = wx[:, 0]
         ins[:, nb + 2:nb + 6] = wx[:, 1:]
         sched = self.bundle.model.structure.scheduled
-        if sched:  # known ahead: the schedules' airflows, the forecast outdoor air
-            k = len(sched)
-            ins[:, nb - k:nb] = self._scheduled_flows(times)
-            ins[:, self._nin - k:] = (wx[:, 0] - ins[:, nb + 1])[:, None]
+        if sched:  # known ahead: their airflows, and their supply (the forecast outdoor
+            k = len(sched)  # air, the ground's month) over the forecast supply air
+            idx = pd.DatetimeIndex(times, tz="UTC")
+            ins[:, nb - k:nb] = scheduled_inputs(sched, idx, self.bundle.site)
+            ins[:, self._nin - k:] = scheduled_rise(sched, idx, self.bundle.site, wx[:, 0],
+                                                    ins[:, nb + 1])
         return ins
-
-    def _scheduled_flows(self, times_ns: np.ndarray) -> np.ndarray:
-        """(len(times_ns), n_scheduled) airflows of the scheduled inputs [kg/s]."""
-        return scheduled_inputs(self.bundle.model.structure.scheduled,
-                                pd.DatetimeIndex(times_ns, tz="UTC"), self.bundle.site)
 
     def _bins(self, times_ns: np.ndarray) -> np.ndarray:
         """Time-of-week bin of the profile for UTC grid times (ns since the epoch)."""

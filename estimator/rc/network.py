@@ -49,6 +49,11 @@ __all__ = [
 
 #: Disturbance vector, paper order (sec:model): ambient, supply air, solar E, S, W, N.
 DISTURBANCES = ("Ta", "Ts", "solE", "solS", "solW", "solN")
+#: conductance between a ground-contact outer face and the ground temperature [W/(m2 K)]:
+#: EnergyPlus puts the face at the ground temperature; 100 W/m2K holds it there within a few
+#: per cent of the drop across any slab (U <= 5 W/m2K) without stiffening the model beyond
+#: its film-coupled massless faces (docs/model.md "Ground contact")
+GROUND_CONDUCTANCE = 100.0
 #: Specific heat capacity of air c_p [J/(kg K)].
 CP_AIR = 1005.0
 #: Air density for room air capacity [kg/m3].
@@ -107,9 +112,12 @@ class ModelOptions:
         Solar input on roofs and other surfaces tilted less than 60 deg from
         horizontal: the mean of the four facade irradiances, or none (v has no
         horizontal component, paper sec:model).
-    ground : {"adiabatic"}
-        Ground-contact outer faces: no heat flux (a fixed ground temperature
-        would need an input the paper's v does not have).
+    ground : {"idf", "adiabatic"}
+        Ground-contact outer faces: held near the IDF's monthly temperature under the
+        building (Site:GroundTemperature:BuildingSurface, EnergyPlus's boundary condition)
+        through :data:`GROUND_CONDUCTANCE`, a scheduled input per surface
+        (:attr:`RCStructure.scheduled`); or no heat flux (the structure before
+        2026-11-24; model files written before read as this).
     rho_air : float
         Air density for room capacities [kg/m3].
     cp_air : float
@@ -141,7 +149,7 @@ class ModelOptions:
     """
 
     roof_solar: str = "mean"
-    ground: str = "adiabatic"
+    ground: str = "idf"
     rho_air: float = RHO_AIR
     cp_air: float = CP_AIR
     window_solar: str = "surfaces"
@@ -160,8 +168,8 @@ class ModelOptions:
             raise ModelDefinitionError("floor_share must be a fraction in [0, 1]")
         if self.roof_solar not in ("mean", "none"):
             raise ModelDefinitionError("roof_solar must be 'mean' or 'none'")
-        if self.ground != "adiabatic":
-            raise ModelDefinitionError("ground must be 'adiabatic' (the only supported choice)")
+        if self.ground not in ("idf", "adiabatic"):
+            raise ModelDefinitionError("ground must be 'idf' or 'adiabatic'")
 
 
 def facade_of(tilt: float, azimuth: float, roof_solar: str = "mean",
@@ -243,12 +251,14 @@ class RCStructure:
         Room -> exterior window area seen by each solar column E, S, W, N [m2] (the
         weights of gamma_winSolAbs a_win v_sol, wherever :class:`ModelOptions` puts it).
     scheduled : dict
-        Scheduled inputs: box id (after the site's boxes in :attr:`boxes`) ->
-        ``{"flow": [kg/s], "schedule": CompactSchedule.to_dict(), "supply": "Ta"}``. Such an
-        input is a box whose airflow is ``flow`` times the schedule's value at the time
-        and whose supply air is the outdoor air (an infiltration that follows a schedule:
-        :func:`~zonecast.estimator.dataset.scheduled_inputs` gives its columns of u and of
-        the discharge-air rise, T_a - T_s).
+        Scheduled inputs: box id (after the site's boxes in :attr:`boxes`) -> its spec.
+        Such an input is a box-like term c_p u (T_supply - x) at one state whose u and
+        T_supply are known ahead (:func:`~zonecast.estimator.dataset.with_scheduled` gives
+        its columns of u and of the discharge-air rise T_supply - T_s):
+        an infiltration that follows a schedule, ``{"flow": [kg/s], "schedule":
+        CompactSchedule.to_dict(), "supply": "Ta"}`` at its room's air; a ground contact,
+        ``{"flow": G A / c_p, "supply": "ground", "monthly": [12 x degC]}`` at the outer
+        face of the surface (:data:`GROUND_CONDUCTANCE`).
     """
 
     labels: list[StateLabel]
@@ -513,6 +523,8 @@ def build_structure(
     skey = {k.lower(): k for k in surfaces}
     done: set[str] = set()
     area_ext = area_win = 0.0
+    scheduled: dict[str, dict] = {}
+    ground_boxes: dict[str, tuple[str, int]] = {}  # box -> (room, state of its face)
     # room -> (face node, area) of the element faces exposed to the room's air: floors, and
     # every other element (walls, ceilings, roofs, doors, internal mass)
     floor_faces: dict[str, list[tuple[int, float]]] = {}
@@ -569,10 +581,22 @@ def build_structure(
         else:
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
             face(s, s.zone, nodes[-1])
-            if s.boundary not in ("Adiabatic", "Ground"):
+            if s.boundary == "Ground" and opts.ground == "idf":
+                # the outer face held near the ground temperature T_g(month): a scheduled
+                # input of constant "airflow" G A / c_p at the face whose supply is T_g
+                box = f"ground:{name}"
+                ground_boxes[box] = (s.zone, nodes[0])
+                box_rooms[box] = s.zone
+                scheduled[box] = {"flow": GROUND_CONDUCTANCE * s.area / opts.cp_air,
+                                  "supply": "ground",
+                                  "monthly": [float(t) for t in building.ground_temperature]}
+            elif s.boundary not in ("Adiabatic", "Ground"):
                 notes.append(f"surface {name}: boundary {s.boundary} treated as adiabatic")
     if any(s.boundary == "Ground" for s in surfaces.values()):
-        notes.append("ground-contact surfaces: outer face adiabatic (ModelOptions.ground)")
+        notes.append("ground-contact surfaces: outer face adiabatic (ModelOptions.ground)"
+                     if opts.ground == "adiabatic" else
+                     "ground-contact surfaces: outer face at the IDF's monthly ground "
+                     "temperature (scheduled inputs)")
 
     for name in sorted(building.internal_masses):
         m = building.internal_masses[name]
@@ -603,7 +627,6 @@ def build_structure(
             notes.append(f"interior window {name}: U_win coupling between rooms")
         else:
             notes.append(f"window {name} on a {parent.boundary} surface: ignored")
-    scheduled: dict[str, dict] = {}
     if opts.infiltration == "idf":
         for name in sorted(building.infiltration):
             inf = building.infiltration[name]
@@ -646,7 +669,8 @@ def build_structure(
         Bv0=b_list[0],
         Bv_p=b_list[1:],
         B_ig=b_ig,
-        room_of_box=np.array([room_state[box_rooms[b]] for b in box_rooms], dtype=int),
+        room_of_box=np.array([ground_boxes[b][1] if b in ground_boxes
+                              else room_state[box_rooms[b]] for b in box_rooms], dtype=int),
         C=c_mat,
         cp_air=opts.cp_air,
         notes=notes,

@@ -13,8 +13,8 @@ from zonecast.estimator.identify import (
 from zonecast.estimator.rc.network import ModelOptions as _Options
 from zonecast.estimator.telemetry import segments_of
 
-#: the RC network alone: NREL's files' scheduled infiltration would add model inputs
-NO_LEAK = _Options(infiltration="none")
+#: the RC network alone (NREL's files' scheduled inputs, infiltration and ground, add to u)
+NO_LEAK = _Options(infiltration="none", ground="adiabatic")
 
 
 def _model_and_inputs(five_zone, seed):

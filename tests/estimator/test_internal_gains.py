@@ -14,8 +14,8 @@ from zonecast.estimator.internal_gains import (
 from zonecast.estimator.rc.network import ModelOptions as _Options
 from zonecast.estimator.telemetry import segments_of
 
-#: the RC network alone: NREL's files' scheduled infiltration would add model inputs
-NO_LEAK = _Options(infiltration="none")
+#: the RC network alone (NREL's files' scheduled inputs, infiltration and ground, add to u)
+NO_LEAK = _Options(infiltration="none", ground="adiabatic")
 
 ZONES = {"South": ["SPACE1-1"], "East": ["SPACE2-1"], "North": ["SPACE3-1"],
          "West": ["SPACE4-1"], "Core": ["SPACE5-1"]}

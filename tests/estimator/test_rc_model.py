@@ -26,12 +26,13 @@ FIVE_ZONES = {"Perim": ["space1-1", "SPACE2-1", "SPACE3-1", "SPACE4-1"], "Core":
 FIVE_BOXES = {f"VAV{i}": f"Space{i}-1" for i in range(1, 6)}
 
 
-#: the RC network alone: NREL's files' scheduled infiltration would add model inputs
-NO_LEAK = ModelOptions(infiltration="none")
+#: the RC network alone (NREL's files' scheduled inputs, infiltration and ground, add to u)
+NO_LEAK = ModelOptions(infiltration="none", ground="adiabatic")
 
 
-def _wall_building(layers, area=(4.0, 3.0), extra=None):
-    """One room whose south wall is exterior; all other surfaces adiabatic."""
+def _wall_building(layers, area=(4.0, 3.0), extra=None, floor="Adiabatic"):
+    """One room whose south wall is exterior; all other surfaces adiabatic (the floor's
+    boundary ``floor``)."""
     w, h = area
     depth = 5.0
     mats = {}
@@ -50,7 +51,7 @@ def _wall_building(layers, area=(4.0, 3.0), extra=None):
         "East": ([(w, 0, h), (w, 0, 0), (w, depth, 0), (w, depth, h)], "Wall", "Adiabatic"),
         "North": ([(w, depth, h), (w, depth, 0), (0, depth, 0), (0, depth, h)], "Wall", "Adiabatic"),
         "West": ([(0, depth, h), (0, depth, 0), (0, 0, 0), (0, 0, h)], "Wall", "Adiabatic"),
-        "Floor": ([(0, 0, 0), (0, depth, 0), (w, depth, 0), (w, 0, 0)], "Floor", "Adiabatic"),
+        "Floor": ([(0, 0, 0), (0, depth, 0), (w, depth, 0), (w, 0, 0)], "Floor", floor),
         "Ceil": ([(0, depth, h), (0, 0, h), (w, 0, h), (w, depth, h)], "Ceiling", "Adiabatic"),
     }
     surfs = {
@@ -452,6 +453,64 @@ def test_scheduled_infiltration_is_a_box_of_outdoor_air():
     with tempfile.TemporaryDirectory() as tmp:
         back, _ = load_structure(save_structure(Path(tmp) / "s.npz", sched, {"room": 60.0}))
     assert back.scheduled == sched.scheduled and list(back.boxes) == list(sched.boxes)
+
+
+def test_ground_contact_holds_the_floor_at_the_monthly_ground_temperature():
+    """A ground-contact floor is a scheduled input at its outer face: G A (T_g(month) - x)
+    with the IDF's Site:GroundTemperature:BuildingSurface (18 degC without one, as
+    EnergyPlus); a room whose only other exchange is adiabatic settles at T_g, and
+    ground='adiabatic' keeps the structure of before."""
+    from zonecast.estimator.dataset import scheduled_inputs, scheduled_rise
+    from zonecast.estimator.rc.network import GROUND_CONDUCTANCE
+    from zonecast.estimator.site import Site
+
+    monthly = {f"{m}_ground_temperature": 10.0 + i for i, m in enumerate(
+        ("january", "february", "march", "april", "may", "june", "july", "august",
+         "september", "october", "november", "december"))}
+    b = _wall_building(LAYERS, floor="Ground",
+                       extra={"Site:GroundTemperature:BuildingSurface": {"G": monthly}})
+    assert b.ground_temperature == tuple(10.0 + i for i in range(12))
+    plain = _wall_building(LAYERS, floor="Ground")
+    assert plain.ground_temperature == (18.0,) * 12
+    assert any("18 degC" in n for n in plain.notes)
+    st = build_structure(b, {"Z": ["room"]}, {})
+    old = build_structure(b, {"Z": ["room"]}, {}, ModelOptions(ground="adiabatic"))
+    assert list(st.boxes) == ["ground:Floor"] and not old.boxes and not old.scheduled
+    spec = st.scheduled["ground:Floor"]
+    assert spec["supply"] == "ground" and spec["monthly"] == [10.0 + i for i in range(12)]
+    assert spec["flow"] * st.cp_air == pytest.approx(GROUND_CONDUCTANCE * 20.0)  # 4 m x 5 m
+    face = st.room_of_box[0]
+    assert st.labels[face].element == "Floor" and st.labels[face].layer == 0  # the outer face
+    assert (st.A0 != old.A0).nnz == 0 and (st.Bv0 != old.Bv0).nnz == 0
+    site = Site.model_validate({
+        "building": "b", "idf": "b.idf", "timezone": "America/Chicago", "step": "15min",
+        "location": {"latitude": 41.8, "longitude": -87.7, "elevation": 190.0},
+        "zones": {"Z": ["Room"]}, "boxes": {},
+        "points": {"outdoor_air_temperature": "Ta", "supply_air_temperature": "Ts",
+                   "zone_temperature": {"Z": ["T"]},
+                   "solar": {"global_horizontal": "G", "direct_normal": "B",
+                             "diffuse_horizontal": "D"}}})
+    # 1 March 03:00 UTC is still February in Chicago: 11 degC
+    t = pd.DatetimeIndex(["2015-03-01 03:00", "2015-03-01 12:00", "2015-07-15 12:00"], tz="UTC")
+    rise = scheduled_rise(st.scheduled, t, site, np.full(3, 30.0), np.full(3, 13.0))
+    np.testing.assert_allclose(rise[:, 0], [11.0 - 13.0, 12.0 - 13.0, 16.0 - 13.0])
+    np.testing.assert_allclose(scheduled_inputs(st.scheduled, t, site)[:, 0], spec["flow"])
+    # no gains, outdoor air at the ground's 14 degC: a room starting at 21 cools towards 14,
+    # and 14 everywhere is the steady state (the ground term vanishes only there)
+    n = 96 * 20
+    v = np.column_stack([np.full(n, 14.0), np.full(n, 13.0), np.zeros((n, 4))])
+    m = BilinearModel(st).with_params({"c_IG[Z]": 0.0})
+    y = m.simulate(np.full(st.n, 21.0), np.full((n, 1), spec["flow"]), v,
+                   reheat=np.full((n, 1), 14.0 - 13.0)).y[:, 0]
+    assert y[0] == pytest.approx(21.0) and 14.0 < y[-1] < y[96] < 21.0
+    # (steady_state has no rise: the only "box" is the ground's, so T_s stands for T_g)
+    ss = m.steady_state(np.array([spec["flow"]]), np.r_[14.0, 14.0, 0, 0, 0, 0])
+    np.testing.assert_allclose(ss, 14.0, atol=1e-9)
+    # with the outdoor air at 21 the floor's outer face sits near the ground, not the room
+    warm = m.steady_state(np.array([spec["flow"]]), np.r_[21.0, 14.0, 0, 0, 0, 0])
+    assert abs(warm[face] - 14.0) < 0.1 * abs(warm[0] - 14.0)
+    with pytest.raises(ModelDefinitionError, match="ground must be"):
+        ModelOptions(ground="soil")
 
 
 def test_facade_rotation_follows_the_plan():

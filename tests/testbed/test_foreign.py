@@ -178,12 +178,13 @@ def test_max_block_raises_the_target_airflow(week):
         assert tel.loc[sel, col].iloc[0] == pytest.approx(inside, rel=0.02)
 
 
-def test_scheduled_infiltration_flows_through_every_input_path(week, tmp_path):
-    """NREL's 5-zone leaks by a Schedule:Compact: the model takes it as scheduled inputs
-    (after the five VAV boxes), the offline rows and the runner's row conversion give the
-    same u and discharge-air rise, and the served inputs carry the schedule's airflows and
-    the forecast outdoor air exactly. The file's schedule is 0 in this October week, so a
-    daily one (the DOE small office's) stands in for it to see the values move."""
+def test_scheduled_inputs_flow_through_every_input_path(week, tmp_path):
+    """NREL's 5-zone leaks by a Schedule:Compact and has ground-contact floors: the model
+    takes both as scheduled inputs (after the five VAV boxes), the offline rows and the
+    runner's row conversion give the same u and discharge-air rise, and the served inputs
+    carry the schedules' airflows, the forecast outdoor air and the ground's month exactly.
+    The file's infiltration schedule is 0 in this October week, so a daily one (the DOE
+    small office's) stands in for it to see the values move."""
     from zonecast.estimator.artifact import load_model_file, write_model_file
     from zonecast.estimator.dataset import scheduled_inputs
     from zonecast.estimator.schedules import CompactSchedule
@@ -192,13 +193,15 @@ def test_scheduled_infiltration_flows_through_every_input_path(week, tmp_path):
     site_file = week.out / "site.yaml"
     pipe = Pipeline.from_site(site_file)
     st = pipe.model().structure
-    assert list(st.scheduled) == [f"infiltration:SPACE{i}-1 Infil 1" for i in range(1, 6)]
-    assert st.hvac_boxes == list(pipe.site.boxes) and len(st.boxes) == 10
+    leaks = [f"infiltration:SPACE{i}-1 Infil 1" for i in range(1, 6)]
+    grounds = [f"ground:F{i}-1" for i in range(1, 6)]
+    assert list(st.scheduled) == grounds + leaks
+    assert st.hvac_boxes == list(pipe.site.boxes) and len(st.boxes) == 15
     daily = CompactSchedule.from_epjson("Quarter", {"data": [{"field": f} for f in (
         "Through: 12/31", "For: Weekdays", "Until: 06:00", 1.0, "Until: 22:00", 0.25,
         "Until: 24:00", 1.0, "For: AllOtherDays", "Until: 24:00", 1.0)]})
-    for spec in st.scheduled.values():
-        spec["schedule"] = daily.to_dict()
+    for b in leaks:
+        st.scheduled[b]["schedule"] = daily.to_dict()
     path = write_model_file(tmp_path / "model.json", site_file, structure=st,
                             room_volume=pipe.model().room_weights())
     bundle = load_model_file(path)
@@ -206,11 +209,13 @@ def test_scheduled_infiltration_flows_through_every_input_path(week, tmp_path):
     tel = load_telemetry(week.out / "telemetry.csv", bundle.site)
     frame = tel.frame
     data = model_rows(bundle, frame)
-    assert data.u.shape[1] == 10 and data.boxes[5:] == list(st.scheduled)
-    flows = data.u[:, 5:]
-    assert set(np.round(flows[:, 0] / st.scheduled[data.boxes[5]]["flow"], 6)) == {0.25, 1.0}
-    np.testing.assert_array_equal(data.reheat[:, 5:],
+    assert data.u.shape[1] == 15 and data.boxes[5:] == grounds + leaks
+    leak = slice(10, 15)
+    assert set(np.round(data.u[:, 10] / st.scheduled[leaks[0]]["flow"], 6)) == {0.25, 1.0}
+    np.testing.assert_array_equal(data.reheat[:, leak],
                                   np.repeat((data.v[:, 0] - data.v[:, 1])[:, None], 5, axis=1))
+    october = st.scheduled[grounds[0]]["monthly"][9]
+    np.testing.assert_allclose(data.reheat[:, 5:10], october - data.v[:, [1] * 5], atol=1e-12)
     conv = RowConverter(bundle)
     ns = frame.index.as_unit("ns").asi8
     u, _, _, rise = conv.convert_rows(ns, frame[conv.points].to_numpy())
@@ -222,8 +227,9 @@ def test_scheduled_infiltration_flows_through_every_input_path(week, tmp_path):
     ins = est.forecast_inputs()
     ahead = est.time.value + 900 * 10**9 * np.arange(len(ins), dtype=np.int64)
     want = scheduled_inputs(st.scheduled, pd.DatetimeIndex(ahead, tz="UTC"), bundle.site)
-    np.testing.assert_array_equal(ins[:, 5:10], want)
-    assert len(np.unique(want[:, 0])) == 2                  # the day's two values ahead
-    nb = 10
-    np.testing.assert_allclose(ins[:, -5:], np.repeat((ins[:, nb] - ins[:, nb + 1])[:, None], 5, axis=1),
-                               rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(ins[:, 5:15], want)
+    assert len(np.unique(want[:, 5])) == 2                  # the day's two values ahead
+    nb = 15
+    np.testing.assert_allclose(ins[:, -5:], np.repeat((ins[:, nb] - ins[:, nb + 1])[:, None],
+                                                      5, axis=1), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ins[:, -10:-5], october - ins[:, [nb + 1] * 5], atol=1e-12)

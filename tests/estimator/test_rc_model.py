@@ -396,6 +396,20 @@ def test_infiltration_read_and_modelled_as_outdoor_air_conductance(fields, flow)
         ModelOptions(infiltration="wind")
 
 
+def _room_site():
+    """A site for the one-room test building in Chicago's time zone."""
+    from zonecast.estimator.site import Site
+
+    return Site.model_validate({
+        "building": "b", "idf": "b.idf", "timezone": "America/Chicago", "step": "15min",
+        "location": {"latitude": 41.8, "longitude": -87.7, "elevation": 190.0},
+        "zones": {"Z": ["Room"]}, "boxes": {},
+        "points": {"outdoor_air_temperature": "Ta", "supply_air_temperature": "Ts",
+                   "zone_temperature": {"Z": ["T"]},
+                   "solar": {"global_horizontal": "G", "direct_normal": "B",
+                             "diffuse_horizontal": "D"}}})
+
+
 SEASONAL_LEAK = {"data": [{"field": f} for f in (
     "Through: 3/31", "For: AllDays", "Until: 24:00", 1.0, "Through: 10/31", "For: AllDays",
     "Until: 24:00", 0.0, "Through: 12/31", "For: AllDays", "Until: 24:00", 1.0)]}
@@ -407,7 +421,6 @@ def test_scheduled_infiltration_is_a_box_of_outdoor_air():
     with F = 1 it is the fixed conductance of a constant schedule; with F = 0, no leak."""
     from zonecast.estimator.artifact import load_structure, save_structure
     from zonecast.estimator.dataset import scheduled_inputs
-    from zonecast.estimator.site import Site
 
     leak = {"zone_or_zonelist_or_space_or_spacelist_name": "Room",
             "design_flow_rate_calculation_method": "Flow/Zone", "design_flow_rate": 0.02}
@@ -436,14 +449,7 @@ def test_scheduled_infiltration_is_a_box_of_outdoor_air():
     np.testing.assert_allclose(off, mp.simulate(x0, np.zeros((n, 0)), v).y, atol=1e-9)
     assert np.abs(on - off).max() > 0.5             # the leak matters in this room
     # the airflow follows the schedule in the site's local time
-    site = Site.model_validate({
-        "building": "b", "idf": "b.idf", "timezone": "America/Chicago", "step": "15min",
-        "location": {"latitude": 41.8, "longitude": -87.7, "elevation": 190.0},
-        "zones": {"Z": ["Room"]}, "boxes": {},
-        "points": {"outdoor_air_temperature": "Ta", "supply_air_temperature": "Ts",
-                   "zone_temperature": {"Z": ["T"]},
-                   "solar": {"global_horizontal": "G", "direct_normal": "B",
-                             "diffuse_horizontal": "D"}}})
+    site = _room_site()
     t = pd.DatetimeIndex(["2015-03-31 12:00", "2015-07-01 12:00", "2015-12-01 12:00"], tz="UTC")
     flows = scheduled_inputs(sched.scheduled, t, site)
     np.testing.assert_allclose(flows[:, 0], [0.024, 0.0, 0.024])
@@ -462,7 +468,6 @@ def test_ground_contact_holds_the_floor_at_the_monthly_ground_temperature():
     ground='adiabatic' keeps the structure of before."""
     from zonecast.estimator.dataset import scheduled_inputs, scheduled_rise
     from zonecast.estimator.rc.network import GROUND_CONDUCTANCE
-    from zonecast.estimator.site import Site
 
     monthly = {f"{m}_ground_temperature": 10.0 + i for i, m in enumerate(
         ("january", "february", "march", "april", "may", "june", "july", "august",
@@ -482,14 +487,7 @@ def test_ground_contact_holds_the_floor_at_the_monthly_ground_temperature():
     face = st.room_of_box[0]
     assert st.labels[face].element == "Floor" and st.labels[face].layer == 0  # the outer face
     assert (st.A0 != old.A0).nnz == 0 and (st.Bv0 != old.Bv0).nnz == 0
-    site = Site.model_validate({
-        "building": "b", "idf": "b.idf", "timezone": "America/Chicago", "step": "15min",
-        "location": {"latitude": 41.8, "longitude": -87.7, "elevation": 190.0},
-        "zones": {"Z": ["Room"]}, "boxes": {},
-        "points": {"outdoor_air_temperature": "Ta", "supply_air_temperature": "Ts",
-                   "zone_temperature": {"Z": ["T"]},
-                   "solar": {"global_horizontal": "G", "direct_normal": "B",
-                             "diffuse_horizontal": "D"}}})
+    site = _room_site()
     # 1 March 03:00 UTC is still February in Chicago: 11 degC
     t = pd.DatetimeIndex(["2015-03-01 03:00", "2015-03-01 12:00", "2015-07-15 12:00"], tz="UTC")
     rise = scheduled_rise(st.scheduled, t, site, np.full(3, 30.0), np.full(3, 13.0))

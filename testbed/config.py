@@ -146,9 +146,15 @@ class BuildingConfig(_Strict):
     weekend_occupancy: float = Field(0.0, ge=0, le=1, description="[-] chance that a person "
                                      "works a full day on a weekend day, as a fraction of the "
                                      "weekday chance (0: only short weekend visits)")
-    floor_position: Literal["middle", "top"] = Field(
+    floor_position: Literal["middle", "top", "ground"] = Field(
         "middle", description="middle: floor and ceiling adiabatic (conditioned floors above "
-                              "and below); top: the ceilings are a roof (construction 'roof')")
+                              "and below); top: the ceilings are a roof (construction 'roof'); "
+                              "ground: the floors lie on the ground (boundary Ground at "
+                              "ground_temperature)")
+    ground_temperature: list[float] | None = Field(
+        None, min_length=12, max_length=12,
+        description="[degC] temperature under a ground floor, January to December "
+                    "(Site:GroundTemperature:BuildingSurface); needed by floor_position ground")
 
     @model_validator(mode="after")
     def _refs(self):
@@ -158,6 +164,8 @@ class BuildingConfig(_Strict):
         need = {"exterior_wall", "interior_wall", "floor", "ceiling", "furniture"}
         if self.floor_position == "top":
             need.add("roof")
+        if self.floor_position == "ground" and self.ground_temperature is None:
+            raise ValueError("floor_position ground needs ground_temperature (12 monthly degC)")
         if missing := need - set(self.constructions):
             raise ValueError(f"constructions lacks {sorted(missing)}")
         return self

@@ -37,6 +37,12 @@ CORE = "C"
 MIN_ROOM_LENGTH = 3.0
 #: Share of generated floors that are a top floor under a roof [-].
 TOP_FLOOR_SHARE = 0.2
+#: share of the other floors that lie on the ground (slab on grade)
+GROUND_FLOOR_SHARE = 0.3
+#: indoor temperature a slab under a conditioned building settles near [degC], the drop to
+#: the soil under it [K], and how much of the outdoor's monthly swing, one month late, reaches
+#: it [-]: DOE's reference buildings' slab values (e.g. Chicago 19.5-22.4 degC) in this form
+GROUND_INDOOR, GROUND_DROP, GROUND_SWING = 21.0, 1.0, 0.12
 #: Largest design airflow of a perimeter box [m3/s per m2 floor].
 MAX_AIRFLOW = 0.012
 #: Inside + outside surface resistances of an exterior wall [m2 K/W] (for the wall U only).
@@ -213,6 +219,22 @@ def _office6_walls() -> dict[str, list[tuple]]:
     return {k: list(map(tuple, v)) for k, v in wall_variants(load_config("office6")).items()}
 
 
+def ground_temperatures(climate: Climate) -> list[float]:
+    """Monthly temperature under a slab on grade [degC] for ``climate``: GROUND_INDOOR -
+    GROUND_DROP + GROUND_SWING x (the previous month's mean outdoor temperature - the annual
+    mean), from the climate's TMY3 file (EnergyPlus's ``WeatherData``)."""
+    from zonecast.testbed.run import energyplus_dir
+
+    path = energyplus_dir() / "WeatherData" / climate.weather
+    rows = [line.split(",") for line in path.read_text().splitlines()[8:] if line.strip()]
+    month = np.array([int(r[1]) for r in rows])
+    dry = np.array([float(r[6]) for r in rows])
+    monthly = np.array([dry[month == m].mean() for m in range(1, 13)])
+    lagged = np.roll(monthly, 1)
+    return [round(float(GROUND_INDOOR - GROUND_DROP + GROUND_SWING * (t - monthly.mean())), 2)
+            for t in lagged]
+
+
 def _climate_of(weather: str) -> str:
     return next((k for k, c in CLIMATES.items() if c.weather == weather), "custom")
 
@@ -228,7 +250,7 @@ def describe(cfg: BuildingConfig) -> dict:
     ``furniture`` [m2/m2], ``infiltration`` [m3/s per m2 facade], ``minimum_fraction`` [-],
     ``airflow_perimeter``, ``airflow_core`` [m3/s per m2 floor], ``supply_reset`` (a
     :data:`RESETS` key or ``custom``) and ``supply_reset_values`` [degC],
-    ``excitation_days``, ``weekend_occupancy`` [-], ``floor_position`` (middle, top).
+    ``excitation_days``, ``weekend_occupancy`` [-], ``floor_position`` (middle, top, ground).
     """
     rects = np.array([r.rect for r in cfg.rooms.values()])
     walls = plan_walls({n: r.rect for n, r in cfg.rooms.items()})
@@ -350,8 +372,10 @@ def draw_member(seed: int, index: int, base: BuildingConfig | None = None) -> Fa
     # experiments and weekend use
     excitation_days = "saturday" if rng.random() < 0.5 else "weekend"
     weekend = 0.0 if rng.random() < 0.5 else float(np.round(rng.uniform(0.05, 0.3), 2))
-    # storey (drawn last, so adding it left every other draw as it was)
+    # storey (drawn last, so adding it left every other draw as it was; the ground floor,
+    # added later, is drawn after it for the same reason)
     top = bool(rng.random() < TOP_FLOOR_SHARE)
+    ground = (not top) and bool(rng.random() < GROUND_FLOOR_SHARE)
 
     data = base.model_dump(mode="json")
     name = f"f{seed}-{index:02d}-{climate_key}"
@@ -367,8 +391,10 @@ def draw_member(seed: int, index: int, base: BuildingConfig | None = None) -> Fa
         "furniture_area_per_floor_area": furniture,
         "infiltration_m3s_per_m2_facade": infiltration,
         "weekend_occupancy": weekend,
-        "floor_position": "top" if top else "middle",
+        "floor_position": "top" if top else "ground" if ground else "middle",
     })
+    if ground:
+        data["ground_temperature"] = ground_temperatures(climate)
     if top:
         data["constructions"]["roof"] = [list(x) for x in roof_layers(base)]
     data["hvac"].update({"design_airflow_perimeter": perim_flow, "design_airflow_core": core_flow,

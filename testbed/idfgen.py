@@ -73,6 +73,8 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
     add(obj("Timestep", 4))
     add(obj("Site:Location", cfg.name + " site", cfg.location.latitude, cfg.location.longitude,
             cfg.location.standard_offset_hours, cfg.location.elevation))
+    if cfg.floor_position == "ground":
+        add(obj("Site:GroundTemperature:BuildingSurface", *cfg.ground_temperature))
     add(obj("SizingPeriod:WeatherFileDays", "Summer sizing", 9, 1, 9, 14, "Monday", "No", "No"))
     add(obj("SizingPeriod:WeatherFileDays", "Winter sizing", 1, 5, 1, 18, "Monday", "No", "No"))
     for i, (first, last) in enumerate(periods):
@@ -118,7 +120,8 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
         x0, y0, x1, y1 = room.rect
         add(obj("Zone", rname, 0.0, 0.0, 0.0, 0.0, 1, 1, H, "autocalculate", "autocalculate"))
         add(obj("BuildingSurface:Detailed", f"{rname}_Floor", "Floor", "floor", rname, "",
-                "Adiabatic", "", "NoSun", "NoWind", "", 4,
+                "Ground" if cfg.floor_position == "ground" else "Adiabatic", "", "NoSun",
+                "NoWind", "", 4,
                 x0, y1, 0.0, x1, y1, 0.0, x1, y0, 0.0, x0, y0, 0.0))
         if cfg.floor_position == "top":
             add(obj("BuildingSurface:Detailed", f"{rname}_Roof", "Roof", "roof", rname, "",

@@ -248,6 +248,10 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                      help="'idf' (the default, chosen on the building family): the IDF's "
                           "infiltration objects as a fixed outdoor-air conductance "
                           "(docs/model.md), or 'none' (the paper)")] = "idf",
+                 ground: Annotated[str, typer.Option(
+                     help="'idf' (the default): ground-contact floors held near the IDF's "
+                          "monthly ground temperature (docs/model.md \"Ground contact\"), or "
+                          "'adiabatic' (the paper's model)")] = "idf",
                  weekend_gains: Annotated[bool, typer.Option(
                      help="identify again with the weekly gains profile of the weeks without "
                           "experiments as known f_IG (buildings occupied at weekends; "
@@ -263,6 +267,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  profile_weeks=profile_weeks, window_solar=window_solar,
                                  seed=seed, priors=priors, sigma_e=sigma_e, window=window,
                                  infiltration=infiltration, weekend_gains=weekend_gains,
+                                 ground=ground,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -331,6 +336,9 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   infiltration: Annotated[str, typer.Option(
                       help="'idf' (the default): the IDF's infiltration as a fixed "
                            "outdoor-air conductance, or 'none' (the paper)")] = "idf",
+                  ground: Annotated[str, typer.Option(
+                      help="'idf' (the default): ground-contact floors at the IDF's monthly "
+                           "ground temperature, or 'adiabatic' (the paper)")] = "idf",
                   weekend_gains: Annotated[bool, typer.Option(
                       help="identify again with the weekly gains profile of the training "
                            "weeks as known f_IG (buildings occupied at weekends)")] = False
@@ -344,7 +352,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 progress=lambda m: prog.update(task, description=f"reproduce: {m}"),
                                 priors=priors, sigma_e=sigma_e, window=window,
                                 sensitivity=sensitivity, infiltration=infiltration,
-                                weekend_gains=weekend_gains)
+                                weekend_gains=weekend_gains, ground=ground)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

@@ -119,7 +119,9 @@ def test_drawn_parameters_stay_in_their_ranges_and_vary(family):
     assert 0.0 in seen("weekend_occupancy") and len(seen("weekend_occupancy")) > 3
     assert 0.0 in seen("north_axis") and max(seen("north_axis")) > 30
     assert any(m.params["windowless_rooms"] for m in gen)
-    assert seen("floor_position") == {"middle", "top"}
+    assert seen("floor_position") == {"middle", "top", "ground"}
+    for m in gen:   # a ground floor carries the temperature under it, others none
+        assert (m.config.ground_temperature is not None) == (m.config.floor_position == "ground")
     # SHGC follows U (clear single glass lets more sun in than low-e double glass)
     u = np.array([m.config.glazing.u_factor for m in gen])
     shgc = np.array([m.config.glazing.shgc for m in gen])
@@ -256,7 +258,14 @@ def test_a_rotated_member_in_another_climate_runs_and_the_estimator_reads_it(tmp
     model = pipe.model()
     assert list(model.structure.zones) == list(cfg.zones)
     assert sorted(model.structure.rooms) == sorted(cfg.rooms)
-    assert model.n_boxes == len(cfg.rooms) == len(site.boxes)
+    assert len(model.structure.hvac_boxes) == len(cfg.rooms) == len(site.boxes)
+    # this member lies on the ground: each room's floor is a ground contact held near the
+    # file's monthly ground temperature (docs/model.md "Ground contact")
+    assert cfg.floor_position == "ground"
+    ground = [b for b in model.structure.scheduled if b.startswith("ground:")]
+    assert sorted(ground) == sorted(f"ground:{r}_Floor" for r in cfg.rooms)
+    assert model.structure.scheduled[ground[0]]["monthly"] == pytest.approx(cfg.ground_temperature)
+    assert model.n_boxes == 2 * len(cfg.rooms)
     # the estimator reads the facades' azimuths as EnergyPlus used them (north axis applied)
     con = sqlite3.connect(tmp_path / "eplus" / "eplusout.sql")
     eplus = dict(con.execute("select SurfaceName, Azimuth from Surfaces where ClassName = 'Wall'"))
@@ -291,3 +300,16 @@ def test_a_top_floor_member_has_a_roof_the_estimator_models(tmp_path, family):
     assert all(s.boundary == "Outdoors" and s.tilt == pytest.approx(0.0) for s in roofs)
     counts = pipe.model().structure.state_counts()
     assert counts.get("roof", 0) > 0 and counts["room_air"] == len(m.config.rooms)
+
+
+def test_a_ground_floor_needs_the_temperature_under_it():
+    from zonecast.testbed.family import family_members
+
+    cfg = next(m.config for m in family_members(20, 0) if m.config.floor_position == "ground")
+    data = cfg.model_dump(mode="json")
+    data["ground_temperature"] = None
+    with pytest.raises(ValueError, match="floor_position ground needs ground_temperature"):
+        type(cfg).model_validate(data)
+    data["ground_temperature"] = [20.0] * 11
+    with pytest.raises(ValueError, match="ground_temperature"):
+        type(cfg).model_validate(data)

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 from zonecast.estimator.constants import STEP
 from zonecast.estimator.rc.network import DISTURBANCES
-from zonecast.estimator.schedules import CompactSchedule
+from zonecast.estimator.schedules import CompactSchedule, local_day_minute
 from zonecast.estimator.site import Site
 from zonecast.estimator.solar import FACADE_AZIMUTHS, facade_irradiance
 from zonecast.estimator.telemetry import Telemetry, segments_of
@@ -117,9 +117,23 @@ def scheduled_inputs(scheduled: Mapping[str, Mapping], times, site: Site) -> np.
             continue
         key = sched["name"]
         if key not in cache:
-            cache[key] = CompactSchedule.from_dict(sched).values(idx, site.timezone, holidays)
+            cache[key] = _parsed(sched).values(idx, site.timezone, holidays)
         out[:, j] = float(spec["flow"]) * cache[key]
     return out
+
+
+#: parsed schedules by the identity of their spec (a model's structure keeps its specs for
+#: its life, so the runner's row-at-a-time conversion parses each once)
+_PARSED: dict[int, tuple[Mapping, CompactSchedule]] = {}
+
+
+def _parsed(sched: Mapping) -> CompactSchedule:
+    hit = _PARSED.get(id(sched))
+    if hit is None or hit[0] is not sched:
+        if len(_PARSED) > 256:
+            _PARSED.clear()
+        hit = _PARSED[id(sched)] = (sched, CompactSchedule.from_dict(sched))
+    return hit[1]
 
 
 def scheduled_rise(scheduled: Mapping[str, Mapping], times, site: Site, ta: np.ndarray,
@@ -136,7 +150,9 @@ def scheduled_rise(scheduled: Mapping[str, Mapping], times, site: Site, ta: np.n
             out[:, j] = ta - ts
         elif spec["supply"] == "ground":
             if month is None:
-                month = pd.DatetimeIndex(times).tz_convert(site.timezone).month.to_numpy() - 1
+                days = local_day_minute(times, site.timezone)[0]
+                month = (np.datetime64("1970-01-01", "D") + days).astype("datetime64[M]")
+                month = month.astype(np.int64) % 12
             out[:, j] = np.asarray(spec["monthly"], float)[month] - ts
         else:
             raise ValueError(f"scheduled input supply {spec['supply']!r}: expected 'Ta' or "

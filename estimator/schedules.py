@@ -30,7 +30,35 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-__all__ = ["CompactSchedule", "ScheduleError"]
+__all__ = ["CompactSchedule", "ScheduleError", "local_day_minute"]
+
+_HOUR_NS = 3_600 * 10**9
+_DAY_MIN = 1_440
+#: UTC offset [min] of each (time zone, UTC hour) met so far (a row at a time costs a dict
+#: look-up instead of a pandas time-zone conversion)
+_OFFSETS: dict[tuple[str, int], int] = {}
+
+
+def local_day_minute(times, timezone: str) -> tuple[np.ndarray, np.ndarray]:
+    """Local day (days since 1970-01-01) and minute of the day of tz-aware ``times`` in
+    ``timezone``."""
+    idx = pd.DatetimeIndex(times)
+    if idx.tz is None:
+        raise ScheduleError("schedule times must be time-zone aware")
+    ns = idx.as_unit("ns").asi8
+    hours = ns // _HOUR_NS
+    keys = [(timezone, int(h)) for h in hours]
+    missing = sorted({k[1] for k in keys if k not in _OFFSETS})
+    if missing:
+        if len(_OFFSETS) > 100_000:
+            _OFFSETS.clear()
+        probe = pd.DatetimeIndex(np.array(missing, dtype=np.int64) * _HOUR_NS, tz="UTC")
+        local = probe.tz_convert(timezone)
+        offs = (local.tz_localize(None).as_unit("ns").asi8 - probe.as_unit("ns").asi8) // (
+            60 * 10**9)
+        _OFFSETS.update({(timezone, h): int(o) for h, o in zip(missing, offs)})
+    minutes = ns // (60 * 10**9) + np.array([_OFFSETS[k] for k in keys], dtype=np.int64)
+    return minutes // _DAY_MIN, minutes % _DAY_MIN
 
 _DAYS = ("monday", "tuesday", "wednesday", "thursday", "friday", "saturday", "sunday")
 
@@ -68,6 +96,8 @@ class CompactSchedule:
     name: str
     periods: list = field(default_factory=list)
     notes: list = field(default_factory=list)
+    #: (until minutes, values) of each local date already evaluated (per holiday flag)
+    _days: dict = field(default_factory=dict, compare=False, repr=False)
 
     # --- reading --------------------------------------------------------------------
     @classmethod
@@ -164,21 +194,21 @@ class CompactSchedule:
         """Schedule value of each interval starting at ``times`` (UTC or tz-aware) in the
         site's local time ``timezone``: the value of the first ``Until`` after the
         interval's start, as EnergyPlus gives it for a time step ending at or before it."""
-        idx = pd.DatetimeIndex(times)
-        if idx.tz is None:
-            raise ScheduleError("schedule times must be time-zone aware")
-        local = idx.tz_convert(timezone)
+        days, minutes = local_day_minute(times, timezone)
         hol = set(holidays)
-        minutes = (local.hour * 60 + local.minute).to_numpy()
-        dates = local.date
-        out = np.empty(len(idx))
-        cache: dict[dt.date, tuple[np.ndarray, np.ndarray]] = {}
-        for k, (d, minute) in enumerate(zip(dates, minutes)):
-            hit = cache.get(d)
+        out = np.empty(len(days))
+        cache = self._days
+        if len(cache) > 4096:       # a long replay: keep the memory bounded
+            cache.clear()
+        epoch = dt.date(1970, 1, 1)
+        for k, (day, minute) in enumerate(zip(days.tolist(), minutes.tolist())):
+            holiday = bool(hol) and (epoch + dt.timedelta(days=day)) in hol
+            key = (day, holiday)
+            hit = cache.get(key)
             if hit is None:
-                until = self.day_values(d, d in hol)
-                hit = cache[d] = (np.array([u[0] for u in until]),
-                                  np.array([u[1] for u in until], dtype=float))
+                until = self.day_values(epoch + dt.timedelta(days=day), holiday)
+                hit = cache[key] = (np.array([u[0] for u in until]),
+                                    np.array([u[1] for u in until], dtype=float))
             ends, vals = hit
             j = int(np.searchsorted(ends, minute, side="right"))
             out[k] = vals[min(j, len(vals) - 1)]

@@ -91,3 +91,22 @@ def test_a_day_without_a_rule_is_an_error_naming_the_fix():
                                                  "Until: 24:00", 1))
     with pytest.raises(ScheduleError, match="AllOtherDays"):
         s.values(_at("2015-06-27 12:00"), "America/Chicago")   # a Saturday
+
+
+def test_local_day_and_minute_match_pandas_across_daylight_saving():
+    from zonecast.estimator.schedules import local_day_minute
+
+    rng = np.random.default_rng(4)
+    start = pd.Timestamp("2014-01-01", tz="UTC").value
+    ns = np.sort(start + rng.integers(0, 2 * 365 * 96, 3000) * 900 * 10**9)
+    ns = np.r_[ns, pd.Timestamp("2015-03-08 07:45", tz="UTC").value,   # 01:45 CST
+               pd.Timestamp("2015-03-08 08:00", tz="UTC").value]       # 03:00 CDT
+    t = pd.DatetimeIndex(ns, tz="UTC")
+    for tz in ("America/Chicago", "Etc/GMT+6", "Asia/Kolkata"):
+        days, minutes = local_day_minute(t, tz)
+        local = t.tz_convert(tz)
+        want_days = (local.tz_localize(None).normalize() - pd.Timestamp("1970-01-01")).days
+        np.testing.assert_array_equal(days, want_days.to_numpy())
+        np.testing.assert_array_equal(minutes, (local.hour * 60 + local.minute).to_numpy())
+    d, m = local_day_minute(t[-2:], "America/Chicago")
+    assert m.tolist() == [105, 180]

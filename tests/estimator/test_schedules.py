@@ -108,5 +108,5 @@ def test_local_day_and_minute_match_pandas_across_daylight_saving():
         want_days = (local.tz_localize(None).normalize() - pd.Timestamp("1970-01-01")).days
         np.testing.assert_array_equal(days, want_days.to_numpy())
         np.testing.assert_array_equal(minutes, (local.hour * 60 + local.minute).to_numpy())
-    d, m = local_day_minute(t[-2:], "America/Chicago")
+    _, m = local_day_minute(t[-2:], "America/Chicago")
     assert m.tolist() == [105, 180]

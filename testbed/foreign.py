@@ -668,36 +668,48 @@ def to_records(layout: Layout, wide: pd.DataFrame, per_hour: int, keep: list, st
 def infer_thermostat(truth: pd.DataFrame, zones: list[str], tz: str, experiment: np.ndarray,
                      tolerance: float = 0.97) -> dict | None:
     """The site's thermostat section from the set points EnergyPlus reported, if two levels
-    (occupied on Monday-Friday within one span of hours, unoccupied otherwise) reproduce at
-    least ``tolerance`` of the rows outside experiments; else None."""
+    (occupied on the working days within one span of hours, unoccupied otherwise) reproduce
+    at least ``tolerance`` of the rows outside experiments; else None. Working days are
+    Monday-Friday, else Monday-Saturday (the DOE reference buildings run Saturdays); a
+    working day whose set points never reach the occupied level is a holiday."""
     ok = ~np.asarray(experiment, bool)
     local = pd.DatetimeIndex(truth.index).tz_convert(tz)
     hour = np.asarray(local.hour + local.minute / 60.0)
-    work = np.asarray(local.day_of_week) < 5
+    dow = np.asarray(local.day_of_week)
+    date = np.asarray(local.date)
+    weekday = dow < 5
     out = {}
     for kind in ("heating", "cooling"):
         sp = np.mean([truth[f"{kind}_setpoint:{z}"].to_numpy() for z in zones], axis=0).round(2)
-        mid = ok & work & (hour >= 11) & (hour < 15)
+        mid = ok & weekday & (hour >= 11) & (hour < 15)
         night = ok & (hour >= 1) & (hour < 4)
         if not mid.any() or not night.any():
             return None
         occ = float(pd.Series(sp[mid]).mode()[0])
         unocc = float(pd.Series(sp[night]).mode()[0])
         out[kind] = (occ, unocc, sp)
-    occ_h, _, sp = out["heating"]
-    hours = np.unique(hour[ok & work & (sp == occ_h)]) if occ_h != out["heating"][1] else []
-    if len(hours) == 0:
+    occ_h, unocc_h, sp = out["heating"]
+    if occ_h == unocc_h:
         return None
-    h0, h1 = float(hours.min()), float(hours.max() + 0.25)
-    th = {"heating_occupied": out["heating"][0], "heating_unoccupied": out["heating"][1],
-          "cooling_occupied": out["cooling"][0], "cooling_unoccupied": out["cooling"][1],
-          "occupied_hours": [h0, h1], "experiment_heating": EXPERIMENT_HEATING}
-    occupied = work & (hour >= h0) & (hour < h1)
-    for kind in ("heating", "cooling"):
-        expect = np.where(occupied, out[kind][0], out[kind][1])
-        if np.mean(np.abs(out[kind][2][ok] - expect[ok]) < 0.05) < tolerance:
-            return None
-    return th
+    for days in ((0, 1, 2, 3, 4), (0, 1, 2, 3, 4, 5)):
+        work = np.isin(dow, days)
+        reached = set(date[ok & work & (sp == occ_h)]) | set(date[~ok])  # experiment days
+        holidays = sorted(d for d in set(date[ok & work]) if d not in reached)
+        hours = np.unique(hour[ok & work & (sp == occ_h)])
+        if len(hours) == 0:
+            continue
+        h0, h1 = float(hours.min()), float(hours.max() + 0.25)
+        occupied = work & ~np.isin(date, holidays) & (hour >= h0) & (hour < h1)
+        fits = all(np.mean(np.abs(out[k][2][ok] - np.where(occupied, out[k][0],
+                                                           out[k][1])[ok]) < 0.05) >= tolerance
+                   for k in ("heating", "cooling"))
+        if fits:
+            return {"heating_occupied": out["heating"][0], "heating_unoccupied": unocc_h,
+                    "cooling_occupied": out["cooling"][0],
+                    "cooling_unoccupied": out["cooling"][1], "occupied_hours": [h0, h1],
+                    "working_days": list(days), "holidays": [d.isoformat() for d in holidays],
+                    "experiment_heating": EXPERIMENT_HEATING}
+    return None
 
 
 def run_foreign(idf: str | Path, out: str | Path, weeks: list[dt.date] | None = None,

@@ -233,3 +233,43 @@ def test_scheduled_inputs_flow_through_every_input_path(week, tmp_path):
     np.testing.assert_allclose(ins[:, -5:], np.repeat((ins[:, nb] - ins[:, nb + 1])[:, None],
                                                       5, axis=1), rtol=0, atol=1e-12)
     np.testing.assert_allclose(ins[:, -10:-5], october - ins[:, [nb + 1] * 5], atol=1e-12)
+
+
+def _setpoints(days, hours, holiday=None, tz="America/Chicago"):
+    """Two zones' reported set points over three weeks: 21/24 C in the occupied ``hours``
+    of the weekdays ``days`` (per weekday its own span), 15.6/26.7 C otherwise."""
+    idx = pd.date_range("2015-06-01", "2015-06-21 23:45", freq="15min", tz=tz)
+    h = idx.hour + idx.minute / 60.0
+    occ = np.zeros(len(idx), bool)
+    for d, (h0, h1) in zip(days, hours):
+        occ |= (idx.day_of_week == d) & (h >= h0) & (h < h1)
+    if holiday is not None:
+        occ &= idx.date != holiday
+    frame = {}
+    for z in ("A", "B"):
+        frame[f"heating_setpoint:{z}"] = np.where(occ, 21.0, 15.6)
+        frame[f"cooling_setpoint:{z}"] = np.where(occ, 24.0, 26.7)
+    return pd.DataFrame(frame, index=idx.tz_convert("UTC"))
+
+
+def test_thermostat_inferred_with_saturdays_and_holidays():
+    from zonecast.testbed.foreign import infer_thermostat
+
+    # Monday-Friday 06-20: the NREL 5-zone's pattern
+    tru = _setpoints(range(5), [(6, 20)] * 5)
+    th = infer_thermostat(tru, ["A", "B"], "America/Chicago", np.zeros(len(tru), bool))
+    assert th["working_days"] == [0, 1, 2, 3, 4] and th["occupied_hours"] == [6.0, 20.0]
+    assert th["holidays"] == [] and th["heating_occupied"] == 21.0
+    # the DOE small office: weekdays 06-22, Saturdays 06-18, one weekday a holiday
+    tru = _setpoints(range(6), [(6, 22)] * 5 + [(6, 18)], holiday=dt.date(2015, 6, 10))
+    th = infer_thermostat(tru, ["A", "B"], "America/Chicago", np.zeros(len(tru), bool))
+    assert th["working_days"] == [0, 1, 2, 3, 4, 5] and th["occupied_hours"] == [6.0, 22.0]
+    assert th["holidays"] == ["2015-06-10"]
+    # an experiment Saturday (set points widened) is not a holiday
+    exp = np.asarray(tru.index.tz_convert("America/Chicago").date == dt.date(2015, 6, 13))
+    th = infer_thermostat(tru, ["A", "B"], "America/Chicago", exp)
+    assert "2015-06-13" not in th["holidays"]
+    # no two levels: nothing inferred
+    flat = tru.copy()
+    flat[:] = 21.0
+    assert infer_thermostat(flat, ["A", "B"], "America/Chicago", np.zeros(len(tru), bool)) is None

@@ -277,9 +277,16 @@ class StepperLadder:
     A, rooms, bxu, h, capacity : as :func:`simulate_exact`
     u_base : float
         Airflow bound of level 0 [kg/s per box], > 0.
+    fixed : array (n_boxes,), optional
+        A known bound [kg/s] of each box whose airflow never exceeds it (a scheduled
+        input: an infiltration's design flow, a ground contact's constant G A / c_p); 0
+        for the boxes the ladder bounds. Such a box keeps its own bound at every level and
+        does not raise the level (a ground contact's "airflow" of tens of kg/s would
+        otherwise lift every box's bound, and the series' length, with it).
     """
 
-    def __init__(self, A, rooms, bxu, h: float, capacity: np.ndarray | None, u_base: float):
+    def __init__(self, A, rooms, bxu, h: float, capacity: np.ndarray | None, u_base: float,
+                 fixed: np.ndarray | None = None):
         if not u_base > 0:
             raise ValueError(f"u_base must be > 0 kg/s, got {u_base}")
         self.A = sp.csr_matrix(A, dtype=float)
@@ -288,13 +295,23 @@ class StepperLadder:
         self.h = float(h)
         self.capacity = capacity
         self.u_base = float(u_base)
+        self.fixed = (np.zeros(len(self.rooms)) if fixed is None
+                      else np.asarray(fixed, dtype=float))
+        if self.fixed.shape != (len(self.rooms),) or (self.fixed < 0).any():
+            raise ValueError("fixed must hold one bound >= 0 kg/s per box")
+        self._free = self.fixed == 0
         self._levels: dict[int, ExactStepper] = {}
 
     def level(self, u: np.ndarray) -> int:
-        """Ladder level covering every airflow in ``u`` [kg/s]."""
-        top = float(np.max(u)) if np.size(u) else 0.0
-        if not np.isfinite(top) or np.min(u) < 0:
+        """Ladder level covering every airflow in ``u`` [kg/s] (a box with a fixed bound
+        counts only where its airflow exceeds that bound)."""
+        u = np.asarray(u, dtype=float)
+        if np.size(u) and (not np.isfinite(u).all() or np.min(u) < 0):
             raise ValueError("airflows must be finite and >= 0 kg/s")
+        if np.size(u) and not self._free.all():
+            over = u > self.fixed
+            u = np.where(self._free | over, u, 0.0)
+        top = float(np.max(u)) if np.size(u) else 0.0
         return max(0, int(np.ceil(np.log2(top / self.u_base)))) if top > self.u_base else 0
 
     def for_airflows(self, u: np.ndarray) -> ExactStepper:
@@ -302,7 +319,8 @@ class StepperLadder:
         k = self.level(u)
         st = self._levels.get(k)
         if st is None:
-            bound = np.full(len(self.rooms), self.u_base * 2.0**k)
+            top = self.u_base * 2.0**k
+            bound = np.where(self._free, top, np.maximum(self.fixed, top))
             st = ExactStepper(self.A, self.rooms, self.bxu, self.h, bound, self.capacity)
             self._levels[k] = st
         return st

@@ -177,6 +177,20 @@ def has_discharge(bundle: ModelBundle) -> bool:
             or any(b.discharge_temperature is not None for b in bundle.site.boxes.values()))
 
 
+def _scheduled_bounds(structure) -> np.ndarray:
+    """Per box: the largest airflow of a scheduled input [kg/s] (its flow times its
+    schedule's largest value), 0 for the site's boxes (:class:`StepperLadder` ``fixed``)."""
+    out = np.zeros(len(structure.boxes))
+    for j, box in enumerate(structure.boxes):
+        spec = structure.scheduled.get(box)
+        if spec is not None:
+            sched = spec.get("schedule")
+            peak = 1.0 if sched is None else max(
+                v for p in sched["periods"] for r in p[1] for _, v in r[1])
+            out[j] = float(spec["flow"]) * max(peak, 0.0)
+    return out
+
+
 def _input_names(bundle: ModelBundle) -> list[str]:
     boxes = list(bundle.model.structure.boxes)
     names = [f"u:{b}" for b in boxes] + [f"v:{d}" for d in DISTURBANCES]
@@ -240,7 +254,8 @@ class OnlineEstimator:
         self._steady = _steady_parts(bundle, Q, R)
         self._ladder = StepperLadder(m.structure.A(m.params.physical), m._rooms, m._bxu,
                                      m.step, m.structure.capacity,
-                                     float(np.max(m.u_nominal)))
+                                     float(np.max(m.u_nominal)),
+                                     fixed=_scheduled_bounds(m.structure))
         # the day-ahead offset's decay and window as chosen on the training weeks (the
         # offline study's; docs/numerics.md)
         self._dayahead = DayAheadGains(bundle.profile, tau=DAYAHEAD_TAU, window=DAYAHEAD_WINDOW,

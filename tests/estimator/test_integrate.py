@@ -148,3 +148,24 @@ def test_ladder_level_depends_on_the_airflows_only():
         StepperLadder(A, rooms, bxu, 900.0, cap, u_base=0.0)
     with pytest.raises(ValueError, match="finite and >= 0"):
         lad.level(np.array([-0.1]))
+
+
+def test_ladder_keeps_a_scheduled_input_on_its_own_bound():
+    """A box with a fixed bound (a ground contact's constant G A / c_p of tens of kg/s)
+    neither raises the level nor the other boxes' bounds; it steps as the general ladder
+    does to round-off, and an airflow above its bound is covered by the level."""
+    rng = np.random.default_rng(9)
+    A, cap, rooms, bxu = random_network(rng, 12, 3)
+    fixed = np.zeros(len(rooms))
+    fixed[-1] = 40.0
+    lad = StepperLadder(A, rooms, bxu, 900.0, cap, u_base=0.5, fixed=fixed)
+    plain = StepperLadder(A, rooms, bxu, 900.0, cap, u_base=0.5)
+    u = np.r_[rng.uniform(0.1, 0.5, len(rooms) - 1), 40.0]
+    assert lad.level(u) == 0 and plain.level(u) == 7
+    x0 = rng.uniform(15.0, 25.0, 12)
+    b = rng.normal(0.0, 1e-3, 12)
+    np.testing.assert_allclose(lad.for_airflows(u).step(x0, u, b, 14.0),
+                               plain.for_airflows(u).step(x0, u, b, 14.0), atol=1e-9, rtol=0)
+    assert lad.level(np.r_[u[:-1], 50.0]) == plain.level(np.array([50.0]))
+    with pytest.raises(ValueError, match="one bound >= 0"):
+        StepperLadder(A, rooms, bxu, 900.0, cap, u_base=0.5, fixed=np.zeros(2))

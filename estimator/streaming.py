@@ -520,7 +520,11 @@ class OnlineEstimator:
         # HVAC channels: every input but the weather (Ta at nb, facade solar at nb + 2 ...
         # nb + 5): the airflows, the supply-air temperature, and any per-box input after
         # the six disturbances (e.g. a discharge-air rise); all but T_s are >= 0
-        self._hv_cols = np.array(list(range(nb)) + [nb + 1] + list(range(nb + 6, self._nin)))
+        # (a scheduled input's airflow and rise are known ahead, not learned: the last
+        # columns of u and of the rises, filled by forecast_inputs)
+        k = len(self.bundle.model.structure.scheduled)
+        self._hv_cols = np.array(list(range(nb - k)) + [nb + 1]
+                                 + list(range(nb + 6, self._nin - (k if self._rh else 0))))
         nonneg = [c != nb + 1 for c in self._hv_cols]
         # regressors: outdoor temperature and the irradiance of each of the building's
         # four facades (a box's cooling airflow follows the sun on its own zone's facade:

@@ -223,9 +223,11 @@ def _noise(doc: dict, path: Path) -> NoiseSettings:
     return NoiseSettings(**{k: float(v) for k, v in known.items()})
 
 
-_OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration", "facades", "ground")
+_OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration", "facades", "ground",
+                "shading")
 #: what a model file without an option was built with (options added later)
-_LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal", "ground": "adiabatic"}
+_LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal", "ground": "adiabatic",
+                    "shading": "none"}
 #: what a model file without ``model_options`` was built with (files written before the
 #: key existed put window solar on the room air, the paper's placement)
 LEGACY_OPTIONS = {"window_solar": "air"}
@@ -396,6 +398,8 @@ def save_structure(path: str | Path, structure: RCStructure,
             "room_volume": {k: float(v) for k, v in room_volume.items()}}
     if structure.scheduled:  # written only when there are any (older files stay the same)
         meta["scheduled"] = structure.scheduled
+    if structure.shading:  # likewise
+        meta["shading"] = structure.shading
     path = Path(path)
     with path.open("wb") as fh:
         np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)
@@ -427,7 +431,8 @@ def load_structure(path: str | Path) -> tuple[RCStructure, dict[str, float]]:
             window_area={r: z[f"window_area.{r}"] for r in meta["window_rooms"]},
             options=ModelOptions(**{**_LEGACY_DEFAULTS, **meta["options"]}),
             facade_rotation=float(meta.get("facade_rotation", 0.0)),
-            scheduled=dict(meta.get("scheduled", {})))
+            scheduled=dict(meta.get("scheduled", {})),
+            shading=list(meta.get("shading", [])))
     return structure, {k: float(v) for k, v in meta["room_volume"].items()}
 
 

@@ -18,7 +18,12 @@ from zonecast.estimator.constants import STEP
 from zonecast.estimator.rc.network import DISTURBANCES
 from zonecast.estimator.schedules import CompactSchedule, local_day_minute
 from zonecast.estimator.site import Site
-from zonecast.estimator.solar import FACADE_AZIMUTHS, facade_irradiance
+from zonecast.estimator.solar import (
+    FACADE_AZIMUTHS,
+    facade_columns,
+    facade_irradiance,
+    sun_geometry,
+)
 from zonecast.estimator.telemetry import Telemetry, segments_of
 
 __all__ = ["DISTURBANCES", "ModelData", "model_data", "scheduled_inputs", "scheduled_rise",
@@ -175,7 +180,8 @@ def with_scheduled(scheduled: Mapping[str, Mapping], times, site: Site, u: np.nd
 def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *,
                sky_model: str = "perez", albedo: float = 0.2,
                facade_azimuths: Sequence[float] = FACADE_AZIMUTHS,
-               scheduled: Mapping[str, Mapping] | None = None) -> ModelData:
+               scheduled: Mapping[str, Mapping] | None = None,
+               shading=None) -> ModelData:
     """Build :class:`ModelData` from validated telemetry.
 
     Parameters
@@ -188,12 +194,21 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
         :attr:`~.rc.network.RCStructure.facade_azimuths`; default E, S, W, N).
     scheduled : the model's scheduled inputs (:attr:`~.rc.network.RCStructure.scheduled`),
         appended after the site's boxes to u and the rise (:func:`with_scheduled`).
+    shading : the model's shaded windows (:attr:`~.rc.network.RCStructure.facade_shading`),
+        applied to the solar columns (:func:`~zonecast.estimator.solar.facade_columns`).
     """
     site = tel.site
     w = tel.weather()
     sol = np.full((len(w), 4), np.nan)
     ok = w[["ghi", "dni", "dhi"]].notna().all(axis=1).to_numpy()
-    if ok.any():
+    if ok.any() and shading:
+        loc = site.location
+        geom = sun_geometry(w.index[ok], pd.Timedelta(site.step), loc.latitude, loc.longitude,
+                            loc.elevation)
+        sol[ok] = facade_columns(geom, w.ghi.to_numpy()[ok], w.dni.to_numpy()[ok],
+                                 w.dhi.to_numpy()[ok], facade_azimuths, shading=shading,
+                                 albedo=albedo, sky_model=sky_model)
+    elif ok.any():
         sol[ok] = facade_irradiance(w.index[ok], w.ghi.to_numpy()[ok], w.dni.to_numpy()[ok],
                                     w.dhi.to_numpy()[ok], site.location.latitude,
                                     site.location.longitude, site.location.elevation,

@@ -535,6 +535,8 @@ class Window:
         [-]
     kind : str
         ``"Window"`` or ``"GlassDoor"``.
+    vertices : ndarray, shape (k, 3), or None
+        World coordinates [m], counter-clockwise seen from outside.
     """
 
     name: str
@@ -545,6 +547,7 @@ class Window:
     u_value: float | None
     shgc: float | None
     kind: str = "Window"
+    vertices: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 #: conditions at which an infiltration object's flow is taken (docs/model.md,
@@ -651,6 +654,10 @@ class Building:
     #: temperature under ground-contact surfaces, January to December [degC]
     #: (Site:GroundTemperature:BuildingSurface; EnergyPlus's 18 degC without one)
     ground_temperature: tuple[float, ...] = (18.0,) * 12
+    #: exterior shading [m, world coordinates]: window name -> the polygons of its
+    #: overhangs and fins; ``"*"`` -> detailed shading surfaces (zone, building, site),
+    #: which may shade any window
+    shading: dict[str, list[np.ndarray]] = field(default_factory=dict)
 
     def zone(self, name: str) -> Zone:
         """Zone by case-insensitive name."""
@@ -785,15 +792,8 @@ _UNSUPPORTED_TYPES: dict[str, str] = {
     "Floor:GroundContact": "simple-geometry floor not read",
     "Floor:Adiabatic": "simple-geometry floor not read",
     "Floor:Interzone": "simple-geometry floor not read",
-    "Shading:Site:Detailed": "shading not modelled (solar enters via facade irradiance)",
-    "Shading:Building:Detailed": "shading not modelled (solar enters via facade irradiance)",
-    "Shading:Zone:Detailed": "shading not modelled (solar enters via facade irradiance)",
     "Shading:Site": "shading not modelled",
     "Shading:Building": "shading not modelled",
-    "Shading:Overhang": "shading not modelled",
-    "Shading:Overhang:Projection": "shading not modelled",
-    "Shading:Fin": "shading not modelled",
-    "Shading:Fin:Projection": "shading not modelled",
     "WindowShadingControl": "window shading control not modelled",
     "WindowProperty:FrameAndDivider": "window frame and divider not modelled",
     "DaylightingDevice:Tubular": "tubular daylighting device not modelled",
@@ -981,7 +981,7 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
                 )
             windows[name] = Window(
                 name, parent_key, parent["zone"], cons, area * mult, c.u_value, c.shgc,
-                "GlassDoor" if kind.lower() == "glassdoor" else "Window",
+                "GlassDoor" if kind.lower() == "glassdoor" else "Window", verts,
             )
         elif kind.lower() == "door":
             doors[name] = dict(
@@ -1033,12 +1033,122 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
     schedules: dict[str, CompactSchedule] = {}
     infiltration = _infiltration(data, zkey, zones, surfaces, unsupported, notes, schedules)
     ground = _ground_temperature(data, surfaces, notes)
+    shading = _shading(data, geo, zones_raw, base, windows, notes)
     return Building(
         name=bname, version=version_text, north_axis=north, zones=zones, surfaces=surfaces,
         windows=windows, constructions=constructions, internal_masses=masses,
         unsupported=unsupported, notes=notes, infiltration=infiltration, schedules=schedules,
-        ground_temperature=ground,
+        ground_temperature=ground, shading=shading,
     )
+
+
+def _constant_schedule(data: Mapping[str, Any], name: str) -> float | None:
+    """The value of a schedule that never changes (Schedule:Constant, or a Schedule:Compact
+    with one value), else None."""
+    low = name.strip().lower()
+    for key, f in data.get("Schedule:Constant", {}).items():
+        if key.lower() == low:
+            return _num(f.get("hourly_value"), 0.0)
+    for key, f in data.get("Schedule:Compact", {}).items():
+        if key.lower() == low:
+            try:
+                parsed = CompactSchedule.from_epjson(key, f)
+            except ScheduleError:
+                return None
+            vals = {v for p in parsed.periods for r in p[1] for _, v in r[1]}
+            return vals.pop() if len(vals) == 1 else None
+    return None
+
+
+def _shading(data: Mapping[str, Any], geo: _Geometry, zones_raw: Mapping[str, Any],
+             base: Mapping[str, Mapping[str, Any]], windows: Mapping[str, Window],
+             notes: list[str]) -> dict[str, list[np.ndarray]]:
+    """Exterior shading polygons in world coordinates (see :attr:`Building.shading`):
+    overhangs and fins by window, detailed shading surfaces under ``"*"``."""
+    from zonecast.estimator.shading import fin_polygons, overhang_polygon
+
+    out: dict[str, list[np.ndarray]] = {}
+    wkey = {k.lower(): k for k in windows}
+
+    def window_of(typ: str, name: str, f: Mapping[str, Any]) -> Window | None:
+        key = wkey.get(str(f.get("window_or_door_name", "")).lower())
+        if key is None or windows[key].vertices is None:
+            notes.append(f"{typ} {name}: window {f.get('window_or_door_name')!r} is not an "
+                         "exterior window zonecast reads; left out")
+            return None
+        return windows[key]
+
+    for typ in ("Shading:Overhang", "Shading:Overhang:Projection"):
+        for name, f in data.get(typ, {}).items():
+            w = window_of(typ, name, f)
+            if w is None:
+                continue
+            depth = _num(f.get("depth"), 0.0)
+            if typ.endswith("Projection"):
+                v = w.vertices
+                height = float(np.ptp(v[:, 2])) if np.ptp(v[:, 2]) > 0 else 0.0
+                depth = _num(f.get("depth_as_fraction_of_window_door_height"), 0.0) * height
+            if depth <= 0.0:
+                continue
+            out.setdefault(w.name, []).append(overhang_polygon(
+                w.vertices, _num(f.get("height_above_window_or_door"), 0.0),
+                _num(f.get("tilt_angle_from_window_door"), 90.0),
+                _num(f.get("left_extension_from_window_door_width"), 0.0),
+                _num(f.get("right_extension_from_window_door_width"), 0.0), depth))
+    for typ in ("Shading:Fin", "Shading:Fin:Projection"):
+        for name, f in data.get(typ, {}).items():
+            w = window_of(typ, name, f)
+            if w is None:
+                continue
+            fins = []
+            for side in ("left", "right"):
+                if typ.endswith("Projection"):
+                    uv = w.vertices[:, :2]
+                    width = float(np.hypot(*np.ptp(uv, axis=0)))
+                    depth = _num(f.get(f"{side}_depth_as_fraction_of_window_door_width"), 0.0) \
+                        * width
+                else:
+                    depth = _num(f.get(f"{side}_depth"), 0.0)
+                fins.append({"side": side,
+                             "extension": _num(f.get(f"{side}_extension_from_window_door"), 0.0),
+                             "above": _num(f.get(f"{side}_distance_above_top_of_window"), 0.0),
+                             "below": _num(f.get(f"{side}_distance_below_bottom_of_window"),
+                                           0.0),
+                             "tilt": _num(f.get(f"{side}_tilt_angle_from_window_door"), 90.0),
+                             "depth": depth})
+            out.setdefault(w.name, []).extend(fin_polygons(w.vertices, fins))
+    bkey = {k.lower(): k for k in base}
+    for typ in ("Shading:Zone:Detailed", "Shading:Building:Detailed", "Shading:Site:Detailed"):
+        for name, f in data.get(typ, {}).items():
+            pts = _vertices_list(f)
+            if len(pts) < 3:
+                continue
+            if typ == "Shading:Zone:Detailed":
+                parent = bkey.get(str(f.get("base_surface_name", "")).lower())
+                if parent is None:
+                    notes.append(f"{typ} {name}: base surface {f.get('base_surface_name')!r} "
+                                 "unknown; left out")
+                    continue
+                verts = geo.to_world(pts, zones_raw[base[parent]["zone"]])
+            elif typ == "Shading:Building:Detailed":
+                verts = geo.to_world(pts, {})
+            else:  # site shading is never moved or rotated with the building
+                verts = pts[::-1] if geo.clockwise else pts
+            sched = f.get("transmittance_schedule_name")
+            if sched:
+                tau = _constant_schedule(data, str(sched))
+                if tau is not None and tau >= 0.999:
+                    continue  # fully transparent: shades nothing
+                if tau is None or tau > 0.001:
+                    notes.append(f"{typ} {name}: transmittance schedule {sched!r} not followed "
+                                 "(taken opaque)")
+            out.setdefault("*", []).append(np.asarray(verts, dtype=float))
+    n_win = sum(len(v) for k, v in out.items() if k != "*")
+    if out:
+        notes.append(f"exterior shading: {n_win} overhang/fin polygons on "
+                     f"{len([k for k in out if k != '*'])} windows, "
+                     f"{len(out.get('*', []))} shading surfaces")
+    return out
 
 
 _MONTHS = ("january", "february", "march", "april", "may", "june", "july", "august",

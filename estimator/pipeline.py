@@ -183,7 +183,8 @@ class Pipeline:
         model = self.model()
         return model_data(tel, model.room_weights(),
                           facade_azimuths=model.structure.facade_azimuths,
-                          scheduled=model.structure.scheduled)
+                          scheduled=model.structure.scheduled,
+                          shading=model.structure.facade_shading)
 
     # --- identification ----------------------------------------------------------------
     def identify(self, data: ModelData, train: Sequence[str] | None = None,

@@ -287,6 +287,78 @@ def transpose(geometry: np.ndarray, ghi, dni, dhi, surfaces, *, albedo: float = 
     return out
 
 
+def _perez_shares(geometry: np.ndarray, dni: np.ndarray, dhi: np.ndarray,
+                  planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Circumsolar and horizon shares [-] of Perez's sky diffuse on each plane, shape
+    (N, k); 0 where the sky is dark or the sun is down (isotropic there, as in
+    :func:`transpose`)."""
+    _, zenith, _, azimuth, dni_extra = geometry
+    n, k = len(dni), len(planes)
+    circ, hor = np.zeros((n, k)), np.zeros((n, k))
+    ok = (zenith < 90.0) & np.isfinite(dni) & np.isfinite(dhi) & (dhi > 0.0)
+    if not ok.any():
+        return circ, hor
+    m = int(ok.sum())
+
+    def rep(a):
+        return np.repeat(a[ok], k)
+
+    zen = rep(zenith)
+    parts = pvlib.irradiance.perez(
+        np.tile(planes[:, 0], m), np.tile(planes[:, 1], m), rep(np.maximum(dhi, 0.0)),
+        rep(np.maximum(dni, 0.0)), rep(dni_extra), zen, rep(azimuth),
+        pvlib.atmosphere.get_relative_airmass(zen), return_components=True)
+    total = np.asarray(parts["poa_sky_diffuse"], dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for out, key in ((circ, "poa_circumsolar"), (hor, "poa_horizon")):
+            share = np.where(total > 0.0, np.asarray(parts[key], dtype=float) / total, 0.0)
+            out[ok] = np.nan_to_num(share).reshape(m, k)
+    return circ, hor
+
+
+def facade_columns(geometry: np.ndarray, ghi, dni, dhi, azimuths: Sequence[float], *,
+                   shading=None, albedo: float = 0.2, sky_model: str = "perez") -> np.ndarray:
+    """The model's four solar columns: global irradiance on vertical facades facing
+    ``azimuths``, shaded where a facade's windows are.
+
+    Parameters
+    ----------
+    geometry, ghi, dni, dhi, albedo, sky_model
+        As in :func:`transpose`.
+    azimuths : four azimuths [deg]
+        The facades (:attr:`~.rc.network.RCStructure.facade_azimuths`).
+    shading : :class:`~zonecast.estimator.shading.FacadeShading` or None
+        The building's shaded windows (:attr:`~.rc.network.RCStructure.facade_shading`):
+        each column loses what the shading takes off its windows
+        (:meth:`~zonecast.estimator.shading.FacadeShading.loss`; beam and circumsolar by
+        the sunlit fraction, isotropic and horizon sky by the diffuse ratios). None: the
+        unshaded facades, exactly :func:`transpose` with ``total=True``.
+
+    Returns
+    -------
+    ndarray, shape (N, 4) [W/m²]; NaN where an input is missing.
+    """
+    planes = np.array([(90.0, float(a)) for a in azimuths])
+    if not shading:
+        return transpose(geometry, ghi, dni, dhi, planes, albedo=albedo, sky_model=sky_model,
+                         total=True)["poa_global"]
+    from zonecast.estimator.shading import sun_vectors
+
+    comp = transpose(geometry, ghi, dni, dhi, planes, albedo=albedo, sky_model=sky_model)
+    sky = comp["poa_sky_diffuse"]
+    if sky_model == "perez":
+        circ_share, hor_share = _perez_shares(geometry, np.asarray(dni, dtype=float),
+                                              np.asarray(dhi, dtype=float), planes)
+    else:
+        circ_share = hor_share = np.zeros_like(sky)
+    circ, hor = sky * circ_share, sky * hor_share
+    iso = sky - circ - hor
+    total = comp["poa_direct"] + comp["poa_sky_diffuse"] + comp["poa_ground_diffuse"]
+    loss = shading.loss(sun_vectors(geometry[1], geometry[3]), np.nan_to_num(comp["poa_direct"]),
+                        np.nan_to_num(iso), np.nan_to_num(circ), np.nan_to_num(hor))
+    return np.clip(total - loss, 0.0, None)
+
+
 def _inputs(times, ghi, dni, dhi, latitude, longitude, elevation, interval, label):
     """Validated columns and the sun geometry of each row's interval."""
     idx = _as_times(times)

@@ -104,7 +104,7 @@ from zonecast.estimator.kalman import (
     initial_state_from_measurement,
     steady_state_covariance,
 )
-from zonecast.estimator.solar import SKY_MODELS, SolarGeometryCache, transpose
+from zonecast.estimator.solar import SKY_MODELS, SolarGeometryCache, facade_columns
 from zonecast.estimator.telemetry import Telemetry, load_telemetry, segments_of
 from zonecast.estimator.units import to_si
 from zonecast.estimator.weather_forecast import (
@@ -154,7 +154,8 @@ def model_rows(bundle: ModelBundle, frame: pd.DataFrame) -> ModelData:
     tel = Telemetry(frame, site, segments_of(frame.index, site.step))
     return model_data(tel, bundle.room_volume,
                       facade_azimuths=bundle.model.structure.facade_azimuths,
-                      scheduled=bundle.model.structure.scheduled)
+                      scheduled=bundle.model.structure.scheduled,
+                      shading=bundle.model.structure.facade_shading)
 
 
 def rows_from_frame(bundle: ModelBundle, frame: pd.DataFrame):
@@ -589,9 +590,10 @@ class OnlineEstimator:
         ok = np.isfinite(vals).all(axis=1)
         if ok.any():
             geom = self._fc_solar.geometry(grid[ok])
-            facades = [(90.0, az) for az in self.bundle.model.structure.facade_azimuths]
-            sol[ok] = transpose(geom, vals[ok, 1], vals[ok, 2], vals[ok, 3], np.array(facades),
-                                total=True)["poa_global"]
+            structure = self.bundle.model.structure
+            sol[ok] = facade_columns(geom, vals[ok, 1], vals[ok, 2], vals[ok, 3],
+                                     structure.facade_azimuths,
+                                     shading=structure.facade_shading)
         self._wx = (int(first), np.column_stack([vals[:, 0], sol]))
 
     def persistence_inputs(self) -> np.ndarray:
@@ -857,7 +859,8 @@ class RowConverter:
             self._zones.append((idx, w))
         loc = site.location
         self.solar = SolarGeometryCache(loc.latitude, loc.longitude, loc.elevation, site.step)
-        self._facades = np.array([(90.0, az) for az in bundle.model.structure.facade_azimuths])
+        self._azimuths = bundle.model.structure.facade_azimuths
+        self._shading = bundle.model.structure.facade_shading
         self.albedo, self.sky_model = float(albedo), sky_model
         self._site, self._scheduled = site, bundle.model.structure.scheduled
 
@@ -897,9 +900,9 @@ class RowConverter:
         ok = np.isfinite(sun).all(axis=1)
         if ok.any():
             geom = self.solar.geometry(np.asarray(times_ns, dtype=np.int64)[ok])
-            sol[ok] = transpose(geom, sun[ok, 0], sun[ok, 1], sun[ok, 2], self._facades,
-                                albedo=self.albedo, sky_model=self.sky_model,
-                                total=True)["poa_global"]
+            sol[ok] = facade_columns(geom, sun[ok, 0], sun[ok, 1], sun[ok, 2], self._azimuths,
+                                     shading=self._shading, albedo=self.albedo,
+                                     sky_model=self.sky_model)
         v = np.column_stack([si[:, self._ta], si[:, self._ts], sol])
         u = si[:, self._box]
         reheat = np.zeros_like(u)

@@ -252,6 +252,10 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                      help="'idf' (the default): ground-contact floors held near the IDF's "
                           "monthly ground temperature (docs/model.md \"Ground contact\"), or "
                           "'adiabatic' (the paper's model)")] = "idf",
+                 shading: Annotated[str, typer.Option(
+                     help="'idf' (the default): the IDF's overhangs, fins and shading "
+                          "surfaces shade the windows' solar (docs/model.md \"Exterior "
+                          "shading\"), or 'none'")] = "idf",
                  weekend_gains: Annotated[bool, typer.Option(
                      help="identify again with the weekly gains profile of the weeks without "
                           "experiments as known f_IG (buildings occupied at weekends; "
@@ -267,7 +271,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  profile_weeks=profile_weeks, window_solar=window_solar,
                                  seed=seed, priors=priors, sigma_e=sigma_e, window=window,
                                  infiltration=infiltration, weekend_gains=weekend_gains,
-                                 ground=ground,
+                                 ground=ground, shading=shading,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -339,6 +343,9 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   ground: Annotated[str, typer.Option(
                       help="'idf' (the default): ground-contact floors at the IDF's monthly "
                            "ground temperature, or 'adiabatic' (the paper)")] = "idf",
+                  shading: Annotated[str, typer.Option(
+                      help="'idf' (the default): the IDF's overhangs, fins and shading "
+                           "surfaces shade the windows, or 'none'")] = "idf",
                   weekend_gains: Annotated[bool, typer.Option(
                       help="identify again with the weekly gains profile of the training "
                            "weeks as known f_IG (buildings occupied at weekends)")] = False
@@ -352,7 +359,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 progress=lambda m: prog.update(task, description=f"reproduce: {m}"),
                                 priors=priors, sigma_e=sigma_e, window=window,
                                 sensitivity=sensitivity, infiltration=infiltration,
-                                weekend_gains=weekend_gains, ground=ground)
+                                weekend_gains=weekend_gains, ground=ground,
+                                shading=shading)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

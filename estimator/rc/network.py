@@ -146,6 +146,11 @@ class ModelOptions:
         infiltration that follows a Schedule:Compact is a scheduled input instead: a
         box-like airflow rho q F(t) whose supply air is the outdoor air
         (:attr:`RCStructure.scheduled`).
+    shading : {"idf", "none"}
+        Exterior shading of windows: the IDF's overhangs, fins and shading surfaces shade
+        the window irradiance of the solar columns (:attr:`RCStructure.shading`,
+        :mod:`~zonecast.estimator.shading`), or nothing shades them (model files written
+        before 2026-11-25 read as this).
     """
 
     roof_solar: str = "mean"
@@ -156,8 +161,11 @@ class ModelOptions:
     floor_share: float = 0.25
     infiltration: str = "idf"
     facades: str = "building"
+    shading: str = "idf"
 
     def __post_init__(self):
+        if self.shading not in ("idf", "none"):
+            raise ModelDefinitionError("shading must be 'idf' or 'none'")
         if self.facades not in ("building", "cardinal"):
             raise ModelDefinitionError("facades must be 'building' or 'cardinal'")
         if self.infiltration not in ("none", "idf"):
@@ -199,6 +207,24 @@ def facade_of(tilt: float, azimuth: float, roof_solar: str = "mean",
         return {f: 0.25 for f in _FACADES.values()} if roof_solar == "mean" else {}
     diffs = {f: abs((azimuth - a - rotation + 180.0) % 360.0 - 180.0) for a, f in _FACADES.items()}
     return {min(diffs, key=diffs.get): 1.0}
+
+
+def _window_shading(shaded, window_area: Mapping[str, np.ndarray],
+                    notes: list[str]) -> list[dict]:
+    """The shaded windows as :attr:`RCStructure.shading` entries: each window's share of
+    its facade's exterior window area and its diffuse ratios."""
+    from zonecast.estimator.shading import WindowShading
+
+    totals = np.sum(list(window_area.values()), axis=0) if window_area else np.zeros(4)
+    out = []
+    for name, col, area, verts, shades in shaded:
+        ws = WindowShading(name, col, float(area / totals[col]), verts, shades)
+        if ws.shades:  # surfaces behind the window cannot shade it
+            out.append(ws.to_dict())
+    if out:
+        notes.append(f"{len(out)} shaded windows: overhangs, fins and shading surfaces shade "
+                     "their facade's solar column (window-area weighted)")
+    return out
 
 
 def facade_rotation(building: Building) -> float:
@@ -259,6 +285,10 @@ class RCStructure:
         CompactSchedule.to_dict(), "supply": "Ta"}`` at its room's air; a ground contact,
         ``{"flow": G A / c_p, "supply": "ground", "monthly": [12 x degC]}`` at the outer
         face of the surface (:data:`GROUND_CONDUCTANCE`).
+    shading : list of dict
+        Shaded exterior windows (:meth:`~zonecast.estimator.shading.WindowShading.to_dict`):
+        their facade column, share of the facade's window area, polygons and diffuse
+        ratios; empty when nothing shades a window. :attr:`facade_shading` applies them.
     """
 
     labels: list[StateLabel]
@@ -280,6 +310,20 @@ class RCStructure:
     options: ModelOptions = field(default_factory=ModelOptions)
     facade_rotation: float = 0.0
     scheduled: dict[str, dict] = field(default_factory=dict)
+    shading: list[dict] = field(default_factory=list)
+
+    @property
+    def facade_shading(self):
+        """:class:`~zonecast.estimator.shading.FacadeShading` of :attr:`shading` (built
+        once), or None when nothing shades a window."""
+        if not self.shading:
+            return None
+        cached = getattr(self, "_facade_shading", None)
+        if cached is None:
+            from zonecast.estimator.shading import FacadeShading
+            cached = FacadeShading.from_list(self.shading)
+            object.__setattr__(self, "_facade_shading", cached)
+        return cached
 
     @property
     def hvac_boxes(self) -> list[str]:
@@ -607,6 +651,7 @@ def build_structure(
         other_faces.setdefault(m.zone, []).extend([(nodes[0], m.area), (nodes[-1], m.area)])
 
     window_area: dict[str, np.ndarray] = {}
+    shaded: list[tuple[str, int, float, np.ndarray, list[np.ndarray]]] = []
     for name in sorted(building.windows):
         w = building.windows[name]
         parent = surfaces[w.surface]
@@ -615,7 +660,15 @@ def build_structure(
             asm.to_temperature(r, 0, w.area, UWIN)  # paper eq:q_bh, window transmission
             targets = _solar_targets(opts, floor_faces.get(w.zone, []),
                                      other_faces.get(w.zone, []), r)
-            for col, wt in facade_of(parent.tilt, parent.azimuth, opts.roof_solar, rotation).items():
+            cols = facade_of(parent.tilt, parent.azimuth, opts.roof_solar, rotation)
+            shades = (building.shading.get(name, []) + building.shading.get("*", [])
+                      if opts.shading == "idf" else [])
+            if shades and len(cols) == 1 and w.vertices is not None:
+                shaded.append((name, DISTURBANCES.index(next(iter(cols))) - 2, w.area,
+                               w.vertices, shades))
+            elif shades:
+                notes.append(f"window {name}: not vertical, its shading is not modelled")
+            for col, wt in cols.items():
                 seen_area = window_area.setdefault(w.zone, np.zeros(4))
                 seen_area[DISTURBANCES.index(col) - 2] += wt * w.area
                 for node, share in targets:
@@ -627,6 +680,7 @@ def build_structure(
             notes.append(f"interior window {name}: U_win coupling between rooms")
         else:
             notes.append(f"window {name} on a {parent.boundary} surface: ignored")
+    shading = _window_shading(shaded, window_area, notes)
     if opts.infiltration == "idf":
         for name in sorted(building.infiltration):
             inf = building.infiltration[name]
@@ -679,4 +733,5 @@ def build_structure(
         options=opts,
         facade_rotation=rotation,
         scheduled=scheduled,
+        shading=shading,
     )

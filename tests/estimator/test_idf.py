@@ -86,9 +86,16 @@ def test_window_areas(five_zone, small_office):
     assert south.area == pytest.approx(south.gross_area - wins)
 
 
-def test_unsupported_reported(five_zone):
+def test_shading_surfaces_read(five_zone):
+    """The 5-zone's two overhangs (Shading:Zone:Detailed, opaque by a constant-0 schedule)
+    are read as shading surfaces, no longer reported as unsupported."""
     kinds = {u.object_type for u in five_zone.unsupported}
-    assert "Shading:Zone:Detailed" in kinds
+    assert "Shading:Zone:Detailed" not in kinds
+    assert len(five_zone.shading["*"]) == 2
+    # the main south overhang, 2.2 m up, 1.3 m deep: rotated with the building (30 deg)
+    main = five_zone.shading["*"][0]
+    assert np.allclose(main[:, 2], 2.2)
+    assert np.linalg.norm(main[0] - main[1]) == pytest.approx(1.3)
 
 
 def test_epjson_input_directly(five_zone_path, tmp_path):

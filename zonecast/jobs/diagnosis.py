@@ -39,7 +39,8 @@ def run(model_path: Path, data_path: Path, out: Path, *, site_path: Path | None 
     tel = load_telemetry(data_path / "telemetry.csv" if data_path.is_dir() else data_path, site)
     model = pipe.model()
     data = model_data(tel, model.room_weights(), facade_azimuths=model.structure.facade_azimuths,
-                      scheduled=model.structure.scheduled)
+                      scheduled=model.structure.scheduled,
+                      shading=model.structure.facade_shading)
     ref = None
     if reference is not None:
         try:

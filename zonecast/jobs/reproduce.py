@@ -344,11 +344,12 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
         progress=lambda s: None, *, priors: bool = True, sigma_e: float = 0.3,
         window: str = "weekend", sensitivity: bool = True,
         infiltration: str = "idf", weekend_gains: bool = False,
-        ground: str = "idf") -> Results:
+        ground: str = "idf", shading: str = "idf") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
-    ``infiltration``, ``ground``: :class:`~zonecast.estimator.rc.network.ModelOptions`;
+    ``infiltration``, ``ground``, ``shading``:
+    :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
     the forecast study's split (never its validation weeks)."""
     out.mkdir(parents=True, exist_ok=True)
@@ -361,7 +362,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
         run_campaign(campaign, seed=seed, progress=lambda s: progress(f"campaign: {s}"))
     timings["campaign"] = time.perf_counter() - t0
     pipe = Pipeline.from_site(campaign / "site.yaml",
-                              options=ModelOptions(infiltration=infiltration, ground=ground))
+                              options=ModelOptions(infiltration=infiltration, ground=ground,
+                                                   shading=shading))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()

@@ -48,6 +48,17 @@ class Glazing(_Strict):
     visible_transmittance: float = Field(gt=0, lt=1)
 
 
+class ExteriorShading(_Strict):
+    """Overhangs and fins on every exterior window."""
+
+    overhang_depth_ratio: float = Field(0.0, ge=0, le=3, description="[-] overhang depth as a "
+                                        "fraction of the window height "
+                                        "(Shading:Overhang:Projection); 0: no overhang")
+    overhang_offset: float = Field(0.0, ge=0, description="[m] overhang above the window top")
+    fin_depth: float = Field(0.0, ge=0, description="[m] depth of a fin at each end of the "
+                             "window, as high as the window (Shading:Fin); 0: no fins")
+
+
 class Room(_Strict):
     rect: tuple[float, float, float, float]
     zone: str
@@ -151,6 +162,8 @@ class BuildingConfig(_Strict):
                               "and below); top: the ceilings are a roof (construction 'roof'); "
                               "ground: the floors lie on the ground (boundary Ground at "
                               "ground_temperature)")
+    shading: ExteriorShading | None = Field(None, description="overhangs and fins on the "
+                                            "exterior windows; None: no exterior shading")
     ground_temperature: list[float] | None = Field(
         None, min_length=12, max_length=12,
         description="[degC] temperature under a ground floor, January to December "

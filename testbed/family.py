@@ -37,6 +37,8 @@ CORE = "C"
 MIN_ROOM_LENGTH = 3.0
 #: Share of generated floors that are a top floor under a roof [-].
 TOP_FLOOR_SHARE = 0.2
+#: share of the members with overhangs on every window (half of them with fins as well)
+SHADING_SHARE = 0.35
 #: share of the other floors that lie on the ground (slab on grade)
 GROUND_FLOOR_SHARE = 0.3
 #: indoor temperature a slab under a conditioned building settles near [degC], the drop to
@@ -250,7 +252,8 @@ def describe(cfg: BuildingConfig) -> dict:
     ``furniture`` [m2/m2], ``infiltration`` [m3/s per m2 facade], ``minimum_fraction`` [-],
     ``airflow_perimeter``, ``airflow_core`` [m3/s per m2 floor], ``supply_reset`` (a
     :data:`RESETS` key or ``custom``) and ``supply_reset_values`` [degC],
-    ``excitation_days``, ``weekend_occupancy`` [-], ``floor_position`` (middle, top, ground).
+    ``excitation_days``, ``weekend_occupancy`` [-], ``floor_position`` (middle, top, ground),
+    ``shading`` (overhang depth / window height, overhang offset [m], fin depth [m]; None).
     """
     rects = np.array([r.rect for r in cfg.rooms.values()])
     walls = plan_walls({n: r.rect for n, r in cfg.rooms.items()})
@@ -282,6 +285,7 @@ def describe(cfg: BuildingConfig) -> dict:
         "excitation_days": cfg.campaign.excitation_days,
         "weekend_occupancy": cfg.weekend_occupancy,
         "floor_position": cfg.floor_position,
+        "shading": cfg.shading.model_dump() if cfg.shading is not None else None,
     }
 
 
@@ -376,6 +380,13 @@ def draw_member(seed: int, index: int, base: BuildingConfig | None = None) -> Fa
     # added later, is drawn after it for the same reason)
     top = bool(rng.random() < TOP_FLOOR_SHARE)
     ground = (not top) and bool(rng.random() < GROUND_FLOOR_SHARE)
+    # exterior shading, drawn after the storey for the same reason
+    shading = None
+    if rng.random() < SHADING_SHARE:
+        shading = {"overhang_depth_ratio": float(np.round(rng.uniform(0.3, 1.0), 2)),
+                   "overhang_offset": float(np.round(rng.uniform(0.0, 0.3), 2)),
+                   "fin_depth": float(np.round(rng.uniform(0.3, 0.8), 2))
+                   if rng.random() < 0.5 else 0.0}
 
     data = base.model_dump(mode="json")
     name = f"f{seed}-{index:02d}-{climate_key}"
@@ -395,6 +406,8 @@ def draw_member(seed: int, index: int, base: BuildingConfig | None = None) -> Fa
     })
     if ground:
         data["ground_temperature"] = ground_temperatures(climate)
+    if shading is not None:
+        data["shading"] = shading
     if top:
         data["constructions"]["roof"] = [list(x) for x in roof_layers(base)]
     data["hvac"].update({"design_airflow_perimeter": perim_flow, "design_airflow_core": core_flow,

@@ -71,6 +71,8 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
     add(obj("SimulationControl", "Yes", "Yes", "Yes", "No", "Yes", "No", 1))
     add(obj("Building", cfg.name, float(cfg.north_axis), "City", 0.04, 0.4, "FullExterior", 25, 6))
     add(obj("Timestep", 4))
+    if cfg.shading is not None:  # shadows of overhangs and fins recomputed every day
+        add(obj("ShadowCalculation", "PolygonClipping", "Periodic", 1))
     add(obj("Site:Location", cfg.name + " site", cfg.location.latitude, cfg.location.longitude,
             cfg.location.standard_offset_hours, cfg.location.elevation))
     if cfg.floor_position == "ground":
@@ -145,6 +147,14 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
                     v = [c for p in wall_vertices(w, 0.0, H, win) for c in p]
                     add(obj("FenestrationSurface:Detailed", f"{w.name}_Win", "Window", "window",
                             w.name, "", "autocalculate", "", 1, 4, *v))
+                    shade = cfg.shading
+                    if shade is not None and shade.overhang_depth_ratio > 0:
+                        add(obj("Shading:Overhang:Projection", f"{w.name}_Overhang",
+                                f"{w.name}_Win", shade.overhang_offset, 90, 0, 0,
+                                shade.overhang_depth_ratio))
+                    if shade is not None and shade.fin_depth > 0:
+                        add(obj("Shading:Fin", f"{w.name}_Fins", f"{w.name}_Win",
+                                0, 0, 0, 90, shade.fin_depth, 0, 0, 0, 90, shade.fin_depth))
         kind = cfg.kinds[room.kind]
         scale = effects.gain_scale(room.zone)
         area = room.floor_area

@@ -331,21 +331,35 @@ class FacadeShading:
     def from_list(cls, items: Sequence[Mapping[str, Any]] | None) -> FacadeShading:
         return cls([WindowShading.from_dict(d) for d in items or []])
 
+    def sunlit(self, sun: np.ndarray) -> np.ndarray:
+        """Sunlit fraction of every window (:func:`sunlit_fraction`), shape (N, windows)."""
+        sun = np.atleast_2d(np.asarray(sun, dtype=float))
+        out = np.ones((len(sun), len(self.windows)))
+        for k, w in enumerate(self.windows):
+            if w.shades:
+                out[:, k] = sunlit_fraction(w, sun)
+        return out
+
     def loss(self, sun: np.ndarray, direct: np.ndarray, isotropic: np.ndarray,
-             circumsolar: np.ndarray, horizon: np.ndarray) -> np.ndarray:
+             circumsolar: np.ndarray, horizon: np.ndarray,
+             sunlit: np.ndarray | None = None) -> np.ndarray:
         """Irradiance the shading takes off each facade column [W/m²], shape (N, 4).
 
         Parameters
         ----------
         sun : (N, 3) unit vectors towards the sun.
         direct, isotropic, circumsolar, horizon : (N, 4) the columns' unshaded components.
+        sunlit : (N, windows) the windows' sunlit fractions when already known
+            (:meth:`sunlit`; the online runner caches them a day at a time).
         """
+        if sunlit is None:
+            sunlit = self.sunlit(sun)
         out = np.zeros_like(direct)
-        for w in self.windows:
+        for k, w in enumerate(self.windows):
             if not w.shades:
                 continue
             j = w.facade
-            f = sunlit_fraction(w, sun)
+            f = sunlit[:, k]
             taken = ((1.0 - f) * (direct[:, j] + circumsolar[:, j])
                      + (1.0 - w.sky) * isotropic[:, j] + (1.0 - w.horizon) * horizon[:, j])
             # Perez's horizon term is negative under some skies: shading never adds light

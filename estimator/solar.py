@@ -317,7 +317,8 @@ def _perez_shares(geometry: np.ndarray, dni: np.ndarray, dhi: np.ndarray,
 
 
 def facade_columns(geometry: np.ndarray, ghi, dni, dhi, azimuths: Sequence[float], *,
-                   shading=None, albedo: float = 0.2, sky_model: str = "perez") -> np.ndarray:
+                   shading=None, albedo: float = 0.2, sky_model: str = "perez",
+                   sunlit: np.ndarray | None = None) -> np.ndarray:
     """The model's four solar columns: global irradiance on vertical facades facing
     ``azimuths``, shaded where a facade's windows are.
 
@@ -333,6 +334,9 @@ def facade_columns(geometry: np.ndarray, ghi, dni, dhi, azimuths: Sequence[float
         (:meth:`~zonecast.estimator.shading.FacadeShading.loss`; beam and circumsolar by
         the sunlit fraction, isotropic and horizon sky by the diffuse ratios). None: the
         unshaded facades, exactly :func:`transpose` with ``total=True``.
+    sunlit : ndarray (N, windows), optional
+        The shaded windows' sunlit fractions when already known
+        (:meth:`~zonecast.estimator.shading.FacadeShading.sunlit`).
 
     Returns
     -------
@@ -355,7 +359,8 @@ def facade_columns(geometry: np.ndarray, ghi, dni, dhi, azimuths: Sequence[float
     iso = sky - circ - hor
     total = comp["poa_direct"] + comp["poa_sky_diffuse"] + comp["poa_ground_diffuse"]
     loss = shading.loss(sun_vectors(geometry[1], geometry[3]), np.nan_to_num(comp["poa_direct"]),
-                        np.nan_to_num(iso), np.nan_to_num(circ), np.nan_to_num(hor))
+                        np.nan_to_num(iso), np.nan_to_num(circ), np.nan_to_num(hor),
+                        sunlit=sunlit)
     return np.clip(total - loss, 0.0, None)
 
 

@@ -104,6 +104,7 @@ from zonecast.estimator.kalman import (
     initial_state_from_measurement,
     steady_state_covariance,
 )
+from zonecast.estimator.shading import sun_vectors
 from zonecast.estimator.solar import SKY_MODELS, SolarGeometryCache, facade_columns
 from zonecast.estimator.telemetry import Telemetry, load_telemetry, segments_of
 from zonecast.estimator.units import to_si
@@ -861,8 +862,23 @@ class RowConverter:
         self.solar = SolarGeometryCache(loc.latitude, loc.longitude, loc.elevation, site.step)
         self._azimuths = bundle.model.structure.facade_azimuths
         self._shading = bundle.model.structure.facade_shading
+        self._sunlit_day: tuple[int, np.ndarray] | None = None
         self.albedo, self.sky_model = float(albedo), sky_model
         self._site, self._scheduled = site, bundle.model.structure.scheduled
+
+    def _sunlit(self, times_ns: np.ndarray) -> np.ndarray | None:
+        """Sunlit fractions of the shaded windows for one grid row, computed for its whole
+        UTC day at once and kept (the runner's case); None otherwise (computed with the
+        row)."""
+        step = self.solar.step.value
+        if not self._shading or len(times_ns) != 1 or times_ns[0] % step:
+            return None
+        day, off = divmod(int(times_ns[0]), 86_400 * 10**9)
+        if self._sunlit_day is None or self._sunlit_day[0] != day:
+            grid = day * 86_400 * 10**9 + step * np.arange(86_400 * 10**9 // step)
+            geom = self.solar.geometry(grid)
+            self._sunlit_day = (day, self._shading.sunlit(sun_vectors(geom[1], geom[3])))
+        return self._sunlit_day[1][off // step:off // step + 1]
 
     def convert(self, times_ns, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rows of readings -> (u, v, y) (:meth:`convert_rows` without the discharge air)."""
@@ -902,7 +918,9 @@ class RowConverter:
             geom = self.solar.geometry(np.asarray(times_ns, dtype=np.int64)[ok])
             sol[ok] = facade_columns(geom, sun[ok, 0], sun[ok, 1], sun[ok, 2], self._azimuths,
                                      shading=self._shading, albedo=self.albedo,
-                                     sky_model=self.sky_model)
+                                     sky_model=self.sky_model,
+                                     sunlit=self._sunlit(np.asarray(times_ns,
+                                                                    dtype=np.int64)[ok]))
         v = np.column_stack([si[:, self._ta], si[:, self._ts], sol])
         u = si[:, self._box]
         reheat = np.zeros_like(u)

@@ -120,6 +120,10 @@ def test_drawn_parameters_stay_in_their_ranges_and_vary(family):
     assert 0.0 in seen("north_axis") and max(seen("north_axis")) > 30
     assert any(m.params["windowless_rooms"] for m in gen)
     assert seen("floor_position") == {"middle", "top", "ground"}
+    shaded = [m.config.shading for m in gen if m.config.shading is not None]
+    assert 0.2 < len(shaded) / len(gen) < 0.5
+    assert any(s.fin_depth > 0 for s in shaded) and any(s.fin_depth == 0 for s in shaded)
+    assert all(0.3 <= s.overhang_depth_ratio <= 1.0 for s in shaded)
     for m in gen:   # a ground floor carries the temperature under it, others none
         assert (m.config.ground_temperature is not None) == (m.config.floor_position == "ground")
     # SHGC follows U (clear single glass lets more sun in than low-e double glass)
@@ -198,6 +202,37 @@ def test_idf_of_a_rotated_member_uses_relative_coordinates_and_its_time_zone(fam
     bare = next(m.config for m in family if m.config.furniture_area_per_floor_area == 0)
     assert "InternalMass" not in build_idf(bare, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))],
                                            Effects(), [])
+
+
+@pytest.mark.energyplus
+def test_a_shaded_member_has_overhangs_and_fins_the_estimator_reads(family, tmp_path):
+    from zonecast.estimator.idf import read_building
+    from zonecast.estimator.rc.network import build_structure
+
+    cfg = next(m.config for m in family if m.config.shading is not None
+               and m.config.shading.fin_depth > 0)
+    idf = build_idf(cfg, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))], Effects(), [])
+    n_win = idf.count("FenestrationSurface:Detailed")
+    assert idf.count("Shading:Overhang:Projection") == idf.count("Shading:Fin,") == n_win > 0
+    assert "ShadowCalculation" in idf
+    unshaded = next(m.config for m in family if m.config.shading is None)
+    assert "Shading:" not in build_idf(unshaded, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))],
+                                       Effects(), [])
+    # the estimator reads geometry, not HVAC: leave out the templates EnergyPlus expands
+    kept = [o for o in idf.split(";") if not o.strip().startswith("HVACTemplate:")]
+    (tmp_path / "b.idf").write_text(";".join(kept))
+    b = read_building(tmp_path / "b.idf")
+    assert len(b.shading) == n_win and all(len(p) == 3 for p in b.shading.values())
+    for name, (oh, *_fins) in b.shading.items():
+        w = b.windows[name]
+        top = w.vertices[:, 2].max()
+        assert oh[:, 2] == pytest.approx(np.full(4, top + cfg.shading.overhang_offset))
+        depth = cfg.shading.overhang_depth_ratio * np.ptp(w.vertices[:, 2])
+        assert np.linalg.norm(oh[2] - oh[1]) == pytest.approx(depth)
+    zones = {z: rooms for z, rooms in cfg.zones.items()}
+    s = build_structure(b, zones, {})
+    assert len(s.shading) == n_win
+    assert all(0.0 < e["sky"] < 1.0 for e in s.shading)
 
 
 def test_climate_table_matches_the_weather_files():

@@ -235,6 +235,44 @@ def test_scheduled_inputs_flow_through_every_input_path(week, tmp_path):
     np.testing.assert_allclose(ins[:, -10:-5], october - ins[:, [nb + 1] * 5], atol=1e-12)
 
 
+def test_shading_flows_through_every_input_path(week, tmp_path):
+    """NREL's 5-zone has overhangs over its south window and glass door
+    (Shading:Zone:Detailed): the model shades its south column only; the runner's row
+    conversion, in one batch and one row at a time (the day's sunlit fractions cached),
+    gives the offline rows' numbers."""
+    from dataclasses import replace
+
+    from zonecast.estimator.artifact import load_model_file, write_model_file
+    from zonecast.estimator.streaming import RowConverter, model_rows
+
+    site_file = week.out / "site.yaml"
+    pipe = Pipeline.from_site(site_file)
+    st = pipe.model().structure
+    assert sorted(e["name"] for e in st.shading) == ["DF-1", "WF-1"]
+    assert {e["facade"] for e in st.shading} == {1}           # the building's south
+    assert sum(e["share"] for e in st.shading) == pytest.approx(1.0)
+    tel = load_telemetry(week.out / "telemetry.csv", pipe.site)
+    shaded = pipe.data(tel)
+    plain = Pipeline.from_site(site_file, options=replace(pipe.options, shading="none")).data(tel)
+    np.testing.assert_array_equal(shaded.v[:, [0, 1, 2, 4, 5]], plain.v[:, [0, 1, 2, 4, 5]])
+    day = plain.v[:, 3] > 50
+    assert np.all(shaded.v[:, 3] <= plain.v[:, 3] + 1e-9)
+    assert shaded.v[day, 3].sum() < 0.9 * plain.v[day, 3].sum()
+    path = write_model_file(tmp_path / "model.json", site_file, structure=st,
+                            room_volume=pipe.model().room_weights())
+    bundle = load_model_file(path)
+    assert bundle.model.structure.shading == st.shading
+    data = model_rows(bundle, tel.frame)
+    np.testing.assert_allclose(data.v, shaded.v, rtol=1e-12, atol=1e-9, equal_nan=True)
+    conv = RowConverter(bundle)
+    ns = tel.frame.index.as_unit("ns").asi8
+    vals = tel.frame[conv.points].to_numpy()
+    _, v, _, _ = conv.convert_rows(ns, vals)
+    np.testing.assert_allclose(v, data.v, rtol=1e-12, atol=1e-9, equal_nan=True)
+    rows = np.vstack([conv.convert_rows(ns[k:k + 1], vals[k:k + 1])[1] for k in range(len(ns))])
+    np.testing.assert_allclose(rows, data.v, rtol=1e-12, atol=1e-9, equal_nan=True)
+
+
 def _setpoints(days, hours, holiday=None, tz="America/Chicago"):
     """Two zones' reported set points over three weeks: 21/24 C in the occupied ``hours``
     of the weekdays ``days`` (per weekday its own span), 15.6/26.7 C otherwise."""

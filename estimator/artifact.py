@@ -224,10 +224,10 @@ def _noise(doc: dict, path: Path) -> NoiseSettings:
 
 
 _OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration", "facades", "ground",
-                "shading")
+                "shading", "return_air")
 #: what a model file without an option was built with (options added later)
 _LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal", "ground": "adiabatic",
-                    "shading": "none"}
+                    "shading": "none", "return_air": "none"}
 #: what a model file without ``model_options`` was built with (files written before the
 #: key existed put window solar on the room air, the paper's placement)
 LEGACY_OPTIONS = {"window_solar": "air"}
@@ -380,6 +380,8 @@ def save_structure(path: str | Path, structure: RCStructure,
         "capacity": structure.capacity, "B_ig": structure.B_ig, "C": structure.C,
         "room_of_box": structure.room_of_box,
     }
+    if structure.return_of_box is not None:  # only when there are any
+        arrays["return_of_box"] = np.asarray(structure.return_of_box, dtype=int)
     _csr_arrays("A0", structure.A0, arrays)
     _csr_arrays("Bv0", structure.Bv0, arrays)
     for i, m in enumerate(structure.A_p):
@@ -432,7 +434,8 @@ def load_structure(path: str | Path) -> tuple[RCStructure, dict[str, float]]:
             options=ModelOptions(**{**_LEGACY_DEFAULTS, **meta["options"]}),
             facade_rotation=float(meta.get("facade_rotation", 0.0)),
             scheduled=dict(meta.get("scheduled", {})),
-            shading=list(meta.get("shading", [])))
+            shading=list(meta.get("shading", [])),
+            return_of_box=z["return_of_box"] if "return_of_box" in z.files else None)
     return structure, {k: float(v) for k, v in meta["room_volume"].items()}
 
 

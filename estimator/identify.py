@@ -30,7 +30,7 @@ from scipy.optimize import least_squares
 from zonecast.estimator.constants import SIGMA_AIR_X0, STEPS_PER_DAY
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.evaluate import rms_by_zone
-from zonecast.estimator.integrate import _run, chebyshev_coefficients, tight_bound
+from zonecast.estimator.integrate import RHO_RETURN, _run, chebyshev_coefficients, tight_bound
 from zonecast.estimator.kalman import (
     default_initial_covariance,
     default_measurement_noise,
@@ -371,6 +371,8 @@ class _Problem:
         self.n_phys = len(st.A_p)
         self.rooms = np.ascontiguousarray(model._rooms, dtype=np.int64)
         self.bxu = np.ascontiguousarray(model._bxu, dtype=float)
+        self.ret = np.ascontiguousarray(model._ret, dtype=np.int64)
+        self.retc = np.ascontiguousarray(model._retc, dtype=float)
         self.capacity = st.capacity
         self.u_max = np.max(np.vstack([data.u[a:b] for a, b in spans]), axis=0)
         self.B_ig = model.B_ig
@@ -386,7 +388,8 @@ class _Problem:
         phys = np.asarray(theta, float)[:self.n_phys]
         n = len(self.capacity)
         A = sp.csr_matrix((self.d0 + phys @ self.dp, self.indices, self.indptr), shape=(n, n))
-        return tight_bound(A, self.rooms, self.bxu, self.u_max[None, :], self.capacity)
+        return tight_bound(A, self.rooms, self.bxu, self.u_max[None, :], self.capacity,
+                           ret=self.ret, retc=self.retc)
 
     def simulate(self, theta: np.ndarray, L: float | None = None) -> list[np.ndarray]:
         """Zone temperatures of every span for parameters ``theta``; ``L`` a spectral bound
@@ -397,14 +400,14 @@ class _Problem:
         n = len(self.capacity)
         L = self.bound(theta) if L is None else L
         r = L * self.model.step / 2.0
-        coef = chebyshev_coefficients(r)
+        coef = chebyshev_coefficients(r, rho=RHO_RETURN if np.any(self.ret >= 0) else 1.0)
         Bv = self.bv0 + np.tensordot(phys, self.bvp, axes=1)
         out = []
         for (a, b), x0, rh in zip(self.spans, self.x0s, self.rh):
             u, v = self.data.u[a:b], self.data.v[a:b]
             forcing = v @ Bv.T + c_ig @ self.B_ig.T + rh
             xs = np.empty((b - a + 1, n))
-            _run(self.indptr, self.indices, data_vals, self.rooms, self.bxu,
+            _run(self.indptr, self.indices, data_vals, self.rooms, self.bxu, self.ret, self.retc,
                  np.ascontiguousarray(x0, float), np.ascontiguousarray(u, float),
                  np.ascontiguousarray(forcing), np.ascontiguousarray(v[:, 1]),
                  float(self.model.step), float(r), coef, xs)

@@ -658,6 +658,9 @@ class Building:
     #: overhangs and fins; ``"*"`` -> detailed shading surfaces (zone, building, site),
     #: which may shade any window
     shading: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    #: zone -> the return plenum its return air flows into (AirLoopHVAC:ReturnPlenum with
+    #: the zones' ZoneHVAC:EquipmentConnections return nodes)
+    return_plenum: dict[str, str] = field(default_factory=dict)
 
     def zone(self, name: str) -> Zone:
         """Zone by case-insensitive name."""
@@ -1034,12 +1037,51 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
     infiltration = _infiltration(data, zkey, zones, surfaces, unsupported, notes, schedules)
     ground = _ground_temperature(data, surfaces, notes)
     shading = _shading(data, geo, zones_raw, base, windows, notes)
+    plenums = _return_plenums(data, zkey, notes)
     return Building(
         name=bname, version=version_text, north_axis=north, zones=zones, surfaces=surfaces,
         windows=windows, constructions=constructions, internal_masses=masses,
         unsupported=unsupported, notes=notes, infiltration=infiltration, schedules=schedules,
-        ground_temperature=ground, shading=shading,
+        ground_temperature=ground, shading=shading, return_plenum=plenums,
     )
+
+
+def _return_plenums(data: Mapping[str, Any], zkey: Mapping[str, str],
+                    notes: list[str]) -> dict[str, str]:
+    """Zone -> its return plenum zone: the plenum's inlet nodes (``AirLoopHVAC:ReturnPlenum``,
+    node lists expanded) matched to the zones' return air nodes
+    (``ZoneHVAC:EquipmentConnections``)."""
+    plenums = data.get("AirLoopHVAC:ReturnPlenum", {})
+    if not plenums:
+        return {}
+    lists = {k.lower(): [str(n.get("node_name", "")).lower() for n in f.get("nodes", [])]
+             for k, f in data.get("NodeList", {}).items()}
+
+    def nodes(name: Any) -> list[str]:
+        low = str(name or "").strip().lower()
+        return lists.get(low, [low] if low else [])
+
+    zone_of_node: dict[str, str] = {}
+    for f in data.get("ZoneHVAC:EquipmentConnections", {}).values():
+        zone = zkey.get(str(f.get("zone_name", "")).lower())
+        if zone is not None:
+            for node in nodes(f.get("zone_return_air_node_or_nodelist_name")):
+                zone_of_node[node] = zone
+    out: dict[str, str] = {}
+    for name, f in plenums.items():
+        plenum = zkey.get(str(f.get("zone_name", "")).lower())
+        if plenum is None:
+            notes.append(f"return plenum {name}: zone {f.get('zone_name')!r} unknown; left out")
+            continue
+        served = []
+        for item in f.get("nodes", []):
+            for node in nodes(item.get("inlet_node_name")):
+                zone = zone_of_node.get(node)
+                if zone is not None and zone != plenum:
+                    out[zone] = plenum
+                    served.append(zone)
+        notes.append(f"return plenum {plenum}: return air of {', '.join(served) or 'no zone'}")
+    return out
 
 
 def _constant_schedule(data: Mapping[str, Any], name: str) -> float | None:

@@ -44,18 +44,26 @@ except ImportError:  # pragma: no cover - exercised only without numba
 TOL = 1e-11
 
 
-def chebyshev_coefficients(r: float, tol: float = TOL) -> np.ndarray:
-    """Coefficients c_k = e^{-r} I_k(r) (c_0 once, the others doubled) of exp on [-2r, 0]."""
-    kmax = int(r + 6.0 * np.sqrt(r + 1.0) + 20.0)
+#: Bernstein ellipse parameter covering the Gershgorin discs of a model with return air
+#: (its generator is not symmetric: eigenvalues may leave the real interval by up to its
+#: half-width); terms are kept until c_k RHO_RETURN^k is negligible
+RHO_RETURN = 1.0 + np.sqrt(2.0)
+
+
+def chebyshev_coefficients(r: float, tol: float = TOL, rho: float = 1.0) -> np.ndarray:
+    """Coefficients c_k = e^{-r} I_k(r) (c_0 once, the others doubled) of exp on [-2r, 0];
+    with ``rho`` > 1, enough terms for eigenvalues inside the Bernstein ellipse of that
+    parameter (c_k rho^k below ``tol`` c_0)."""
+    kmax = int(rho * r + 6.0 * np.sqrt(rho * r + 1.0) + 20.0 * rho)
     c = ive(np.arange(kmax + 1), r)
-    keep = np.flatnonzero(c > tol * c[0])
+    keep = np.flatnonzero(c * rho ** np.arange(kmax + 1) > tol * c[0])
     c = c[: keep[-1] + 1].copy()
     c[1:] *= 2.0
     return c
 
 
 @njit(cache=True, nogil=True)
-def _step(indptr, indices, data, rooms, bxu, x, u, b_fixed, ts, h, r, coef, out):
+def _step(indptr, indices, data, rooms, bxu, ret, retc, x, u, b_fixed, ts, h, r, coef, out):
     n = x.shape[0]
     # t = 1 + M h / r acting on [w; c] (the augmented component c is 1 for every T_k);
     # the scaled generator (A + diag(dd)) h / r and forcing b h / r are formed once
@@ -67,6 +75,26 @@ def _step(indptr, indices, data, rooms, bxu, x, u, b_fixed, ts, h, r, coef, out)
     diag = np.empty(n)
     for i in range(n):
         b[i] = (b_fixed[i] - dd[i] * ts) * scale  # + c_p u Ts / C (paper eq:q_hvac)
+    # return air into a plenum: c_p u_j (x_room - x_plenum) / C_plenum: the plenum's own air
+    # leaving (diagonal) and the room's air entering (off-diagonal, applied after each product)
+    m = 0
+    for j in range(ret.shape[0]):
+        if ret[j] >= 0:
+            m += 1
+    rp = np.empty(m, dtype=np.int64)
+    rr = np.empty(m, dtype=np.int64)
+    rg = np.empty(m)
+    m = 0
+    for j in range(ret.shape[0]):
+        p = ret[j]
+        if p >= 0:
+            g = retc[j] * u[j]
+            dd[p] -= g
+            rp[m] = p
+            rr[m] = rooms[j]
+            rg[m] = g * scale
+            m += 1
+    for i in range(n):
         diag[i] = 1.0 + dd[i] * scale
     d = data * scale
     w_prev = np.empty(n)
@@ -81,21 +109,29 @@ def _step(indptr, indices, data, rooms, bxu, x, u, b_fixed, ts, h, r, coef, out)
         for q in range(indptr[i], indptr[i + 1]):
             acc += d[q] * w_prev[indices[q]]
         w_cur[i] = acc
-        out[i] += coef[1] * acc
+    for e in range(m):
+        w_cur[rp[e]] += rg[e] * w_prev[rr[e]]
+    for i in range(n):
+        out[i] += coef[1] * w_cur[i]
+    tmp = np.empty(n)
     for k in range(2, coef.shape[0]):
         ck = coef[k]
         for i in range(n):
             acc = diag[i] * w_cur[i] + b[i]
             for q in range(indptr[i], indptr[i + 1]):
                 acc += d[q] * w_cur[indices[q]]
-            nxt = 2.0 * acc - w_prev[i]
+            tmp[i] = acc
+        for e in range(m):
+            tmp[rp[e]] += rg[e] * w_cur[rr[e]]
+        for i in range(n):
+            nxt = 2.0 * tmp[i] - w_prev[i]
             w_next[i] = nxt
             out[i] += ck * nxt
         w_prev, w_cur, w_next = w_cur, w_next, w_prev
 
 
 @njit(cache=True, nogil=True)
-def _columns(indptr, indices, data, rooms, bxu, u, B, h, r, coef, out):
+def _columns(indptr, indices, data, rooms, bxu, ret, retc, u, B, h, r, coef, out):
     # out[:, j] = Gamma B[:, j]: the response after one step of a zero state to the unit
     # forcing B[:, j] held over the step (supply-temperature term off)
     n = B.shape[0]
@@ -105,45 +141,75 @@ def _columns(indptr, indices, data, rooms, bxu, u, B, h, r, coef, out):
     for j in range(B.shape[1]):
         for i in range(n):
             col[i] = B[i, j]
-        _step(indptr, indices, data, rooms, bxu, zero, u, col, 0.0, h, r, coef, res)
+        _step(indptr, indices, data, rooms, bxu, ret, retc, zero, u, col, 0.0, h, r, coef, res)
         for i in range(n):
             out[i, j] = res[i]
 
 
 @njit(cache=True, nogil=True)
-def _run(indptr, indices, data, rooms, bxu, x0, u, b_fixed, ts, h, r, coef, xs):
+def _run(indptr, indices, data, rooms, bxu, ret, retc, x0, u, b_fixed, ts, h, r, coef, xs):
     xs[0] = x0
     for k in range(u.shape[0]):
-        _step(indptr, indices, data, rooms, bxu, xs[k], u[k], b_fixed[k], ts[k], h, r, coef,
-              xs[k + 1])
+        _step(indptr, indices, data, rooms, bxu, ret, retc, xs[k], u[k], b_fixed[k], ts[k], h, r,
+              coef, xs[k + 1])
 
 
-def spectral_bound(A, rooms: np.ndarray, bxu: np.ndarray, u: np.ndarray) -> float:
+def _no_returns(n_boxes: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.full(n_boxes, -1, dtype=np.int64), np.zeros(n_boxes)
+
+
+def _returns(ret, retc, n_boxes: int) -> tuple[np.ndarray, np.ndarray]:
+    if ret is None:
+        return _no_returns(n_boxes)
+    return np.ascontiguousarray(ret, dtype=np.int64), np.ascontiguousarray(retc, dtype=float)
+
+
+def spectral_bound(A, rooms: np.ndarray, bxu: np.ndarray, u: np.ndarray,
+                   ret: np.ndarray | None = None, retc: np.ndarray | None = None) -> float:
     """L [1/s] with every eigenvalue of A(u_k) in [-L, 0] for all rows of ``u``
-    (Gershgorin: A(u) is diagonally dominant with a non-positive diagonal)."""
+    (Gershgorin: A(u) is diagonally dominant with a non-positive diagonal). ``ret``,
+    ``retc``: the boxes' return plenums (:attr:`~.rc.network.RCStructure.returns`), whose
+    outflow adds to the plenum's diagonal."""
     A = sp.csr_matrix(A)
     diag = -A.diagonal()
     off = np.asarray(abs(A).sum(axis=1)).ravel() - np.abs(A.diagonal())
     extra = np.zeros((len(u), A.shape[0]))
     np.add.at(extra.T, rooms, (-np.asarray(bxu)[:, None]) * np.asarray(u).T)
+    if ret is not None and np.any(np.asarray(ret) >= 0):
+        has = np.asarray(ret) >= 0
+        # the plenum's row: its outflow on the diagonal and the rooms' inflow off it
+        np.add.at(extra.T, np.asarray(ret)[has],
+                  2.0 * np.asarray(retc)[has][:, None] * np.asarray(u).T[has])
     return float(np.max(diag + off + extra.max(axis=0))) if len(u) else float(np.max(diag + off))
 
 
 def tight_bound(A, rooms: np.ndarray, bxu: np.ndarray, u: np.ndarray, capacity: np.ndarray,
-                margin: float = 1.05) -> float:
+                margin: float = 1.05, ret: np.ndarray | None = None,
+                retc: np.ndarray | None = None) -> float:
     """L [1/s] from the extreme eigenvalue of the symmetric form at the largest airflows.
 
     ``A(u) = diag(1/cap) K(u)`` is similar to ``S(u) = D^-1/2 K(u) D^-1/2`` (D = diag(cap)),
     symmetric; raising any airflow adds a negative semidefinite diagonal, so by Weyl's
     inequality the most negative eigenvalue over all rows of ``u`` is bounded by the one at
     the element-wise maximum airflow. ``margin`` covers the eigensolver's tolerance.
+    ``ret``, ``retc``: as :func:`spectral_bound`. With return air A(u) is not symmetric:
+    the symmetric part's extreme eigenvalue then bounds the real parts of its eigenvalues
+    (numerical range), and the series keeps terms for the Gershgorin discs
+    (:data:`RHO_RETURN`).
     """
     A = sp.csr_matrix(A, dtype=float)
     umax = np.max(u, axis=0) if len(u) else np.zeros(len(bxu))
     dd = np.zeros(A.shape[0])
     np.add.at(dd, rooms, np.asarray(bxu) * umax)
+    Au = A + sp.diags(dd)
+    if ret is not None and np.any(np.asarray(ret) >= 0):
+        has = np.asarray(ret) >= 0
+        p, r_, g = np.asarray(ret)[has], np.asarray(rooms)[has], np.asarray(retc)[has] * umax[has]
+        n = A.shape[0]
+        Au = Au + sp.csr_matrix((np.concatenate([g, -g]),
+                                 (np.concatenate([p, p]), np.concatenate([r_, p]))), shape=(n, n))
     sq = np.sqrt(np.asarray(capacity, float))
-    S = sp.diags(sq) @ (A + sp.diags(dd)) @ sp.diags(1.0 / sq)
+    S = sp.diags(sq) @ Au @ sp.diags(1.0 / sq)
     S = 0.5 * (S + S.T)
     try:
         # a fixed start vector: ARPACK's default is random, which would make the number of
@@ -151,13 +217,14 @@ def tight_bound(A, rooms: np.ndarray, bxu: np.ndarray, u: np.ndarray, capacity: 
         lam = eigsh(S, k=1, which="SA", return_eigenvectors=False, tol=1e-6, maxiter=5000,
                     v0=np.ones(S.shape[0]))
     except ArpackNoConvergence:
-        return spectral_bound(A, rooms, bxu, u)
-    return float(min(-lam[0] * margin, spectral_bound(A, rooms, bxu, u)))
+        return spectral_bound(A, rooms, bxu, u, ret, retc)
+    return float(min(-lam[0] * margin, spectral_bound(A, rooms, bxu, u, ret, retc)))
 
 
 def simulate_exact(A, rooms: np.ndarray, bxu: np.ndarray, x0: np.ndarray, u: np.ndarray,
                    b_fixed: np.ndarray, ts: np.ndarray, h: float, tol: float = TOL,
-                   capacity: np.ndarray | None = None) -> np.ndarray:
+                   capacity: np.ndarray | None = None, ret: np.ndarray | None = None,
+                   retc: np.ndarray | None = None) -> np.ndarray:
     """States (N + 1, n) [degC] of the model stepped exactly with inputs held per step.
 
     Parameters
@@ -173,22 +240,25 @@ def simulate_exact(A, rooms: np.ndarray, bxu: np.ndarray, x0: np.ndarray, u: np.
     tol : truncation of the Chebyshev series (relative)
     capacity : (n,) state heat capacities [J/K]; with them the spectral interval comes
         from the symmetric form's extreme eigenvalue (fewer terms), else from Gershgorin.
+    ret, retc : (n_boxes,) each box's return plenum state (-1: none) and c_p / C_plenum
+        (:attr:`~.rc.network.RCStructure.returns`); default none.
     """
+    ret, retc = _returns(ret, retc, len(rooms))
     As = sp.csr_matrix(A)
     As.sum_duplicates()
     u = np.ascontiguousarray(u, dtype=float)
     if np.any(u < 0):
         raise ValueError("airflows u must be >= 0 kg/s")
-    L = (tight_bound(As, rooms, bxu, u, capacity) if capacity is not None
-         else spectral_bound(As, rooms, bxu, u))
+    L = (tight_bound(As, rooms, bxu, u, capacity, ret=ret, retc=retc) if capacity is not None
+         else spectral_bound(As, rooms, bxu, u, ret, retc))
     r = max(L * h / 2.0, 1e-12)
-    coef = chebyshev_coefficients(r, tol)
+    coef = chebyshev_coefficients(r, tol, RHO_RETURN if np.any(ret >= 0) else 1.0)
     if len(coef) < 2:
         coef = np.append(coef, 0.0)
     xs = np.empty((len(u) + 1, As.shape[0]))
     _run(As.indptr.astype(np.int64), As.indices.astype(np.int64), As.data.astype(np.float64),
          np.ascontiguousarray(rooms, dtype=np.int64), np.ascontiguousarray(bxu, float),
-         np.ascontiguousarray(x0, float), u, np.ascontiguousarray(b_fixed, float),
+         ret, retc, np.ascontiguousarray(x0, float), u, np.ascontiguousarray(b_fixed, float),
          np.ascontiguousarray(ts, float), float(h), float(r), coef, xs)
     return xs
 
@@ -199,23 +269,27 @@ class ExactStepper:
 
     Parameters
     ----------
-    A, rooms, bxu, h, capacity : as :func:`simulate_exact`
+    A, rooms, bxu, h, capacity, ret, retc : as :func:`simulate_exact`
     u_max : (n_boxes,) the largest airflows [kg/s] that will be stepped (bounds the spectrum)
     """
 
     def __init__(self, A, rooms, bxu, h: float, u_max: np.ndarray,
-                 capacity: np.ndarray | None = None, tol: float = TOL):
+                 capacity: np.ndarray | None = None, tol: float = TOL,
+                 ret: np.ndarray | None = None, retc: np.ndarray | None = None):
         self.A = sp.csr_matrix(A, dtype=float)
         self.A.sum_duplicates()
         self.rooms = np.ascontiguousarray(rooms, dtype=np.int64)
         self.bxu = np.ascontiguousarray(bxu, dtype=float)
+        self.ret, self.retc = _returns(ret, retc, len(self.rooms))
         self.u_max = np.asarray(u_max, dtype=float)
         um = self.u_max[None, :]
-        L = (tight_bound(self.A, self.rooms, self.bxu, um, capacity) if capacity is not None
-             else spectral_bound(self.A, self.rooms, self.bxu, um))
+        L = (tight_bound(self.A, self.rooms, self.bxu, um, capacity, ret=self.ret,
+                         retc=self.retc) if capacity is not None
+             else spectral_bound(self.A, self.rooms, self.bxu, um, self.ret, self.retc))
         self.h = float(h)
         self.r = max(L * h / 2.0, 1e-12)
-        self.coef = chebyshev_coefficients(self.r, tol)
+        self.coef = chebyshev_coefficients(self.r, tol,
+                                           RHO_RETURN if np.any(self.ret >= 0) else 1.0)
         if len(self.coef) < 2:
             self.coef = np.append(self.coef, 0.0)
         self._ip = self.A.indptr.astype(np.int64)
@@ -227,7 +301,7 @@ class ExactStepper:
         supply temperature ``ts`` [degC] held over the step."""
         u = self._check(u)
         out = np.empty_like(np.asarray(x, dtype=float))
-        _step(self._ip, self._ix, self._d, self.rooms, self.bxu,
+        _step(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc,
               np.ascontiguousarray(x, dtype=float), u, np.ascontiguousarray(b_fixed, float),
               float(ts), self.h, self.r, self.coef, out)
         return out
@@ -246,7 +320,7 @@ class ExactStepper:
         same arithmetic as N calls of :meth:`step`."""
         u = self._check(np.atleast_2d(u))
         xs = np.empty((len(u) + 1, self.A.shape[0]))
-        _run(self._ip, self._ix, self._d, self.rooms, self.bxu,
+        _run(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc,
              np.ascontiguousarray(x0, dtype=float), u, np.ascontiguousarray(b_fixed, float),
              np.ascontiguousarray(ts, float), self.h, self.r, self.coef, xs)
         return xs
@@ -259,8 +333,8 @@ class ExactStepper:
         u = self._check(u)
         B = np.ascontiguousarray(B, dtype=float)
         out = np.empty(B.shape)
-        _columns(self._ip, self._ix, self._d, self.rooms, self.bxu, u, B, self.h, self.r,
-                 self.coef, out)
+        _columns(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc, u, B,
+                 self.h, self.r, self.coef, out)
         return out
 
 
@@ -286,7 +360,8 @@ class StepperLadder:
     """
 
     def __init__(self, A, rooms, bxu, h: float, capacity: np.ndarray | None, u_base: float,
-                 fixed: np.ndarray | None = None):
+                 fixed: np.ndarray | None = None, ret: np.ndarray | None = None,
+                 retc: np.ndarray | None = None):
         if not u_base > 0:
             raise ValueError(f"u_base must be > 0 kg/s, got {u_base}")
         self.A = sp.csr_matrix(A, dtype=float)
@@ -294,6 +369,7 @@ class StepperLadder:
         self.bxu = np.asarray(bxu, dtype=float)
         self.h = float(h)
         self.capacity = capacity
+        self.ret, self.retc = _returns(ret, retc, len(self.rooms))
         self.u_base = float(u_base)
         self.fixed = (np.zeros(len(self.rooms)) if fixed is None
                       else np.asarray(fixed, dtype=float))
@@ -321,6 +397,7 @@ class StepperLadder:
         if st is None:
             top = self.u_base * 2.0**k
             bound = np.where(self._free, top, np.maximum(self.fixed, top))
-            st = ExactStepper(self.A, self.rooms, self.bxu, self.h, bound, self.capacity)
+            st = ExactStepper(self.A, self.rooms, self.bxu, self.h, bound, self.capacity,
+                              ret=self.ret, retc=self.retc)
             self._levels[k] = st
         return st

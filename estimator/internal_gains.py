@@ -42,7 +42,8 @@ class GainsTrack:
 def stepper_for(model: BilinearModel, u: np.ndarray) -> ExactStepper:
     """An :class:`ExactStepper` of ``model`` valid for airflows up to the max of ``u``."""
     return ExactStepper(model.structure.A(model.params.physical), model._rooms, model._bxu,
-                        model.step, np.max(u, axis=0), capacity=model.structure.capacity)
+                        model.step, np.max(u, axis=0), capacity=model.structure.capacity,
+                        ret=model._ret, retc=model._retc)
 
 
 def track_gains(model: BilinearModel, data: ModelData, start: int, stop: int,

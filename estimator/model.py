@@ -144,6 +144,10 @@ class BilinearModel:
         self.C = structure.C
         self._bxu = structure.Bxu_diag()  # one nonzero per box: (room, room)
         self._rooms = structure.room_of_box
+        # return air into plenums: the plenum's air state and c_p / C_plenum per box (-1, 0:
+        # none); the room's air enters at its value at the step's start (docs/model.md)
+        self._ret, self._retc = structure.returns
+        self._has_ret = bool(np.any(self._ret >= 0))
         cap = structure.capacity
         self._k0 = -cap[:, None] * self.A
         self._k0 = 0.5 * (self._k0 + self._k0.T)  # symmetric by construction; remove round-off
@@ -173,10 +177,15 @@ class BilinearModel:
 
     # continuous matrices ------------------------------------------------------
     def Bxu(self, j: int) -> np.ndarray:
-        """Continuous B_xu_j [1/(s kg/s)] (paper eq:ct_model); nonzero only at the room."""
+        """Continuous B_xu_j [1/(s kg/s)] (paper eq:ct_model); nonzero at the room and, with a
+        return plenum p, c_p / C_p at (p, room) and -c_p / C_p at (p, p)."""
         out = np.zeros((self.n, self.n))
         r = self._rooms[j]
         out[r, r] = self._bxu[j]
+        p = self._ret[j]
+        if p >= 0:
+            out[p, r] += self._retc[j]
+            out[p, p] -= self._retc[j]
         return out
 
     def Bvu(self, j: int) -> np.ndarray:
@@ -186,9 +195,15 @@ class BilinearModel:
         return out
 
     def system_matrix(self, u: np.ndarray) -> np.ndarray:
-        """A + sum_j u_j B_xu_j [1/s]."""
+        """A + sum_j u_j B_xu_j [1/s] (return air included exactly)."""
         m = self.A.copy()
-        np.add.at(m, (self._rooms, self._rooms), self._bxu * np.asarray(u, dtype=float))
+        u = np.asarray(u, dtype=float)
+        np.add.at(m, (self._rooms, self._rooms), self._bxu * u)
+        if self._has_ret:
+            has = self._ret >= 0
+            g = self._retc[has] * u[has]
+            np.add.at(m, (self._ret[has], self._rooms[has]), g)
+            np.add.at(m, (self._ret[has], self._ret[has]), -g)
         return m
 
     def input_matrix(self, u: np.ndarray) -> np.ndarray:
@@ -219,8 +234,12 @@ class BilinearModel:
         """Exact Phi = e^{M h} and Gamma = int_0^h e^{M s} ds for rows of u (batched).
 
         M(u) = -Cap^-1 K(u) with K symmetric, so with S = Cap^-1/2 K Cap^-1/2 = Q L Q^T:
-        e^{M h} = Cap^-1/2 Q e^{-L h} Q^T Cap^1/2 (exact, no series truncation).
+        e^{M h} = Cap^-1/2 Q e^{-L h} Q^T Cap^1/2 (exact, no series truncation). With return
+        air M(u) is not symmetric: the same with a general eigendecomposition
+        (:meth:`_propagators_general`).
         """
+        if self._has_ret:
+            return self._propagators_general(np.atleast_2d(u))
         s = self._isq[None, :, None] * self._stiffness(u) * self._isq[None, None, :]
         lam, q = np.linalg.eigh(s)
         lam = np.maximum(lam, 0.0)
@@ -232,6 +251,25 @@ class BilinearModel:
         left = self._isq[None, :, None] * q
         phi = np.matmul(left * decay[:, None, :], qt_c)
         gam = np.matmul(left * integral[:, None, :], qt_c)
+        return phi, gam
+
+    def _propagators_general(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Phi and Gamma of :meth:`_propagators` for a generator that is not symmetric (return
+        air): S = Cap^1/2 M Cap^-1/2 = V diag(lam) V^-1 (nearly symmetric, well conditioned),
+        e^{M h} = Cap^-1/2 V e^{lam h} V^-1 Cap^1/2, Gamma likewise with (e^{lam h} - 1) / lam."""
+        mats = np.stack([self.system_matrix(row) for row in u])
+        s = self._sq[None, :, None] * mats * self._isq[None, None, :]
+        lam, vec = np.linalg.eig(s)
+        inv = np.linalg.inv(vec)
+        h = self.step
+        z = lam * h
+        small = np.abs(z) < 1e-8
+        decay = np.exp(z)
+        integral = np.where(small, h, np.expm1(z) / np.where(small, 1.0, lam))
+        left = self._isq[None, :, None] * vec
+        right = inv * self._sq[None, None, :]
+        phi = np.real(np.matmul(left * decay[:, None, :], right))
+        gam = np.real(np.matmul(left * integral[:, None, :], right))
         return phi, gam
 
     def _lookup(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -319,6 +357,10 @@ class BilinearModel:
             r = self._rooms[j]
             direction[r, r] = self._bxu[j]
             direction[r, n + 1] = -self._bxu[j]
+            if self._ret[j] >= 0:
+                p = self._ret[j]
+                direction[p, r] += self._retc[j]
+                direction[p, p] -= self._retc[j]
             _, d = sla.expm_frechet(aug * self.step, direction * self.step)
             bxu[j] = d[:n, :n]
             bvu[j] = d[:n, n:n + nv]
@@ -431,7 +473,8 @@ class BilinearModel:
             forcing = v @ self.Bv.T + gains @ self.B_ig.T + extra
             xs = simulate_exact(self.structure.A(self.params.physical), self._rooms, self._bxu,
                                 x0, u, forcing, v[:, 1], self.step,
-                                capacity=self.structure.capacity)
+                                capacity=self.structure.capacity, ret=self._ret,
+                                retc=self._retc)
         elif method == "eig":
             forcing = v @ self.Bv.T + gains @ self.B_ig.T + extra  # u held per step
             ts = v[:, 1]

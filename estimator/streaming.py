@@ -257,7 +257,8 @@ class OnlineEstimator:
         self._ladder = StepperLadder(m.structure.A(m.params.physical), m._rooms, m._bxu,
                                      m.step, m.structure.capacity,
                                      float(np.max(m.u_nominal)),
-                                     fixed=_scheduled_bounds(m.structure))
+                                     fixed=_scheduled_bounds(m.structure),
+                                     ret=m._ret, retc=m._retc)
         # the day-ahead offset's decay and window as chosen on the training weeks (the
         # offline study's; docs/numerics.md)
         self._dayahead = DayAheadGains(bundle.profile, tau=DAYAHEAD_TAU, window=DAYAHEAD_WINDOW,

@@ -256,6 +256,10 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                      help="'idf' (the default): the IDF's overhangs, fins and shading "
                           "surfaces shade the windows' solar (docs/model.md \"Exterior "
                           "shading\"), or 'none'")] = "idf",
+                 return_air: Annotated[str, typer.Option(
+                     help="'idf' (the default): the boxes' return air flows through the "
+                          "IDF's return plenums (docs/model.md \"Return plenum\"), or "
+                          "'none' (the paper)")] = "idf",
                  weekend_gains: Annotated[bool, typer.Option(
                      help="identify again with the weekly gains profile of the weeks without "
                           "experiments as known f_IG (buildings occupied at weekends; "
@@ -271,7 +275,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  profile_weeks=profile_weeks, window_solar=window_solar,
                                  seed=seed, priors=priors, sigma_e=sigma_e, window=window,
                                  infiltration=infiltration, weekend_gains=weekend_gains,
-                                 ground=ground, shading=shading,
+                                 ground=ground, shading=shading, return_air=return_air,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -346,6 +350,9 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   shading: Annotated[str, typer.Option(
                       help="'idf' (the default): the IDF's overhangs, fins and shading "
                            "surfaces shade the windows, or 'none'")] = "idf",
+                  return_air: Annotated[str, typer.Option(
+                      help="'idf' (the default): return air through the IDF's return "
+                           "plenums, or 'none' (the paper)")] = "idf",
                   weekend_gains: Annotated[bool, typer.Option(
                       help="identify again with the weekly gains profile of the training "
                            "weeks as known f_IG (buildings occupied at weekends)")] = False
@@ -360,7 +367,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 priors=priors, sigma_e=sigma_e, window=window,
                                 sensitivity=sensitivity, infiltration=infiltration,
                                 weekend_gains=weekend_gains, ground=ground,
-                                shading=shading)
+                                shading=shading, return_air=return_air)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

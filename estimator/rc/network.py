@@ -150,7 +150,13 @@ class ModelOptions:
         Exterior shading of windows: the IDF's overhangs, fins and shading surfaces shade
         the window irradiance of the solar columns (:attr:`RCStructure.shading`,
         :mod:`~zonecast.estimator.shading`), or nothing shades them (model files written
-        before 2026-11-25 read as this).
+        before the option existed read as this).
+    return_air : {"idf", "none"}
+        Return air through a return plenum (the IDF's ``AirLoopHVAC:ReturnPlenum``): each
+        box's airflow carries its room's air into the plenum, c_p u_j (x_room - x_plenum)
+        (:attr:`RCStructure.return_of_box`; docs/model.md "Return plenum"), or the plenum
+        exchanges heat by conduction only (the paper; model files written before the option
+        existed read as this).
     """
 
     roof_solar: str = "mean"
@@ -162,8 +168,11 @@ class ModelOptions:
     infiltration: str = "idf"
     facades: str = "building"
     shading: str = "idf"
+    return_air: str = "idf"
 
     def __post_init__(self):
+        if self.return_air not in ("idf", "none"):
+            raise ModelDefinitionError("return_air must be 'idf' or 'none'")
         if self.shading not in ("idf", "none"):
             raise ModelDefinitionError("shading must be 'idf' or 'none'")
         if self.facades not in ("building", "cardinal"):
@@ -289,6 +298,10 @@ class RCStructure:
         Shaded exterior windows (:meth:`~zonecast.estimator.shading.WindowShading.to_dict`):
         their facade column, share of the facade's window area, polygons and diffuse
         ratios; empty when nothing shades a window. :attr:`facade_shading` applies them.
+    return_of_box : ndarray of int or None
+        Air state of the return plenum each box's return air flows into, -1 for none (a
+        room without a plenum, a scheduled input); None: no return paths. The plenum gains
+        c_p u_j (x_room - x_plenum) (:attr:`returns`).
     """
 
     labels: list[StateLabel]
@@ -311,6 +324,17 @@ class RCStructure:
     facade_rotation: float = 0.0
     scheduled: dict[str, dict] = field(default_factory=dict)
     shading: list[dict] = field(default_factory=list)
+    return_of_box: np.ndarray | None = None
+
+    @property
+    def returns(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return air path of each box: (state index of its return plenum's air or -1,
+        c_p / C_plenum [1/(s kg/s)] or 0)."""
+        nb = len(self.room_of_box)
+        ret = (np.full(nb, -1, dtype=np.int64) if self.return_of_box is None
+               else np.asarray(self.return_of_box, dtype=np.int64))
+        coef = np.where(ret >= 0, self.cp_air / self.capacity[np.maximum(ret, 0)], 0.0)
+        return ret, coef
 
     @property
     def facade_shading(self):
@@ -701,6 +725,16 @@ def build_structure(
                                    opts.rho_air * opts.cp_air * inf.flow, -1)
 
 
+    return_of_box = None
+    if opts.return_air == "idf" and building.return_plenum:
+        ret = [room_state.get(building.return_plenum.get(box_rooms[b], ""), -1)
+               if b not in scheduled else -1 for b in box_rooms]
+        if any(r >= 0 for r in ret):
+            return_of_box = np.array(ret, dtype=int)
+            plen = sorted({building.return_plenum[box_rooms[b]] for b, r in zip(box_rooms, ret)
+                           if r >= 0})
+            notes.append(f"return air of {sum(r >= 0 for r in ret)} boxes into the plenum(s) "
+                         f"{', '.join(plen)}: c_p u (x_room - x_plenum)")
     cap, a_list, b_list = asm.matrices()
     n = len(cap)
     zone_names = list(zone_rooms)
@@ -725,6 +759,7 @@ def build_structure(
         B_ig=b_ig,
         room_of_box=np.array([ground_boxes[b][1] if b in ground_boxes
                               else room_state[box_rooms[b]] for b in box_rooms], dtype=int),
+        return_of_box=return_of_box,
         C=c_mat,
         cp_air=opts.cp_air,
         notes=notes,

@@ -21,7 +21,8 @@ from zonecast.estimator.rc.network import ModelOptions as _Options
 from zonecast.estimator.telemetry import segments_of
 
 #: the RC network alone (NREL's files' scheduled inputs, infiltration and ground, add to u)
-NO_LEAK = _Options(infiltration="none", ground="adiabatic")
+# the paper's structure of the 5-zone: no infiltration, ground, shading or return air
+NO_LEAK = _Options(infiltration="none", ground="adiabatic", shading="none", return_air="none")
 
 ZONES = {"South": ["SPACE1-1"], "East": ["SPACE2-1"], "North": ["SPACE3-1"],
          "West": ["SPACE4-1"], "Core": ["SPACE5-1"]}

@@ -14,7 +14,8 @@ from zonecast.estimator.rc.network import ModelOptions as _Options
 from zonecast.estimator.telemetry import segments_of
 
 #: the RC network alone (NREL's files' scheduled inputs, infiltration and ground, add to u)
-NO_LEAK = _Options(infiltration="none", ground="adiabatic")
+# the paper's structure of the 5-zone: no infiltration, ground, shading or return air
+NO_LEAK = _Options(infiltration="none", ground="adiabatic", shading="none", return_air="none")
 
 
 def _model_and_inputs(five_zone, seed):

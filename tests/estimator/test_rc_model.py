@@ -27,7 +27,9 @@ FIVE_BOXES = {f"VAV{i}": f"Space{i}-1" for i in range(1, 6)}
 
 
 #: the RC network alone (NREL's files' scheduled inputs, infiltration and ground, add to u)
-NO_LEAK = ModelOptions(infiltration="none", ground="adiabatic")
+# the paper's structure of the 5-zone: no infiltration, ground, shading or return air
+NO_LEAK = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
+                       return_air="none")
 
 
 def _wall_building(layers, area=(4.0, 3.0), extra=None, floor="Adiabatic"):

@@ -59,6 +59,17 @@ class ExteriorShading(_Strict):
                              "window, as high as the window (Shading:Fin); 0: no fins")
 
 
+class ReturnPlenum(_Strict):
+    """A return plenum above the rooms: one unconditioned zone over the whole floor that
+    every box's return air flows through."""
+
+    height: float = Field(gt=0, le=2, description="[m] between the rooms' ceilings (acoustic "
+                          "tile) and the slab or roof above")
+    lights_return_fraction: float = Field(0.0, ge=0, le=0.5, description="[-] share of the "
+                                          "lights' heat released into the return air "
+                                          "(Lights Return Air Fraction)")
+
+
 class Room(_Strict):
     rect: tuple[float, float, float, float]
     zone: str
@@ -164,6 +175,8 @@ class BuildingConfig(_Strict):
                               "ground_temperature)")
     shading: ExteriorShading | None = Field(None, description="overhangs and fins on the "
                                             "exterior windows; None: no exterior shading")
+    plenum: ReturnPlenum | None = Field(None, description="return plenum above the rooms; "
+                                        "None: the ceilings are the slab (no plenum)")
     ground_temperature: list[float] | None = Field(
         None, min_length=12, max_length=12,
         description="[degC] temperature under a ground floor, January to December "

@@ -39,6 +39,8 @@ MIN_ROOM_LENGTH = 3.0
 TOP_FLOOR_SHARE = 0.2
 #: share of the members with overhangs on every window (half of them with fins as well)
 SHADING_SHARE = 0.35
+#: share of the members with a return plenum above the rooms
+PLENUM_SHARE = 0.4
 #: share of the other floors that lie on the ground (slab on grade)
 GROUND_FLOOR_SHARE = 0.3
 #: indoor temperature a slab under a conditioned building settles near [degC], the drop to
@@ -253,7 +255,8 @@ def describe(cfg: BuildingConfig) -> dict:
     ``airflow_perimeter``, ``airflow_core`` [m3/s per m2 floor], ``supply_reset`` (a
     :data:`RESETS` key or ``custom``) and ``supply_reset_values`` [degC],
     ``excitation_days``, ``weekend_occupancy`` [-], ``floor_position`` (middle, top, ground),
-    ``shading`` (overhang depth / window height, overhang offset [m], fin depth [m]; None).
+    ``shading`` (overhang depth / window height, overhang offset [m], fin depth [m]; None),
+    ``plenum`` (height [m], lights' return-air fraction [-]; None).
     """
     rects = np.array([r.rect for r in cfg.rooms.values()])
     walls = plan_walls({n: r.rect for n, r in cfg.rooms.items()})
@@ -286,6 +289,7 @@ def describe(cfg: BuildingConfig) -> dict:
         "weekend_occupancy": cfg.weekend_occupancy,
         "floor_position": cfg.floor_position,
         "shading": cfg.shading.model_dump() if cfg.shading is not None else None,
+        "plenum": cfg.plenum.model_dump() if cfg.plenum is not None else None,
     }
 
 
@@ -387,6 +391,11 @@ def draw_member(seed: int, index: int, base: BuildingConfig | None = None) -> Fa
                    "overhang_offset": float(np.round(rng.uniform(0.0, 0.3), 2)),
                    "fin_depth": float(np.round(rng.uniform(0.3, 0.8), 2))
                    if rng.random() < 0.5 else 0.0}
+    # return plenum, drawn after the shading for the same reason
+    plenum = None
+    if rng.random() < PLENUM_SHARE:
+        plenum = {"height": float(np.round(rng.uniform(0.6, 1.2), 2)),
+                  "lights_return_fraction": float(np.round(rng.uniform(0.0, 0.3), 2))}
 
     data = base.model_dump(mode="json")
     name = f"f{seed}-{index:02d}-{climate_key}"
@@ -408,6 +417,8 @@ def draw_member(seed: int, index: int, base: BuildingConfig | None = None) -> Fa
         data["ground_temperature"] = ground_temperatures(climate)
     if shading is not None:
         data["shading"] = shading
+    if plenum is not None:
+        data["plenum"] = plenum
     if top:
         data["constructions"]["roof"] = [list(x) for x in roof_layers(base)]
     data["hvac"].update({"design_airflow_perimeter": perim_flow, "design_airflow_core": core_flow,

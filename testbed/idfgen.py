@@ -102,6 +102,14 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
                 add(obj("Material", name, "MediumRough", float(th), float(k), float(rho), float(c),
                         0.9, 0.65, 0.65))
         add(obj("Construction", cname, *[layer[0] for layer in layers]))
+    if cfg.plenum is not None:
+        # the rooms' ceiling is its last layer (the tile) under the plenum; above the plenum
+        # the ceiling's (or the roof's) massive layers without the tile and air spaces
+        tile = cfg.constructions["ceiling"][-1]
+        add(obj("Construction", "plenum_tile", tile[0]))
+        top = cfg.constructions["roof" if cfg.floor_position == "top" else "ceiling"]
+        deck = [layer[0] for layer in top[:-1] if len(layer) != 2] or [top[0][0]]
+        add(obj("Construction", "plenum_deck", *deck))
     shgc = effects.shgc if effects.shgc is not None else cfg.glazing.shgc
     add(obj("WindowMaterial:SimpleGlazingSystem", "Glazing", cfg.glazing.u_factor, shgc,
             cfg.glazing.visible_transmittance))
@@ -125,7 +133,11 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
                 "Ground" if cfg.floor_position == "ground" else "Adiabatic", "", "NoSun",
                 "NoWind", "", 4,
                 x0, y1, 0.0, x1, y1, 0.0, x1, y0, 0.0, x0, y0, 0.0))
-        if cfg.floor_position == "top":
+        if cfg.plenum is not None:
+            add(obj("BuildingSurface:Detailed", f"{rname}_Ceiling", "Ceiling", "plenum_tile",
+                    rname, "", "Surface", f"Plenum_Floor_{rname}", "NoSun", "NoWind", "", 4,
+                    x0, y0, H, x1, y0, H, x1, y1, H, x0, y1, H))
+        elif cfg.floor_position == "top":
             add(obj("BuildingSurface:Detailed", f"{rname}_Roof", "Roof", "roof", rname, "",
                     "Outdoors", "", "SunExposed", "WindExposed", "", 4,
                     x0, y0, H, x1, y0, H, x1, y1, H, x0, y1, H))
@@ -161,8 +173,9 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
         if kind.people_per_m2 > 0:
             add(obj("People", f"{rname} People", rname, f"sch:occ:{rname}", "People/Area", "",
                     kind.people_per_m2 * scale, "", 0.3, "autocalculate", "Activity"))
+        raf = cfg.plenum.lights_return_fraction if cfg.plenum is not None else 0.0
         add(obj("Lights", f"{rname} Lights", rname, f"sch:lights:{rname}", "Watts/Area", "",
-                kind.lights_w_m2 * scale, "", 0.0, 0.42, 0.18, 1.0))
+                kind.lights_w_m2 * scale, "", raf, 0.42, 0.18, 1.0))
         add(obj("ElectricEquipment", f"{rname} Equipment", rname, f"sch:equip:{rname}",
                 "Watts/Area", "", kind.equipment_w_m2 * scale, "", 0.0, 0.3, 0.0))
         mass_area = cfg.furniture_area_per_floor_area * area * effects.mass_scale(room.zone)
@@ -179,6 +192,8 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
         add(obj("HVACTemplate:Zone:VAV", rname, "AHU", "Thermostat", flow, "", "", "Scheduled",
                 "", "", f"sch:minflow:{rname}", "Flow/Person", 0.00944, "", "", "Electric",
                 "AlwaysOn" if effects.reheat else "AlwaysOff", "Reverse", "", "", 35.0))
+    if cfg.plenum is not None:
+        _plenum(cfg, walls, add)
     # air exchanged both ways with neighbours of other zones (effect switch mixing.ZONE)
     pairs: dict[tuple[str, str], float] = {}
     for rname, room in cfg.rooms.items():
@@ -196,7 +211,7 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
             0.9, 1.0, "ChilledWater", "AlwaysOn", "", cfg.hvac.supply_setpoint, "Electric",
             "AlwaysOn", "", 10.0, "", "", "None", "", "", "", "", "", "autosize", "autosize",
             "ProportionalMinimum", "", "DifferentialDryBulb", "NoLockout", 19.0, "", "", "",
-            "", "", "DrawThrough", "InletVaneDampers", "StayOff", "", "None", "", "",
+            "", "Plenum" if cfg.plenum is not None else "", "DrawThrough", "InletVaneDampers", "StayOff", "", "None", "", "",
             "OutdoorAirTemperatureReset", "None", "None"))
     add(obj("HVACTemplate:Plant:ChilledWaterLoop", "Chilled Water Loop", "", "Intermittent",
             "Default", "", "", 7.22, "ConstantPrimaryNoSecondary"))
@@ -211,3 +226,27 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
         add(obj("Output:Variable", supply_node(room), "System Node Temperature", "Timestep"))
     add(obj("Output:Variable", ahu_outlet_node(), "System Node Temperature", "Timestep"))
     return "\n".join(out)
+
+
+def _plenum(cfg: BuildingConfig, walls, add) -> None:
+    """The return plenum zone over the rooms: its floor is each room's ceiling (tile), its
+    top the slab (adiabatic) or the roof, its outer walls the facade above the rooms."""
+    H, hp = cfg.floor_to_ceiling, cfg.plenum.height
+    top = H + hp
+    add(obj("Zone", "Plenum", 0.0, 0.0, 0.0, 0.0, 1, 1, hp, "autocalculate", "autocalculate",
+            "", "", "No"))
+    roof = cfg.floor_position == "top"
+    for rname, room in cfg.rooms.items():
+        x0, y0, x1, y1 = room.rect
+        add(obj("BuildingSurface:Detailed", f"Plenum_Floor_{rname}", "Floor", "plenum_tile",
+                "Plenum", "", "Surface", f"{rname}_Ceiling", "NoSun", "NoWind", "", 4,
+                x0, y1, H, x1, y1, H, x1, y0, H, x0, y0, H))
+        add(obj("BuildingSurface:Detailed", f"Plenum_Top_{rname}", "Roof" if roof else "Ceiling",
+                "plenum_deck", "Plenum", "", "Outdoors" if roof else "Adiabatic", "",
+                "SunExposed" if roof else "NoSun", "WindExposed" if roof else "NoWind", "", 4,
+                x0, y0, top, x1, y0, top, x1, y1, top, x0, y1, top))
+        for w in walls[rname].walls:
+            if w.neighbour is None:
+                v = [c for p in wall_vertices(w, H, top) for c in p]
+                add(obj("BuildingSurface:Detailed", f"Plenum_{w.name}", "Wall", "exterior_wall",
+                        "Plenum", "", "Outdoors", "", "SunExposed", "WindExposed", "", 4, *v))

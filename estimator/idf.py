@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 from zonecast.estimator.schedules import CompactSchedule, ScheduleError
+from zonecast.estimator.shading import fin_polygons, overhang_polygon
 
 __all__ = [
     "Building",
@@ -1107,8 +1108,6 @@ def _shading(data: Mapping[str, Any], geo: _Geometry, zones_raw: Mapping[str, An
              notes: list[str]) -> dict[str, list[np.ndarray]]:
     """Exterior shading polygons in world coordinates (see :attr:`Building.shading`):
     overhangs and fins by window, detailed shading surfaces under ``"*"``."""
-    from zonecast.estimator.shading import fin_polygons, overhang_polygon
-
     out: dict[str, list[np.ndarray]] = {}
     wkey = {k.lower(): k for k in windows}
 

@@ -39,6 +39,7 @@ from typing import Literal
 import numpy as np
 import pandas as pd
 import pvlib
+from zonecast.estimator.shading import sun_vectors
 
 __all__ = [
     "FACADE_AZIMUTHS",
@@ -346,8 +347,6 @@ def facade_columns(geometry: np.ndarray, ghi, dni, dhi, azimuths: Sequence[float
     if not shading:
         return transpose(geometry, ghi, dni, dhi, planes, albedo=albedo, sky_model=sky_model,
                          total=True)["poa_global"]
-    from zonecast.estimator.shading import sun_vectors
-
     comp = transpose(geometry, ghi, dni, dhi, planes, albedo=albedo, sky_model=sky_model)
     sky = comp["poa_sky_diffuse"]
     if sky_model == "perez":

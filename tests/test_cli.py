@@ -52,7 +52,8 @@ def test_model_on_nrels_five_zone_building(tmp_path):
     assert summary["parameters"]["gamma_EW"]["unit"] == "W/(m2 K)"
     mats = np.load(out.with_suffix(".npz"))
     assert mats["A"].shape == (summary["n_states"],) * 2 and mats["C"].shape[0] == 5
-    assert "Shading:Zone:Detailed" in res.output   # reported, not silently skipped
+    # its overhangs (Shading:Zone:Detailed) and return plenum are modelled, and said so
+    assert "2 shaded windows" in res.output and "return air of 5 boxes" in res.output
     res = runner.invoke(app, ["model", "--site", str(site), "--out", str(out), "--params", "paper"])
     assert res.exit_code == 2 and "needs the paper's zones" in res.output
 

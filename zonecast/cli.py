@@ -210,6 +210,9 @@ def model_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the building
     counts = ", ".join(f"{k} {v}" for k, v in model.structure.state_counts().items())
     typer.echo(f"{s.building}: {model.n} states ({counts}); {len(s.zones)} zones, "
                f"{len(model.structure.rooms)} rooms, {model.n_boxes} boxes")
+    for note in model.structure.notes:  # what of the IDF's physics the model took in
+        if "shaded windows" in note or note.startswith("return air of"):
+            typer.echo(note)
     if building.unsupported:
         typer.echo(f"not modelled ({len(building.unsupported)}): "
                    + "; ".join(str(u) for u in building.unsupported[:10]))

@@ -34,6 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 from zonecast.estimator.idf import Building, Construction, Surface
 from zonecast.estimator.rc.elements import NodeLayout, discretise_layers
+from zonecast.estimator.shading import FacadeShading, WindowShading
 
 __all__ = [
     "CP_AIR",
@@ -222,8 +223,6 @@ def _window_shading(shaded, window_area: Mapping[str, np.ndarray],
                     notes: list[str]) -> list[dict]:
     """The shaded windows as :attr:`RCStructure.shading` entries: each window's share of
     its facade's exterior window area and its diffuse ratios."""
-    from zonecast.estimator.shading import WindowShading
-
     totals = np.sum(list(window_area.values()), axis=0) if window_area else np.zeros(4)
     out = []
     for name, col, area, verts, shades in shaded:
@@ -344,7 +343,6 @@ class RCStructure:
             return None
         cached = getattr(self, "_facade_shading", None)
         if cached is None:
-            from zonecast.estimator.shading import FacadeShading
             cached = FacadeShading.from_list(self.shading)
             object.__setattr__(self, "_facade_shading", cached)
         return cached

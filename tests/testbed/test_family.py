@@ -196,7 +196,8 @@ def test_idf_of_a_rotated_member_uses_relative_coordinates_and_its_time_zone(fam
     assert f"{rotated.location.longitude:.6g},\n    -6,\n" in idf        # CST
     office6 = build_idf(OFFICE6, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))], Effects(), [])
     assert "Counterclockwise,\n    World;" in office6 and "Building,\n    office6,\n    0," in office6
-    top = next(m.config for m in family if m.config.floor_position == "top")
+    top = next(m.config for m in family if m.config.floor_position == "top"
+               and m.config.plenum is None)   # under a plenum the roof is the plenum's top
     idf = build_idf(top, [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))], Effects(), [])
     assert idf.count("    Roof,\n    roof,") == len(top.rooms) and "_Ceiling" not in idf
     assert "Flow/ExteriorWallArea" in idf and "Flow/ExteriorArea," not in idf
@@ -313,7 +314,9 @@ def test_a_rotated_member_in_another_climate_runs_and_the_estimator_reads_it(tmp
     pipe = Pipeline.from_site(tmp_path / "site.yaml")
     model = pipe.model()
     assert list(model.structure.zones) == list(cfg.zones)
-    assert sorted(model.structure.rooms) == sorted(cfg.rooms)
+    # a member with a return plenum has it as one more (unmeasured) room
+    assert sorted(model.structure.rooms) == sorted([*cfg.rooms, *(["Plenum"] if cfg.plenum
+                                                                  else [])])
     assert len(model.structure.hvac_boxes) == len(cfg.rooms) == len(site.boxes)
     # this member lies on the ground: each room's floor is a ground contact held near the
     # file's monthly ground temperature (docs/model.md "Ground contact")
@@ -345,7 +348,7 @@ def test_a_top_floor_member_has_a_roof_the_estimator_models(tmp_path, family):
     from zonecast.estimator.pipeline import Pipeline
     from zonecast.testbed.run import run_weeks
 
-    m = min((m for m in family if m.config.floor_position == "top"),
+    m = min((m for m in family if m.config.floor_position == "top" and m.config.plenum is None),
             key=lambda m: len(m.config.rooms))
     res = run_weeks([dt.date(2015, 1, 12)], tmp_path, seed=m.run_seed, config=m.config)
     temps = res.truth[[f"air_temperature:{r}" for r in m.config.rooms]].to_numpy()

@@ -30,7 +30,7 @@ from scipy.optimize import least_squares
 from zonecast.estimator.constants import SIGMA_AIR_X0, STEPS_PER_DAY
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.evaluate import rms_by_zone
-from zonecast.estimator.integrate import RHO_RETURN, _run, chebyshev_coefficients, tight_bound
+from zonecast.estimator.integrate import _run, chebyshev_coefficients, return_rho, tight_bound
 from zonecast.estimator.kalman import (
     default_initial_covariance,
     default_measurement_noise,
@@ -373,6 +373,7 @@ class _Problem:
         self.bxu = np.ascontiguousarray(model._bxu, dtype=float)
         self.ret = np.ascontiguousarray(model._ret, dtype=np.int64)
         self.retc = np.ascontiguousarray(model._retc, dtype=float)
+        self._rho: float | None = None
         self.capacity = st.capacity
         self.u_max = np.max(np.vstack([data.u[a:b] for a, b in spans]), axis=0)
         self.B_ig = model.B_ig
@@ -400,7 +401,14 @@ class _Problem:
         n = len(self.capacity)
         L = self.bound(theta) if L is None else L
         r = L * self.model.step / 2.0
-        coef = chebyshev_coefficients(r, rho=RHO_RETURN if np.any(self.ret >= 0) else 1.0)
+        if self._rho is None:
+            # with return air: how far the eigenvalues leave the real axis, taken once at the
+            # first parameters (the non-symmetric return terms do not depend on them; the
+            # margin of return_rho covers the conductances' change)
+            self._rho = 1.0 if not np.any(self.ret >= 0) else return_rho(
+                sp.csr_matrix((data_vals, self.indices, self.indptr), shape=(n, n)),
+                self.rooms, self.bxu, self.ret, self.retc, self.u_max, L)
+        coef = chebyshev_coefficients(r, rho=self._rho)
         Bv = self.bv0 + np.tensordot(phys, self.bvp, axes=1)
         out = []
         for (a, b), x0, rh in zip(self.spans, self.x0s, self.rh):

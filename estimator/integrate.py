@@ -44,10 +44,29 @@ except ImportError:  # pragma: no cover - exercised only without numba
 TOL = 1e-11
 
 
-#: Bernstein ellipse parameter covering the Gershgorin discs of a model with return air
-#: (its generator is not symmetric: eigenvalues may leave the real interval by up to its
-#: half-width); terms are kept until c_k RHO_RETURN^k is negligible
-RHO_RETURN = 1.0 + np.sqrt(2.0)
+def return_rho(A, rooms, bxu, ret, retc, u_max, L: float) -> float:
+    """Bernstein-ellipse parameter rho >= 1 enclosing the eigenvalues of A(u) on the
+    Chebyshev interval [-L, 0] (scaled to [-1, 1]) for airflows up to ``u_max``: 1 when they
+    are real (a symmetric generator), more when return air makes A(u) non-symmetric and some
+    leave the real axis. From the dense eigenvalues at ``u_max`` and at half of it, with a
+    margin of 50 % on rho - 1."""
+    ret = np.asarray(ret)
+    if not np.any(ret >= 0) or L <= 0:
+        return 1.0
+    A = sp.csr_matrix(A, dtype=float)
+    rho = 1.0
+    for f in (1.0, 0.5):
+        u = f * np.asarray(u_max, dtype=float)
+        M = A.toarray()
+        np.add.at(M, (rooms, rooms), np.asarray(bxu) * u)
+        has = ret >= 0
+        g = np.asarray(retc)[has] * u[has]
+        np.add.at(M, (ret[has], np.asarray(rooms)[has]), g)
+        np.add.at(M, (ret[has], ret[has]), -g)
+        z = 1.0 + 2.0 * np.linalg.eigvals(M) / L
+        w = z + np.sqrt(z * z - 1.0 + 0j)
+        rho = max(rho, float(np.max(np.maximum(np.abs(w), 1.0 / np.maximum(np.abs(w), 1e-300)))))
+    return 1.0 + 1.5 * (rho - 1.0)
 
 
 def chebyshev_coefficients(r: float, tol: float = TOL, rho: float = 1.0) -> np.ndarray:
@@ -76,23 +95,15 @@ def _step(indptr, indices, data, rooms, bxu, ret, retc, x, u, b_fixed, ts, h, r,
     for i in range(n):
         b[i] = (b_fixed[i] - dd[i] * ts) * scale  # + c_p u Ts / C (paper eq:q_hvac)
     # return air into a plenum: c_p u_j (x_room - x_plenum) / C_plenum: the plenum's own air
-    # leaving (diagonal) and the room's air entering (off-diagonal, applied after each product)
-    m = 0
-    for j in range(ret.shape[0]):
-        if ret[j] >= 0:
-            m += 1
-    rp = np.empty(m, dtype=np.int64)
-    rr = np.empty(m, dtype=np.int64)
-    rg = np.empty(m)
+    # leaving (diagonal) and the room's air entering (off-diagonal entries of the plenum's
+    # row, per step: rptr/rr/rg in CSR form, added inside each row's product)
+    cnt = np.zeros(n + 1, dtype=np.int64)
     m = 0
     for j in range(ret.shape[0]):
         p = ret[j]
         if p >= 0:
-            g = retc[j] * u[j]
-            dd[p] -= g
-            rp[m] = p
-            rr[m] = rooms[j]
-            rg[m] = g * scale
+            dd[p] -= retc[j] * u[j]
+            cnt[p + 1] += 1
             m += 1
     for i in range(n):
         diag[i] = 1.0 + dd[i] * scale
@@ -103,28 +114,53 @@ def _step(indptr, indices, data, rooms, bxu, ret, retc, x, u, b_fixed, ts, h, r,
     for i in range(n):
         w_prev[i] = x[i]
         out[i] = coef[0] * x[i]
-    # w1 = t z
+    if m == 0:
+        # w1 = t z
+        for i in range(n):
+            acc = diag[i] * w_prev[i] + b[i]
+            for q in range(indptr[i], indptr[i + 1]):
+                acc += d[q] * w_prev[indices[q]]
+            w_cur[i] = acc
+            out[i] += coef[1] * acc
+        for k in range(2, coef.shape[0]):
+            ck = coef[k]
+            for i in range(n):
+                acc = diag[i] * w_cur[i] + b[i]
+                for q in range(indptr[i], indptr[i + 1]):
+                    acc += d[q] * w_cur[indices[q]]
+                nxt = 2.0 * acc - w_prev[i]
+                w_next[i] = nxt
+                out[i] += ck * nxt
+            w_prev, w_cur, w_next = w_cur, w_next, w_prev
+        return
+    for i in range(n):
+        cnt[i + 1] += cnt[i]
+    rr = np.empty(m, dtype=np.int64)
+    rg = np.empty(m)
+    fill = cnt[:n].copy()
+    for j in range(ret.shape[0]):
+        p = ret[j]
+        if p >= 0:
+            rr[fill[p]] = rooms[j]
+            rg[fill[p]] = retc[j] * u[j] * scale
+            fill[p] += 1
     for i in range(n):
         acc = diag[i] * w_prev[i] + b[i]
         for q in range(indptr[i], indptr[i + 1]):
             acc += d[q] * w_prev[indices[q]]
+        for e in range(cnt[i], cnt[i + 1]):
+            acc += rg[e] * w_prev[rr[e]]
         w_cur[i] = acc
-    for e in range(m):
-        w_cur[rp[e]] += rg[e] * w_prev[rr[e]]
-    for i in range(n):
-        out[i] += coef[1] * w_cur[i]
-    tmp = np.empty(n)
+        out[i] += coef[1] * acc
     for k in range(2, coef.shape[0]):
         ck = coef[k]
         for i in range(n):
             acc = diag[i] * w_cur[i] + b[i]
             for q in range(indptr[i], indptr[i + 1]):
                 acc += d[q] * w_cur[indices[q]]
-            tmp[i] = acc
-        for e in range(m):
-            tmp[rp[e]] += rg[e] * w_cur[rr[e]]
-        for i in range(n):
-            nxt = 2.0 * tmp[i] - w_prev[i]
+            for e in range(cnt[i], cnt[i + 1]):
+                acc += rg[e] * w_cur[rr[e]]
+            nxt = 2.0 * acc - w_prev[i]
             w_next[i] = nxt
             out[i] += ck * nxt
         w_prev, w_cur, w_next = w_cur, w_next, w_prev
@@ -194,8 +230,8 @@ def tight_bound(A, rooms: np.ndarray, bxu: np.ndarray, u: np.ndarray, capacity: 
     the element-wise maximum airflow. ``margin`` covers the eigensolver's tolerance.
     ``ret``, ``retc``: as :func:`spectral_bound`. With return air A(u) is not symmetric:
     the symmetric part's extreme eigenvalue then bounds the real parts of its eigenvalues
-    (numerical range), and the series keeps terms for the Gershgorin discs
-    (:data:`RHO_RETURN`).
+    (numerical range), and the series keeps terms for any that leave the real axis
+    (:func:`return_rho`).
     """
     A = sp.csr_matrix(A, dtype=float)
     umax = np.max(u, axis=0) if len(u) else np.zeros(len(bxu))
@@ -252,7 +288,8 @@ def simulate_exact(A, rooms: np.ndarray, bxu: np.ndarray, x0: np.ndarray, u: np.
     L = (tight_bound(As, rooms, bxu, u, capacity, ret=ret, retc=retc) if capacity is not None
          else spectral_bound(As, rooms, bxu, u, ret, retc))
     r = max(L * h / 2.0, 1e-12)
-    coef = chebyshev_coefficients(r, tol, RHO_RETURN if np.any(ret >= 0) else 1.0)
+    coef = chebyshev_coefficients(r, tol, return_rho(As, rooms, bxu, ret, retc,
+                                                      np.max(u, axis=0), L))
     if len(coef) < 2:
         coef = np.append(coef, 0.0)
     xs = np.empty((len(u) + 1, As.shape[0]))
@@ -288,8 +325,8 @@ class ExactStepper:
              else spectral_bound(self.A, self.rooms, self.bxu, um, self.ret, self.retc))
         self.h = float(h)
         self.r = max(L * h / 2.0, 1e-12)
-        self.coef = chebyshev_coefficients(self.r, tol,
-                                           RHO_RETURN if np.any(self.ret >= 0) else 1.0)
+        self.coef = chebyshev_coefficients(self.r, tol, return_rho(
+            self.A, self.rooms, self.bxu, self.ret, self.retc, self.u_max, L))
         if len(self.coef) < 2:
             self.coef = np.append(self.coef, 0.0)
         self._ip = self.A.indptr.astype(np.int64)

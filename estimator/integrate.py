@@ -96,7 +96,8 @@ def _step(indptr, indices, data, rooms, bxu, ret, retc, x, u, b_fixed, ts, h, r,
         b[i] = (b_fixed[i] - dd[i] * ts) * scale  # + c_p u Ts / C (paper eq:q_hvac)
     # return air into a plenum: c_p u_j (x_room - x_plenum) / C_plenum: the plenum's own air
     # leaving (diagonal) and the room's air entering (off-diagonal entries of the plenum's
-    # row, per step: rptr/rr/rg in CSR form, added inside each row's product)
+    # row, per step: cnt/rr/rg in CSR form, added inside each row's product; empty without
+    # return air, which leaves the arithmetic of the symmetric model unchanged)
     cnt = np.zeros(n + 1, dtype=np.int64)
     m = 0
     for j in range(ret.shape[0]):
@@ -114,25 +115,6 @@ def _step(indptr, indices, data, rooms, bxu, ret, retc, x, u, b_fixed, ts, h, r,
     for i in range(n):
         w_prev[i] = x[i]
         out[i] = coef[0] * x[i]
-    if m == 0:
-        # w1 = t z
-        for i in range(n):
-            acc = diag[i] * w_prev[i] + b[i]
-            for q in range(indptr[i], indptr[i + 1]):
-                acc += d[q] * w_prev[indices[q]]
-            w_cur[i] = acc
-            out[i] += coef[1] * acc
-        for k in range(2, coef.shape[0]):
-            ck = coef[k]
-            for i in range(n):
-                acc = diag[i] * w_cur[i] + b[i]
-                for q in range(indptr[i], indptr[i + 1]):
-                    acc += d[q] * w_cur[indices[q]]
-                nxt = 2.0 * acc - w_prev[i]
-                w_next[i] = nxt
-                out[i] += ck * nxt
-            w_prev, w_cur, w_next = w_cur, w_next, w_prev
-        return
     for i in range(n):
         cnt[i + 1] += cnt[i]
     rr = np.empty(m, dtype=np.int64)

@@ -29,6 +29,7 @@ Three ways to step it are offered (see ``docs/model.md`` for the measured errors
 from __future__ import annotations
 
 import json
+import warnings
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -255,8 +256,36 @@ class BilinearModel:
 
     def _propagators_general(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Phi and Gamma of :meth:`_propagators` for a generator that is not symmetric (return
-        air): S = Cap^1/2 M Cap^-1/2 = V diag(lam) V^-1 (nearly symmetric, well conditioned),
-        e^{M h} = Cap^-1/2 V e^{lam h} V^-1 Cap^1/2, Gamma likewise with (e^{lam h} - 1) / lam."""
+        air): Phi = e^{M h} by scaling and squaring (:func:`scipy.linalg.expm`) and
+        Gamma = M^-1 (Phi - I) from an LU factorisation of M, which is nonsingular when every
+        state has a conductive or airflow path to a boundary (outdoor air, ground, supply
+        air). About 2.4x faster than an eigendecomposition for ~400 states, equal to it to
+        ~1e-13 (tests/estimator/test_return_air.py); a nearly singular M (a state with no
+        path to a boundary) takes the eigendecomposition (:meth:`_propagators_eig`)."""
+        phis, gams = [], []
+        eye = np.eye(self.n)
+        h = self.step
+        for row in u:
+            m = self.system_matrix(row)
+            with warnings.catch_warnings():  # a singular M is handled below
+                warnings.simplefilter("ignore", sla.LinAlgWarning)
+                lu, piv = sla.lu_factor(m, check_finite=False)
+            pivots = np.abs(np.diag(lu))
+            if pivots.min() <= 1e-10 * pivots.max():
+                phi, gam = self._propagators_eig(row[None, :])
+                phis.append(phi[0])
+                gams.append(gam[0])
+                continue
+            phi = sla.expm(m * h)
+            phis.append(phi)
+            gams.append(sla.lu_solve((lu, piv), phi - eye, check_finite=False))
+        return np.stack(phis), np.stack(gams)
+
+    def _propagators_eig(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Phi and Gamma of a non-symmetric generator from its eigendecomposition:
+        S = Cap^1/2 M Cap^-1/2 = V diag(lam) V^-1 (nearly symmetric, well conditioned),
+        e^{M h} = Cap^-1/2 V e^{lam h} V^-1 Cap^1/2, Gamma likewise with (e^{lam h} - 1) / lam
+        (also right for a singular M, lam = 0 giving h)."""
         mats = np.stack([self.system_matrix(row) for row in u])
         s = self._sq[None, :, None] * mats * self._isq[None, None, :]
         lam, vec = np.linalg.eig(s)

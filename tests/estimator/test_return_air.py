@@ -142,3 +142,28 @@ def test_structure_file_keeps_the_return_paths(structures, tmp_path):
     assert back.options.return_air == "idf"
     back, _ = load_structure(save_structure(tmp_path / "p.npz", plain, {"SPACE1-1": 1.0}))
     assert back.return_of_box is None
+
+
+def test_general_propagators_equal_the_eigendecomposition(structures):
+    """Phi = expm(M h), Gamma = M^-1 (Phi - I) (the fast path) equal the propagators of the
+    eigendecomposition; a singular M (an isolated state, eigenvalue 0) takes the
+    eigendecomposition, whose Gamma is h on that state instead of a division by zero."""
+    st, _ = structures
+    m = BilinearModel(st, ParameterSet(list(ZONES)))
+    u, _ = _inputs(4)
+    phi, gam = m._propagators_general(u)
+    phi_e, gam_e = m._propagators_eig(u)
+    np.testing.assert_allclose(phi, phi_e, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(gam, gam_e, rtol=0, atol=1e-10 * np.abs(gam_e).max())
+    regular = m.system_matrix
+
+    def isolated(row):
+        M = regular(row).copy()
+        M[0, :] = 0.0
+        M[:, 0] = 0.0
+        return M
+
+    m.system_matrix = isolated
+    phi, gam = m._propagators_general(u[:1])
+    assert np.all(np.isfinite(gam))
+    assert phi[0, 0, 0] == pytest.approx(1.0) and gam[0, 0, 0] == pytest.approx(m.step)

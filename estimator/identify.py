@@ -30,7 +30,13 @@ from scipy.optimize import least_squares
 from zonecast.estimator.constants import SIGMA_AIR_X0, STEPS_PER_DAY
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.evaluate import rms_by_zone
-from zonecast.estimator.integrate import _run, chebyshev_coefficients, return_rho, tight_bound
+from zonecast.estimator.integrate import (
+    ExactStepper,
+    _run,
+    chebyshev_coefficients,
+    return_rho,
+    tight_bound,
+)
 from zonecast.estimator.kalman import (
     default_initial_covariance,
     default_measurement_noise,
@@ -151,12 +157,22 @@ def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
     x0 = initial_state_from_measurement(np.where(np.isfinite(y[first[0]]), y[first[0]],
                                                  np.nanmean(y[first[0]])), model.state_zones())
     gains = model.params.c_ig
+    # one exact stepper for the window (the kernel's series for its largest airflows): Phi
+    # from the series applied to the identity and the forcing's increment from one step of
+    # a zero state, ~7x faster than eigendecompositions per distinct airflow
+    rows = slice(start, stop + 1)
+    u_max = np.max(data.u[rows], axis=0)
+    stepper = ExactStepper(model.structure.A(model.params.physical), model._rooms,
+                           model._bxu, model.step, u_max, capacity=model.structure.capacity,
+                           ret=model._ret, retc=model._retc)
+    forcing = data.v[rows] @ model.Bv.T + model.reheat_forcing(data.u[rows], data.reheat[rows])
+    zero = np.zeros(model.n)
 
     def step(k):
         u = data.u[start + k]
-        phi, gv, gi = model.step_matrices(u)
         g = gains if f_ig is None else gains + f_ig[start + k]
-        return phi, gv @ data.v[start + k] + gi @ g + model.reheat_step(u, data.reheat[start + k])
+        b = forcing[k] + model.B_ig @ g
+        return stepper.propagator(u), stepper.step(zero, u, b, data.v[start + k, 1])
 
     res = run_filter(x0, default_initial_covariance(model.n, air), step, y, model.C,
                      default_process_noise(model.n, air, sigma_air=sigma_air),

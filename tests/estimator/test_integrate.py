@@ -128,6 +128,25 @@ def test_stepper_run_and_columns_equal_single_steps_and_the_dense_reference():
         st_.columns(u.max(axis=0) * 1.5, B)
 
 
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(2, 30))
+def test_propagator_equals_the_dense_exponential(seed, n):
+    """ExactStepper.propagator (the step's series applied to the identity) is exp(A(u) h)
+    and maps a state as a step of it does without forcing."""
+    rng = np.random.default_rng(seed)
+    A, cap, rooms, bxu = random_network(rng, n, max(1, n // 3))
+    u = rng.uniform(0.0, 1.0, (2, len(rooms)))
+    st_ = ExactStepper(A, rooms, bxu, 900.0, u.max(axis=0), capacity=cap)
+    dd = np.zeros(n)
+    np.add.at(dd, rooms, bxu * u[0])
+    P = st_.propagator(u[0])
+    np.testing.assert_allclose(P, sl.expm((A + np.diag(dd)) * 900.0), atol=1e-10, rtol=0)
+    x = rng.uniform(15.0, 25.0, n)
+    np.testing.assert_allclose(P @ x, st_.step(x, u[0], np.zeros(n), 0.0), atol=1e-9, rtol=0)
+    with pytest.raises(ValueError, match="above the stepper's u_max"):
+        st_.propagator(u.max(axis=0) * 1.5)
+
+
 def test_ladder_level_depends_on_the_airflows_only():
     rng = np.random.default_rng(8)
     A, cap, rooms, bxu = random_network(rng, 12, 3)

@@ -167,3 +167,16 @@ def test_general_propagators_equal_the_eigendecomposition(structures):
     phi, gam = m._propagators_general(u[:1])
     assert np.all(np.isfinite(gam))
     assert phi[0, 0, 0] == pytest.approx(1.0) and gam[0, 0, 0] == pytest.approx(m.step)
+
+
+def test_stepper_propagator_with_return_air(structures):
+    """The series' dense propagator (identification's x(0) filter) equals the propagators of
+    the non-symmetric generator with return air."""
+    st, _ = structures
+    m = BilinearModel(st, ParameterSet(list(ZONES)))
+    u, _ = _inputs(4)
+    stepper = ExactStepper(st.A(m.params.physical), m._rooms, m._bxu, m.step, u.max(axis=0),
+                           capacity=st.capacity, ret=m._ret, retc=m._retc)
+    for row in u:
+        np.testing.assert_allclose(stepper.propagator(row), m._propagators_eig(row[None])[0][0],
+                                   rtol=0, atol=1e-10)

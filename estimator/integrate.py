@@ -82,6 +82,33 @@ def chebyshev_coefficients(r: float, tol: float = TOL, rho: float = 1.0) -> np.n
 
 
 @njit(cache=True, nogil=True)
+def _return_terms(rooms, ret, retc, u, scale, dd):
+    # the plenums' outflow added to the diagonal dd (in place) and the rooms' inflow into
+    # each plenum row as CSR lists: row pointers cnt, source rooms rr, scaled gains rg
+    n = dd.shape[0]
+    cnt = np.zeros(n + 1, dtype=np.int64)
+    m = 0
+    for j in range(ret.shape[0]):
+        p = ret[j]
+        if p >= 0:
+            dd[p] -= retc[j] * u[j]
+            cnt[p + 1] += 1
+            m += 1
+    for i in range(n):
+        cnt[i + 1] += cnt[i]
+    rr = np.empty(m, dtype=np.int64)
+    rg = np.empty(m)
+    fill = cnt[:n].copy()
+    for j in range(ret.shape[0]):
+        p = ret[j]
+        if p >= 0:
+            rr[fill[p]] = rooms[j]
+            rg[fill[p]] = retc[j] * u[j] * scale
+            fill[p] += 1
+    return cnt, rr, rg
+
+
+@njit(cache=True, nogil=True)
 def _step(indptr, indices, data, rooms, bxu, ret, retc, x, u, b_fixed, ts, h, r, coef, out):
     n = x.shape[0]
     # t = 1 + M h / r acting on [w; c] (the augmented component c is 1 for every T_k);
@@ -98,14 +125,7 @@ def _step(indptr, indices, data, rooms, bxu, ret, retc, x, u, b_fixed, ts, h, r,
     # leaving (diagonal) and the room's air entering (off-diagonal entries of the plenum's
     # row, per step: cnt/rr/rg in CSR form, added inside each row's product; empty without
     # return air, which leaves the arithmetic of the symmetric model unchanged)
-    cnt = np.zeros(n + 1, dtype=np.int64)
-    m = 0
-    for j in range(ret.shape[0]):
-        p = ret[j]
-        if p >= 0:
-            dd[p] -= retc[j] * u[j]
-            cnt[p + 1] += 1
-            m += 1
+    cnt, rr, rg = _return_terms(rooms, ret, retc, u, scale, dd)
     for i in range(n):
         diag[i] = 1.0 + dd[i] * scale
     d = data * scale
@@ -115,17 +135,6 @@ def _step(indptr, indices, data, rooms, bxu, ret, retc, x, u, b_fixed, ts, h, r,
     for i in range(n):
         w_prev[i] = x[i]
         out[i] = coef[0] * x[i]
-    for i in range(n):
-        cnt[i + 1] += cnt[i]
-    rr = np.empty(m, dtype=np.int64)
-    rg = np.empty(m)
-    fill = cnt[:n].copy()
-    for j in range(ret.shape[0]):
-        p = ret[j]
-        if p >= 0:
-            rr[fill[p]] = rooms[j]
-            rg[fill[p]] = retc[j] * u[j] * scale
-            fill[p] += 1
     for i in range(n):
         acc = diag[i] * w_prev[i] + b[i]
         for q in range(indptr[i], indptr[i + 1]):
@@ -157,25 +166,7 @@ def _block(indptr, indices, data, rooms, bxu, ret, retc, u, X, h, r, coef, out):
     dd = np.zeros(n)
     for j in range(rooms.shape[0]):
         dd[rooms[j]] += bxu[j] * u[j]
-    cnt = np.zeros(n + 1, dtype=np.int64)
-    nr = 0
-    for j in range(ret.shape[0]):
-        p = ret[j]
-        if p >= 0:
-            dd[p] -= retc[j] * u[j]
-            cnt[p + 1] += 1
-            nr += 1
-    for i in range(n):
-        cnt[i + 1] += cnt[i]
-    rr = np.empty(nr, dtype=np.int64)
-    rg = np.empty(nr)
-    fill = cnt[:n].copy()
-    for j in range(ret.shape[0]):
-        p = ret[j]
-        if p >= 0:
-            rr[fill[p]] = rooms[j]
-            rg[fill[p]] = retc[j] * u[j] * scale
-            fill[p] += 1
+    cnt, rr, rg = _return_terms(rooms, ret, retc, u, scale, dd)
     diag = np.empty(n)
     for i in range(n):
         diag[i] = 1.0 + dd[i] * scale

@@ -10,7 +10,7 @@ identification seconds. Then the median and the worst building per role (``train
 choose defaults; ``heldout`` and ``third_party`` members only report).
 
     python benchmarks/bench_family.py --family DIR [--extra CAMPAIGN ...] [--out DIR]
-                                      [--jobs 2] [--starts 3] [--only NAME ...]
+                                      [--jobs 2] [--starts 1] [--only NAME ...]
 
 ``DIR/index.json`` is written by ``zonecast testbed family``: a list of members (or
 ``{"members": [...]}``) with ``name`` and ``role``; each member's campaign is ``DIR/<name>``.
@@ -149,7 +149,7 @@ def main() -> int:
     ap.add_argument("--extra", type=Path, nargs="*", default=[])
     ap.add_argument("--out", type=Path, default=Path("runs/bench_family"))
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--starts", type=int, default=3)
+    ap.add_argument("--starts", type=int, default=1)
     ap.add_argument("--only", nargs="*")
     ap.add_argument("--rerun", action="store_true")
     ap.add_argument("--reproduce-args", default="--no-sensitivity",

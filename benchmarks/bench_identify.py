@@ -67,7 +67,7 @@ def main() -> int:
                     help="more campaign folders (e.g. NREL's files from `testbed foreign`)")
     ap.add_argument("--only", nargs="*", help="member names to run")
     ap.add_argument("--repeat", type=int, default=1)
-    ap.add_argument("--starts", type=int, default=3)
+    ap.add_argument("--starts", type=int, default=1)
     ap.add_argument("--no-reference", action="store_true",
                     help="skip the reference fit with every start run")
     args = ap.parse_args()

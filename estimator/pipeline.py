@@ -188,7 +188,7 @@ class Pipeline:
 
     # --- identification ----------------------------------------------------------------
     def identify(self, data: ModelData, train: Sequence[str] | None = None,
-                 validation: Sequence[str] | None = None, *, n_starts: int = 3, seed: int = 0,
+                 validation: Sequence[str] | None = None, *, n_starts: int = 1, seed: int = 0,
                  progress: Progress = _quiet, priors: bool | Mapping[str, Prior] = True,
                  sigma_e: float = 0.3, window: str = "weekend", weekend_gains: bool = False,
                  gains_weeks: Sequence[int] | None = None,

@@ -231,7 +231,8 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  validate: Annotated[list[str] | None, typer.Option(
                      help="Saturday of a validation weekend (repeatable; default: the earliest "
                           "excitation weekend, as the paper's fall)")] = None,
-                 starts: Annotated[int, typer.Option(min=1, help="starting points")] = 3,
+                 starts: Annotated[int, typer.Option(min=1, help=(
+                     "starting points: 1, the IDF's physical values (the default since 2026-11-25, docs/identification.md); more add seeded perturbations"))] = 1,
                  profile_weeks: Annotated[bool, typer.Option(
                      help="also estimate the fixed weekly internal-gains profile (paper "
                           "section 4-B) from every whole week of the data")] = True,
@@ -334,7 +335,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   campaign: Annotated[Path | None, typer.Option(
                       help="campaign folder to reuse (default: run it into REPORT/campaign)")] = None,
                   seed: Seed = 0,
-                  starts: Annotated[int, typer.Option(min=1, help="identification starts")] = 3,
+                  starts: Annotated[int, typer.Option(min=1, help="identification starts (as zonecast identify)")] = 1,
                   priors: Annotated[bool, typer.Option(
                       help="MAP identification with priors (as zonecast identify; the "
                            "default); --no-priors: the paper's least squares")] = True,

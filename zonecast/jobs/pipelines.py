@@ -69,7 +69,7 @@ class IdentifyOutcome:
 
 
 def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None = None,
-                  validate: list[str] | None = None, starts: int = 3,
+                  validate: list[str] | None = None, starts: int = 1,
                   profile_weeks: bool = True, window_solar: str = "surfaces", seed: int = 0,
                   priors: bool = True, sigma_e: float = 0.3, window: str = "weekend",
                   infiltration: str = "idf", weekend_gains: bool = False,

@@ -340,7 +340,7 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
     return out
 
 
-def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 3,
+def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         progress=lambda s: None, *, priors: bool = True, sigma_e: float = 0.3,
         window: str = "weekend", sensitivity: bool = True,
         infiltration: str = "idf", weekend_gains: bool = False,

@@ -7,6 +7,7 @@ from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.identify import (
     IdentificationError,
     IdentificationResult,
+    _Problem,
     identify,
     weekend_spans,
 )
@@ -253,3 +254,28 @@ def test_starts_stop_once_two_agree(truth_and_data):
     assert len(early.starts) == 2 and any("1 skipped" in m for m in msgs)
     assert early.n_evaluations < full.n_evaluations
     assert early.train_rms["mean"] == pytest.approx(full.train_rms["mean"], rel=1e-2)
+
+
+def test_gain_columns_of_the_jacobian_are_exact(truth_and_data):
+    """The Jacobian's c_IG columns (one block run of every zone's constant gain) equal the
+    residuals' change for a unit change of each c_IG (the zone temperatures are affine in
+    it), also with a missing measurement; the physical columns stay forward differences."""
+    model, _, data = truth_and_data
+    spans = weekend_spans(data, ["2015-04-18"])
+    y = data.y.copy()
+    y[spans[0][0] + 10:spans[0][0] + 14, 1] = np.nan
+    data = ModelData(data.times, data.u, data.v, y, data.zones, data.boxes, data.segments,
+                     data.excitation, data.timezone)
+    prob = _Problem(model, data, spans, [np.full(model.n, 21.0)])
+    theta = model.params.values
+    L = 1.02 * prob.bound(theta)
+    f0 = prob.residuals(theta, L)
+    G = prob.gain_columns(theta, L)
+    for z in range(G.shape[1]):
+        t = theta.copy()
+        t[prob.n_phys + z] += 1.0
+        np.testing.assert_allclose(G[:, z], prob.residuals(t, L) - f0, rtol=0, atol=1e-12)
+    lo, hi = (np.array(b) for b in zip(*model.params.bounds))
+    J = prob.jacobian(theta, lo, hi)
+    assert J.shape == (len(f0), len(theta))
+    np.testing.assert_array_equal(J[:, prob.n_phys:], G)

@@ -9,8 +9,8 @@ is low and the experiments decorrelate the zones. x(0) of each weekend comes fro
 filter run over the 24 h before it (the paper's x_KF(0)) with the starting model. The fit
 starts from the model's physical values (the priors' means); on request (``n_starts`` > 1)
 more starts (the paper's Table 1 where the zones match, and seeded perturbations) look for
-other minima, and their spread (cost and end point of each) is reported. The best start's fit is then repeated once with x(0) re-estimated at its
-parameters. Standard errors and
+other minima, and their spread (cost and end point of each) is reported. The best start's
+fit is then repeated once with x(0) re-estimated at its parameters. Standard errors and
 correlations come from the Jacobian at the optimum (they assume independent residuals,
 which simulation errors are not, so they are optimistic: read them as a ranking of how
 well each parameter is determined).

@@ -237,6 +237,10 @@ class IdentificationResult:
         ``"weekend"`` or ``"experiments"`` (:func:`identification_spans`).
     spans : list of dict
         The hours fitted (training) and scored (validation): role, local start and end.
+    gain_scale : dict or None
+        With a weekend gains shape (``identify(gain_shape=)``): zone -> {"value", "se"},
+        the shape's fitted scale [-] (not a model parameter; rank and condition include
+        it).
     """
 
     param_names: list[str]
@@ -261,6 +265,7 @@ class IdentificationResult:
     sigma_e: float | None = None
     window: str = "weekend"
     spans: list[dict] = field(default_factory=list)
+    gain_scale: dict | None = None
 
     @property
     def bse(self) -> np.ndarray:
@@ -342,7 +347,8 @@ class IdentificationResult:
                 "prior": None if self.priors is None else
                 {n: {"mean": p.mean, "sd": p.sd, "source": p.source}
                  for n, p in self.priors.items()},
-                "map_sigma_e": self.sigma_e, "window": self.window, "spans": self.spans}
+                "map_sigma_e": self.sigma_e, "window": self.window, "spans": self.spans,
+                "gain_scale": self.gain_scale}
 
 
 class _Problem:
@@ -356,8 +362,11 @@ class _Problem:
     """
 
     def __init__(self, model: BilinearModel, data: ModelData, spans, x0s, threads: int = 2,
-                 f_ig: np.ndarray | None = None):
+                 f_ig: np.ndarray | None = None, shape: np.ndarray | None = None):
         self.model, self.data, self.spans, self.x0s = model, data, spans, x0s
+        # a per-zone gains shape [W/m2] whose scales follow c_IG in theta (identify(gain_shape=))
+        self.shape = None if shape is None else [np.ascontiguousarray(shape[a:b], dtype=float)
+                                                 for a, b in spans]
         self.threads = threads
         self.n_evaluations = 0
         st = model.structure
@@ -413,7 +422,9 @@ class _Problem:
         """Zone temperatures of every span for parameters ``theta``; ``L`` a spectral bound
         valid for them (default: computed, an eigenvalue problem of ~20 ms)."""
         theta = np.asarray(theta, float)
-        phys, c_ig = theta[:self.n_phys], theta[self.n_phys:]
+        nz = self.B_ig.shape[1]
+        phys, c_ig = theta[:self.n_phys], theta[self.n_phys:self.n_phys + nz]
+        scale = theta[self.n_phys + nz:]
         data_vals = self.d0 + phys @ self.dp
         n = len(self.capacity)
         L = self.bound(theta) if L is None else L
@@ -428,9 +439,11 @@ class _Problem:
         coef = chebyshev_coefficients(r, rho=self._rho)
         Bv = self.bv0 + np.tensordot(phys, self.bvp, axes=1)
         out = []
-        for (a, b), x0, rh in zip(self.spans, self.x0s, self.rh):
+        for i, ((a, b), x0, rh) in enumerate(zip(self.spans, self.x0s, self.rh)):
             u, v = self.data.u[a:b], self.data.v[a:b]
             forcing = v @ Bv.T + c_ig @ self.B_ig.T + rh
+            if self.shape is not None:
+                forcing = forcing + (self.shape[i] * scale) @ self.B_ig.T
             xs = np.empty((b - a + 1, n))
             _run(self.indptr, self.indices, data_vals, self.rooms, self.bxu, self.ret, self.retc,
                  np.ascontiguousarray(x0, float), np.ascontiguousarray(u, float),
@@ -450,12 +463,14 @@ class _Problem:
         return np.concatenate(res)
 
     def gain_columns(self, theta: np.ndarray, L: float) -> np.ndarray:
-        """Exact derivatives of the residuals with respect to c_IG (n_residuals, n_zones).
+        """Exact derivatives of the residuals with respect to c_IG (n_residuals, n_zones),
+        and with a gains shape to its per-zone scales too (n_residuals, 2 n_zones).
 
-        The zone temperatures are affine in c_IG: each column is the response of a zero
-        state to the constant forcing B_IG[:, z] held over every step, all zones in one
-        compiled run per span (:func:`~zonecast.estimator.integrate._run_block`), on the
-        series of ``theta`` and ``L`` as the residuals."""
+        The zone temperatures are affine in c_IG (and in the scales): each column is the
+        response of a zero state to the forcing B_IG[:, z] held over every step (times the
+        zone's shape for a scale), all columns in one compiled run per span
+        (:func:`~zonecast.estimator.integrate._run_block`), on the series of ``theta`` and
+        ``L`` as the residuals."""
         phys = np.asarray(theta, float)[:self.n_phys]
         data_vals = self.d0 + phys @ self.dp
         n, nz = len(self.capacity), self.B_ig.shape[1]
@@ -463,18 +478,22 @@ class _Problem:
         if self._rho is None:
             self.simulate(theta, L)  # sets rho (the first evaluation always comes first)
         coef = chebyshev_coefficients(r, rho=self._rho)
-        bcols = np.ascontiguousarray(self.B_ig, dtype=float)
+        m = nz if self.shape is None else 2 * nz
+        bcols = np.ascontiguousarray(np.tile(self.B_ig, (1, m // nz)), dtype=float)
         out = []
-        for a, b in self.spans:
+        for i, (a, b) in enumerate(self.spans):
             u = np.ascontiguousarray(self.data.u[a:b], dtype=float)
-            xs = np.empty((b - a + 1, n, nz))
+            weights = np.ones((b - a, m))
+            if self.shape is not None:
+                weights[:, nz:] = self.shape[i]
+            xs = np.empty((b - a + 1, n, m))
             _run_block(self.indptr, self.indices, data_vals, self.rooms, self.bxu, self.ret,
-                       self.retc, np.zeros((n, nz)), u, bcols, np.ones((b - a, nz)),
+                       self.retc, np.zeros((n, m)), u, bcols, weights,
                        np.zeros(b - a), float(self.model.step), float(r), coef, xs)
             dy = np.einsum("oi,kiz->koz", self.C, xs[1:])
             meas = self.data.y[measured_rows(self.data, a, b)]
             dy = np.where(np.isfinite(meas)[:, :, None], dy[:len(meas)], 0.0)
-            out.append(dy.reshape(-1, nz))
+            out.append(dy.reshape(-1, m))
         return np.vstack(out)
 
     def jacobian(self, theta: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -540,7 +559,9 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
              n_starts: int = 1, seed: int = 0, max_nfev: int = 60,
              progress=lambda msg: None, priors: Mapping[str, Prior] | None = None,
              sigma_e: float = 0.3, window: str = "weekend", f_ig: np.ndarray | None = None,
-             start: np.ndarray | None = None, agree_rtol: float = 1e-3) -> IdentificationResult:
+             start: np.ndarray | None = None, agree_rtol: float = 1e-3,
+             gain_shape: np.ndarray | None = None,
+             shape_prior: tuple[float, float] = (1.0, 1.0)) -> IdentificationResult:
     """Identify the parameters of ``model`` (paper section 4-A).
 
     Parameters
@@ -575,6 +596,16 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     agree_rtol : float
         Relative cost difference [-] under which two starts count as the same optimum;
         0 runs every start.
+    gain_shape : ndarray (N, n_zones), optional
+        A per-zone shape of the weekends' internal gains [W/m2] (e.g. the weekly profile
+        of the weeks without experiments) whose per-zone scale s_z [-] is estimated with
+        the parameters: f_IG = c_IG + s_z shape_z(t) on the fitted rows, the x(0) filter
+        and Table 2 (``result.gain_scale``). The scales are the fit's, not the model's:
+        forecasts use the model's 13 parameters and their own gains.
+    shape_prior : (float, float)
+        Mean and standard deviation [-] of each scale's Gaussian prior in a MAP fit
+        (1 ± 1: the shape is the expected gains, a weekend's own may be none or twice
+        them); bounds [0, 5].
     """
     t0 = time.perf_counter()
     rng = np.random.default_rng([seed, 11])
@@ -589,14 +620,37 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
                 "Kalman filter estimates x(0) over them)")
     lo, hi = (np.array(b) for b in zip(*model.params.bounds))
     scale = np.maximum(np.abs(model.params.start_params), 1.0)
+    n_model = len(lo)
+    names = list(model.params.param_names)
+    if gain_shape is not None:
+        gain_shape = np.nan_to_num(np.asarray(gain_shape, float))
+        if gain_shape.shape != (len(data.times), len(data.zones)):
+            raise IdentificationError(
+                f"gain_shape has shape {gain_shape.shape}; give one value per row and zone "
+                f"{(len(data.times), len(data.zones))}")
+        nz = len(data.zones)
+        lo, hi = np.r_[lo, np.zeros(nz)], np.r_[hi, np.full(nz, 5.0)]
+        scale = np.r_[scale, np.ones(nz)]
+        names = names + [f"s_IG[{z}]" for z in data.zones]
+        if priors is not None:
+            priors = {**priors, **{f"s_IG[{z}]": Prior(*shape_prior, "the gains shape's scale")
+                                   for z in data.zones}}
 
-    def x0s(m, spans):
+    def known_gains(theta):
+        """f_IG known at every row for parameters ``theta``: the given gains and the shape
+        times its scales."""
+        if gain_shape is None:
+            return f_ig
+        g = gain_shape * np.asarray(theta, float)[n_model:]
+        return g if f_ig is None else f_ig + g
+
+    def x0s(m, spans, theta):
         # one Kalman filter per span, on two threads (the dense products release the GIL)
+        g = known_gains(theta)
         with ThreadPoolExecutor(max_workers=2) as pool:
             return list(pool.map(lambda sp: kalman_state(m, data, sp[0] - x0_window, sp[0],
-                                                         f_ig=f_ig), spans))
+                                                         f_ig=g), spans))
 
-    names = list(model.params.param_names)
     if priors is not None:
         prior_jac = prior_jacobian(priors, names, sigma_e)
 
@@ -617,9 +671,14 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     starts_report = []
     progress("x(0) of the training weekends")
     # round 1, every start: x_KF(0) of the start model
-    first = _Problem(model, data, train_spans, x0s(model, train_spans), f_ig=f_ig)
-    thetas = ([np.clip(np.asarray(start, float), lo, hi)] if start is not None
+    thetas = ([np.asarray(start, float)] if start is not None
               else _starts(model.params, n_starts, rng))
+    if gain_shape is not None:
+        thetas = [t if len(t) == len(lo) else np.r_[t, np.full(len(lo) - len(t), shape_prior[0])]
+                  for t in thetas]
+    thetas = [np.clip(t, lo, hi) for t in thetas]
+    first = _Problem(model, data, train_spans, x0s(model, train_spans, thetas[0]), f_ig=f_ig,
+                     shape=gain_shape)
     for i, theta0 in enumerate(thetas):
         progress(f"start {i + 1}/{len(thetas)}")
         sol = fit(first, theta0)
@@ -636,8 +695,9 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
             break
     # round 2, the best start only: x(0) re-estimated with its parameters, then refitted
     progress("x(0) at the best start's parameters, refit")
-    problem = _Problem(model, data, train_spans, x0s(model.with_params(best[1].x), train_spans),
-                       f_ig=f_ig)
+    problem = _Problem(model, data, train_spans,
+                       x0s(model.with_params(best[1].x[:n_model]), train_spans, best[1].x),
+                       f_ig=f_ig, shape=gain_shape)
     sol = fit(problem, best[1].x)
     theta = sol.x
     cost = float(np.sum(sol.fun ** 2))
@@ -653,17 +713,25 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     tol = singular.max() * max(J.shape) * np.finfo(float).eps if len(singular) else 0.0
     rank = int(np.sum(singular > tol))
     condition = float(singular.max() / singular.min()) if singular.min() > 0 else float("inf")
-    fitted = model.with_params(theta)
+    fitted = model.with_params(theta[:n_model])
     # Table 2 as the paper defines it: simulations from x(0) = x_KF(0) of the identified
     # model, the same for training and validation weekends (the last refit started from
     # x(0) of the parameters before it)
-    spans_x0 = x0s(fitted, train_spans + val_spans)
+    spans_x0 = x0s(fitted, train_spans + val_spans, theta)
     train_rms = _fit_rms(_Problem(model, data, train_spans, spans_x0[:len(train_spans)],
-                                  f_ig=f_ig), theta, data.zones)
+                                  f_ig=f_ig, shape=gain_shape), theta, data.zones)
     val_rms = None
     if val_spans:
-        vp = _Problem(model, data, val_spans, spans_x0[len(train_spans):], f_ig=f_ig)
+        vp = _Problem(model, data, val_spans, spans_x0[len(train_spans):], f_ig=f_ig,
+                      shape=gain_shape)
         val_rms = _fit_rms(vp, theta, data.zones)
+    gain_scale = None
+    if gain_shape is not None:
+        gain_scale = {z: {"value": float(theta[n_model + i]), "se": float(se[n_model + i])}
+                      for i, z in enumerate(data.zones)}
+        theta, se, corr = theta[:n_model], se[:n_model], corr[:n_model, :n_model]
+        lo, hi = lo[:n_model], hi[:n_model]
+        priors = None if priors is None else {n: priors[n] for n in names[:n_model]}
     local = data.local_times()
     step = data.times[1] - data.times[0]
     used = [{"role": role, "start": local[a].isoformat(), "end": (local[b - 1] + step).isoformat()}
@@ -676,4 +744,5 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         sum(s["nfev"] for s in starts_report) + int(sol.nfev), time.perf_counter() - t0, seed,
         bounds=[(float(lo_), float(hi_)) for lo_, hi_ in zip(lo, hi)], model=fitted, rank=rank,
         condition=condition, priors=dict(priors) if priors is not None else None,
-        sigma_e=sigma_e if priors is not None else None, window=window, spans=used)
+        sigma_e=sigma_e if priors is not None else None, window=window, spans=used,
+        gain_scale=gain_scale)

@@ -190,7 +190,8 @@ class Pipeline:
     def identify(self, data: ModelData, train: Sequence[str] | None = None,
                  validation: Sequence[str] | None = None, *, n_starts: int = 1, seed: int = 0,
                  progress: Progress = _quiet, priors: bool | Mapping[str, Prior] = True,
-                 sigma_e: float = 0.3, window: str = "weekend", weekend_gains: bool = False,
+                 sigma_e: float = 0.3, window: str = "weekend",
+                 weekend_gains: bool | str = False,
                  gains_weeks: Sequence[int] | None = None,
                  agree_rtol: float = 1e-3) -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
@@ -213,8 +214,17 @@ class Pipeline:
         the whole weeks ``gains_weeks`` (indices into :func:`~.forecast.whole_weeks`;
         default all) that hold no experiment row, with those parameters, then the fit
         again from them (one start) with the profile as known f_IG on every row
-        (docs/identification.md).
+        (docs/identification.md). ``"scaled"``: the same, but the profile is a per-zone
+        shape whose scale is fitted with the parameters (:func:`~.identify.identify`
+        ``gain_shape``), so a weekend without people can say so; True or ``"known"``:
+        the profile as it is.
         """
+        modes = {False: None, "none": None, True: "known", "known": "known",
+                 "scaled": "scaled"}
+        if weekend_gains not in modes:
+            raise PipelineError(f"weekend_gains={weekend_gains!r}: use 'none', 'known' or "
+                                "'scaled'")
+        weekend_gains = modes[weekend_gains]
         sats = [str(s.date()) for s in excitation_saturdays(data)]
         train = list(train) if train else sats[1:3]
         validation = list(validation) if validation is not None else sats[:1]
@@ -238,9 +248,10 @@ class Pipeline:
             prof = self.weekly_profile(data, weeks=quiet) if quiet else None
             if prof is not None:
                 f_ig = np.nan_to_num(prof(data.times))
+                known, shape = (f_ig, None) if weekend_gains == "known" else (None, f_ig)
                 res = identify(self.model(res.model.params), data, train, validation,
                                seed=seed, progress=progress, priors=priors or None,
-                               sigma_e=sigma_e, window=window, f_ig=f_ig,
+                               sigma_e=sigma_e, window=window, f_ig=known, gain_shape=shape,
                                start=res.model.params.values)
         self.identification = res
         self.params = res.model.params

@@ -264,10 +264,12 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                      help="'idf' (the default): the boxes' return air flows through the "
                           "IDF's return plenums (docs/model.md \"Return plenum\"), or "
                           "'none' (the paper)")] = "idf",
-                 weekend_gains: Annotated[bool, typer.Option(
-                     help="identify again with the weekly gains profile of the weeks without "
-                          "experiments as known f_IG (buildings occupied at weekends; "
-                          "docs/identification.md)")] = False,
+                 weekend_gains: Annotated[str, typer.Option(
+                     help="'none' (the default, the paper's f_IG = 0 at weekends); 'known': "
+                          "identify again with the weekly gains profile of the weeks without "
+                          "experiments as known f_IG; 'scaled': the profile as a per-zone "
+                          "shape whose scale is fitted with the parameters (buildings occupied "
+                          "at weekends; docs/identification.md)")] = "none",
                  seed: Seed = 0) -> None:
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the
@@ -357,9 +359,10 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   return_air: Annotated[str, typer.Option(
                       help="'idf' (the default): return air through the IDF's return "
                            "plenums, or 'none' (the paper)")] = "idf",
-                  weekend_gains: Annotated[bool, typer.Option(
-                      help="identify again with the weekly gains profile of the training "
-                           "weeks as known f_IG (buildings occupied at weekends)")] = False
+                  weekend_gains: Annotated[str, typer.Option(
+                      help="'none' (the default), 'known' (identify again with the weekly "
+                           "gains profile of the training weeks as known f_IG) or 'scaled' "
+                           "(the profile's per-zone scale fitted with the parameters)")] = "none"
                   ) -> None:
     """The paper's tables and figures on the virtual building: campaign, identification,
     internal gains, forecasts; writes results.json, figures and report.md."""

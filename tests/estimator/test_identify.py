@@ -214,10 +214,10 @@ def test_identification_on_declared_experiments_with_a_lead_in(truth_and_data):
     assert sims[0]["saturday"] == "2015-04-18" and len(sims[0]["measured"]) == b - a
 
 
-def test_known_weekend_gains_enter_the_fit(five_zone):
-    """Data simulated with time-varying gains on the weekend: the paper's fit (f_IG = 0)
-    leaves them to the parameters and misses; the fit told the gains (``f_ig``) recovers
-    the parameters and reaches the noise level, from the given start."""
+def _weekend_gains_case(five_zone, scale, level):
+    """Model, parameter names, true parameters (gamma_IW x 1.6), the gains' per-zone shape
+    (``level`` W/m2 x a zone factor, 10:00-17:00 of every day) and the data simulated with
+    the shape times ``scale`` per zone as internal gains."""
     model, zones, boxes, rng, times, u, v, day = _model_and_inputs(five_zone, 7)
     n = len(times)
     true = model.params.start_params.copy()
@@ -225,12 +225,20 @@ def test_known_weekend_gains_enter_the_fit(five_zone):
     true[names.index("gamma_IW")] *= 1.6
     truth = model.with_params(true)
     occupied = ((day % 1) > 0.4) & ((day % 1) < 0.7)  # weekend occupancy, 10:00-17:00
-    f_ig = np.where(occupied, 12.0, 0.0)[:, None] * rng.uniform(0.5, 1.5, 5)
-    sim = truth.simulate(truth.steady_state(u[0], v[0]), u, v, f_ig)
+    shape = np.where(occupied, level, 0.0)[:, None] * rng.uniform(0.5, 1.5, 5)
+    sim = truth.simulate(truth.steady_state(u[0], v[0]), u, v, shape * scale)
     y = sim.y[:-1] + rng.normal(0.0, 0.05, (n, 5))
     data = ModelData(times, u, v, y, list(zones), list(boxes),
                      segments_of(times, pd.Timedelta("15min")), np.zeros(n, bool),
                      "America/Los_Angeles")
+    return model, names, true, shape, data
+
+
+def test_known_weekend_gains_enter_the_fit(five_zone):
+    """Data simulated with time-varying gains on the weekend: the paper's fit (f_IG = 0)
+    leaves them to the parameters and misses; the fit told the gains (``f_ig``) recovers
+    the parameters and reaches the noise level, from the given start."""
+    model, names, true, f_ig, data = _weekend_gains_case(five_zone, np.ones(5), 12.0)
     blind = identify(model, data, train=["2015-04-18"], n_starts=1, max_nfev=40)
     told = identify(model, data, train=["2015-04-18"], max_nfev=40, f_ig=f_ig,
                     start=blind.params)
@@ -279,3 +287,34 @@ def test_gain_columns_of_the_jacobian_are_exact(truth_and_data):
     J = prob.jacobian(theta, lo, hi)
     assert J.shape == (len(f0), len(theta))
     np.testing.assert_array_equal(J[:, prob.n_phys:], G)
+
+
+def test_gain_shape_scales_are_exact_columns_and_recovered(five_zone):
+    """Weekend gains 1.5 x a known per-zone shape in zones 0-2 and none in zones 3-4: the
+    fit with the shape (``gain_shape``) finds those scales, a Table 2 at the noise level
+    and the parameters; the scales' Jacobian columns equal unit changes of the scales."""
+    scale = np.array([1.5, 1.5, 1.5, 0.0, 0.0])
+    model, names, true, shape, data = _weekend_gains_case(five_zone, scale, 10.0)
+    zones = data.zones
+    with pytest.raises(IdentificationError, match="one value per row and zone"):
+        identify(model, data, train=["2015-04-18"], gain_shape=shape[:, :2])
+    res = identify(model, data, train=["2015-04-18"], max_nfev=40, gain_shape=shape)
+    assert len(res.params) == len(names) and set(res.gain_scale) == set(zones)
+    got = np.array([res.gain_scale[z]["value"] for z in zones])
+    np.testing.assert_allclose(got, scale, atol=0.15)
+    assert res.train_rms["mean"] < 0.08
+    i = names.index("gamma_IW")
+    assert res.params[i] == pytest.approx(true[i], rel=0.15)
+    assert res.to_dict()["gain_scale"][zones[0]]["value"] == pytest.approx(got[0])
+
+    spans = weekend_spans(data, ["2015-04-18"])
+    prob = _Problem(model, data, spans, [np.full(model.n, 21.0)], shape=shape)
+    theta = np.r_[model.params.values, np.ones(5)]
+    L = 1.02 * prob.bound(theta)
+    f0 = prob.residuals(theta, L)
+    G = prob.gain_columns(theta, L)
+    assert G.shape == (len(f0), 10)
+    for j in range(10):
+        t = theta.copy()
+        t[prob.n_phys + j] += 1.0
+        np.testing.assert_allclose(G[:, j], prob.residuals(t, L) - f0, rtol=0, atol=1e-12)

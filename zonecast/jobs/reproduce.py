@@ -123,10 +123,19 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                   f"`{results.identification.get('window', 'weekend')}`: "
                   + "; ".join(f"{s['role']} {s['start'][:16]} to {s['end'][:16]}"
                               for s in spans) + ".", ""]
-    if (results.identification or {}).get("weekend_gains"):
+    mode = (results.identification or {}).get("weekend_gains")
+    if mode in (True, "known"):
         lines += [("Fitted with the weekly internal-gains profile of the training weeks without "
-                   "experiments as known f_IG (`--weekend-gains`), so Table 2 is the model with "
-                   "that profile, not the paper's f_IG = 0."), ""]
+                   "experiments as known f_IG (`--weekend-gains known`), so Table 2 is the model "
+                   "with that profile, not the paper's f_IG = 0."), ""]
+    elif mode == "scaled":
+        scale = (results.identification or {}).get("gain_scale") or {}
+        lines += [("Fitted with the weekly internal-gains profile of the training weeks without "
+                   "experiments as a per-zone shape whose scale was fitted with the parameters "
+                   "(`--weekend-gains scaled`), so Table 2 is the model with those gains, not the "
+                   "paper's f_IG = 0. Scales: "
+                   + ", ".join(f"{z} {v['value']:.2f} ± {v['se']:.2f}"
+                               for z, v in scale.items()) + "."), ""]
     lines += _table(results.table2, zones, PAPER["table2"])
     if results.table2_window_solar_air:
         lines += ["", (f"Model options: {json.dumps(results.model_options)}. Sensitivity, the same "
@@ -343,7 +352,7 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
 def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         progress=lambda s: None, *, priors: bool = True, sigma_e: float = 0.3,
         window: str = "weekend", sensitivity: bool = True,
-        infiltration: str = "idf", weekend_gains: bool = False,
+        infiltration: str = "idf", weekend_gains: bool | str = False,
         ground: str = "idf", shading: str = "idf", return_air: str = "idf") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
@@ -371,7 +380,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     ident = pipe.identify(data, n_starts=starts, seed=seed, priors=priors, sigma_e=sigma_e,
                           window=window, progress=lambda s: progress(f"identification: {s}"),
                           weekend_gains=weekend_gains,
-                          gains_weeks=week_split(data, seed)["train"] if weekend_gains else None)
+                          gains_weeks=(week_split(data, seed)["train"]
+                                       if weekend_gains not in (False, None, "none") else None))
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
     progress("identification with window solar on the room air (paper's placement)")

@@ -75,12 +75,22 @@ class Room(_Strict):
     zone: str
     kind: str
     windows: bool
+    box_shares: tuple[float, ...] = Field(
+        (1.0,), description="[-] shares of the room's design airflow, one per VAV box "
+        "serving it (an open-plan room often has several)")
 
     @field_validator("rect")
     @classmethod
     def _ordered(cls, v):
         if not (v[2] > v[0] and v[3] > v[1]):
             raise ValueError(f"rect {v} must be [x0, y0, x1, y1] with x1 > x0 and y1 > y0")
+        return v
+
+    @field_validator("box_shares")
+    @classmethod
+    def _shares(cls, v):
+        if not v or min(v) <= 0 or abs(sum(v) - 1.0) > 1e-6:
+            raise ValueError(f"box_shares {v} must be positive and sum to 1 (one per box)")
         return v
 
     @property

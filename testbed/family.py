@@ -43,6 +43,9 @@ SHADING_SHARE = 0.35
 PLENUM_SHARE = 0.4
 #: share of the other floors that lie on the ground (slab on grade)
 GROUND_FLOOR_SHARE = 0.3
+#: share of the members whose larger rooms have several VAV boxes, the floor area one box
+#: serves in them [m2] (drawn per member within this range) and the most boxes per room
+MULTI_BOX_SHARE, BOX_AREA, MAX_BOXES = 0.4, (40.0, 90.0), 3
 #: indoor temperature a slab under a conditioned building settles near [degC], the drop to
 #: the soil under it [K], and how much of the outdoor's monthly swing, one month late, reaches
 #: it [-]: DOE's reference buildings' slab values (e.g. Chicago 19.5-22.4 degC) in this form
@@ -223,6 +226,14 @@ def _office6_walls() -> dict[str, list[tuple]]:
     return {k: list(map(tuple, v)) for k, v in wall_variants(load_config("office6")).items()}
 
 
+def box_shares(rng: np.random.Generator, n: int) -> list[float]:
+    """Unequal shares [-] of a room's design airflow among its ``n`` boxes (each 0.6-1.4
+    times an equal share before normalising, two decimals, summing to exactly 1)."""
+    w = rng.uniform(0.6, 1.4, n)
+    shares = [float(np.round(x, 2)) for x in w[:-1] / w.sum()]
+    return shares + [float(np.round(1.0 - sum(shares), 2))]
+
+
 def ground_temperatures(climate: Climate) -> list[float]:
     """Monthly temperature under a slab on grade [degC] for ``climate``: GROUND_INDOOR -
     GROUND_DROP + GROUND_SWING x (the previous month's mean outdoor temperature - the annual
@@ -256,7 +267,8 @@ def describe(cfg: BuildingConfig) -> dict:
     :data:`RESETS` key or ``custom``) and ``supply_reset_values`` [degC],
     ``excitation_days``, ``weekend_occupancy`` [-], ``floor_position`` (middle, top, ground),
     ``shading`` (overhang depth / window height, overhang offset [m], fin depth [m]; None),
-    ``plenum`` (height [m], lights' return-air fraction [-]; None).
+    ``plenum`` (height [m], lights' return-air fraction [-]; None), ``boxes`` (VAV
+    boxes in all) and ``most_boxes_per_room``.
     """
     rects = np.array([r.rect for r in cfg.rooms.values()])
     walls = plan_walls({n: r.rect for n, r in cfg.rooms.items()})
@@ -290,6 +302,8 @@ def describe(cfg: BuildingConfig) -> dict:
         "floor_position": cfg.floor_position,
         "shading": cfg.shading.model_dump() if cfg.shading is not None else None,
         "plenum": cfg.plenum.model_dump() if cfg.plenum is not None else None,
+        "boxes": sum(len(r.box_shares) for r in cfg.rooms.values()),
+        "most_boxes_per_room": max(len(r.box_shares) for r in cfg.rooms.values()),
     }
 
 
@@ -396,6 +410,14 @@ def draw_member(seed: int, index: int, base: BuildingConfig | None = None) -> Fa
     if rng.random() < PLENUM_SHARE:
         plenum = {"height": float(np.round(rng.uniform(0.6, 1.2), 2)),
                   "lights_return_fraction": float(np.round(rng.uniform(0.0, 0.3), 2))}
+    # several boxes in the larger rooms, drawn after the plenum for the same reason
+    if rng.random() < MULTI_BOX_SHARE:
+        box_area = rng.uniform(*BOX_AREA)
+        for room in rooms.values():
+            x0, y0, x1, y1 = room["rect"]
+            n = int(min(MAX_BOXES, np.ceil((x1 - x0) * (y1 - y0) / box_area)))
+            if n > 1:
+                room["box_shares"] = box_shares(rng, n)
 
     data = base.model_dump(mode="json")
     name = f"f{seed}-{index:02d}-{climate_key}"

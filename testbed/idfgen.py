@@ -3,7 +3,8 @@
 HVAC is written with EnergyPlus's own HVACTemplate objects (expanded by ExpandObjects
 at run time): one AHU (chilled-water cooling with outdoor-air reset of the supply set
 point, electric heating coil, economiser) serving one VAV box with electric reheat per
-room. Box airflows are forced exactly by ``Zone Minimum Air Flow Input Method =
+room; a room with several boxes (``Room.box_shares``) gets the others added to the
+expanded IDF (:func:`zonecast.testbed.run.add_boxes`). Box airflows are forced exactly by ``Zone Minimum Air Flow Input Method =
 Scheduled`` with the minimum fraction from a Schedule:File column per box; during an
 excitation block the shared thermostat is widened so that no box modulates above its
 scheduled fraction.
@@ -43,13 +44,26 @@ def obj(cls: str, *fields) -> str:
     return f"{cls},\n{body + ',' if body else ''}\n    {vals[-1]};\n".replace(",\n\n", ",\n")
 
 
-def box_name(room: str) -> str:
-    return f"VAV_{room}"
+def box_name(room: str, i: int = 0) -> str:
+    """The BMS name of box ``i`` of ``room`` (the first keeps the one-box name)."""
+    return f"VAV_{room}" if i == 0 else f"VAV_{room}_{i + 1}"
 
 
-def supply_node(room: str) -> str:
-    """The zone air inlet node HVACTemplate:Zone:VAV gives the box of ``room``."""
-    return f"{room} Supply Inlet"
+def supply_node(room: str, i: int = 0) -> str:
+    """The air outlet node of box ``i`` of ``room`` (box 0: the zone air inlet node
+    HVACTemplate:Zone:VAV gives it)."""
+    return f"{room} Supply Inlet" if i == 0 else f"{room} Supply Inlet {i + 1}"
+
+
+def reheat_coil(room: str, i: int = 0) -> str:
+    """The electric reheat coil of box ``i`` of ``room``."""
+    return f"{room} Reheat Coil" if i == 0 else f"{room} Reheat Coil {i + 1}"
+
+
+def room_boxes(cfg: BuildingConfig, room: str) -> list[tuple[int, str, float]]:
+    """(index, BMS name, share of the room's design airflow) of every box of ``room``."""
+    return [(i, box_name(room, i), share)
+            for i, share in enumerate(cfg.rooms[room].box_shares)]
 
 
 def ahu_outlet_node() -> str:
@@ -222,8 +236,11 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
     for key, var in OUTPUT_VARIABLES:
         add(obj("Output:Variable", key, var, "Timestep"))
     for room in cfg.rooms:
-        add(obj("Output:Variable", supply_node(room), "System Node Mass Flow Rate", "Timestep"))
-        add(obj("Output:Variable", supply_node(room), "System Node Temperature", "Timestep"))
+        for i, _, _ in room_boxes(cfg, room):
+            add(obj("Output:Variable", supply_node(room, i), "System Node Mass Flow Rate",
+                    "Timestep"))
+            add(obj("Output:Variable", supply_node(room, i), "System Node Temperature",
+                    "Timestep"))
     add(obj("Output:Variable", ahu_outlet_node(), "System Node Temperature", "Timestep"))
     return "\n".join(out)
 

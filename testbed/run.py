@@ -27,7 +27,14 @@ from zonecast.estimator.site import Site
 from zonecast.testbed.config import BuildingConfig, load_config
 from zonecast.testbed.effects import Effects
 from zonecast.testbed.geometry import plan_walls
-from zonecast.testbed.idfgen import SCHEDULE_FILE, ahu_outlet_node, box_name, build_idf, supply_node
+from zonecast.testbed.idfgen import (
+    SCHEDULE_FILE,
+    ahu_outlet_node,
+    build_idf,
+    reheat_coil,
+    room_boxes,
+    supply_node,
+)
 from zonecast.testbed.schedules import excitation_plan, rng_for, schedule_table, zone_neighbours
 
 STANDARD_OFFSET = dt.timezone(dt.timedelta(hours=-8))  # EnergyPlus reports standard time
@@ -85,6 +92,100 @@ def _patch_expanded(expanded: str, cfg: BuildingConfig) -> str:
                                  f"{m.group(4)}  {hi},{m.group(5)}"), out)
     if n != 1:
         raise EnergyPlusError("could not find the AHU supply air reset in the expanded IDF")
+    return add_boxes(out, cfg)
+
+
+def _room_flow(cfg: BuildingConfig, room: str) -> float:
+    """Design (maximum) supply airflow of ``room`` [m3/s]."""
+    area = cfg.rooms[room].floor_area
+    return area * (cfg.hvac.design_airflow_perimeter if _is_perimeter(cfg, room)
+                   else cfg.hvac.design_airflow_core)
+
+
+def _find(text: str, cls: str, name: str) -> tuple[int, int, list[str]]:
+    """Start and end offsets of the IDF object ``cls`` named ``name`` in ``text`` and its
+    fields (comments dropped)."""
+    # an object's class starts its line (a field naming a class, e.g. a terminal's reheat
+    # coil type, is indented)
+    m = re.search(rf"^{re.escape(cls)},[ \t]*(?:!.*)?\n[ \t]*{re.escape(name)}[ \t]*[,;]",
+                  text, flags=re.MULTILINE | re.IGNORECASE)
+    if m is None:
+        raise EnergyPlusError(f"the expanded IDF has no {cls} {name!r}")
+    body, i = [], m.start()
+    for end, line in _lines_from(text, i):
+        body.append(line.split("!", 1)[0])
+        if ";" in body[-1]:
+            break
+    flat = "".join(body)
+    fields = [f.strip() for f in flat[:flat.index(";")].split(",")]
+    return m.start(), end, fields[1:]
+
+
+def _lines_from(text: str, start: int):
+    pos = start
+    while pos < len(text):
+        nl = text.find("\n", pos)
+        nl = len(text) if nl < 0 else nl + 1
+        yield nl, text[pos:nl]
+        pos = nl
+
+
+def _render(cls: str, fields: list) -> str:
+    vals = [f"{f:.6g}" if isinstance(f, float) else str(f) for f in fields]
+    return f"{cls},\n" + "".join(f"  {v},\n" for v in vals[:-1]) + f"  {vals[-1]};\n"
+
+
+def _replace(text: str, cls: str, name: str, fields: list, extra: str = "") -> str:
+    a, b, _ = _find(text, cls, name)
+    return text[:a] + _render(cls, fields) + extra + text[b:]
+
+
+def add_boxes(expanded: str, cfg: BuildingConfig) -> str:
+    """Give every room with several boxes (``Room.box_shares``) its other boxes in the
+    expanded IDF: a copy of the template's VAV terminal, reheat coil and air distribution
+    unit per box, each hard-sized to its share of the room's design airflow and reheat,
+    fed from the AHU's zone splitter and blowing into the room through a node list; the
+    room's equipment list shares the load uniformly (one thermostat drives all of a room's
+    boxes, as a BMS does) and every box follows the room's minimum-flow schedule."""
+    out = expanded
+    for room, spec in cfg.rooms.items():
+        shares = spec.box_shares
+        if len(shares) < 2:
+            continue
+        flow = _room_flow(cfg, room)
+        _, _, term = _find(out, "AirTerminal:SingleDuct:VAV:Reheat", f"{room} VAV Reheat")
+        _, _, coil = _find(out, "Coil:Heating:Electric", reheat_coil(room))
+        capacity = float(coil[3])
+        term[4], coil[3] = shares[0] * flow, shares[0] * capacity
+        added = ""
+        for i, share in enumerate(shares[1:], start=1):
+            t = list(term)
+            t[0], t[2], t[3] = f"{room} VAV Reheat {i + 1}", f"{room} Damper Outlet {i + 1}", \
+                f"{room} Zone Equip Inlet {i + 1}"
+            t[4], t[10], t[13] = share * flow, reheat_coil(room, i), supply_node(room, i)
+            c = [reheat_coil(room, i), coil[1], coil[2], share * capacity,
+                 f"{room} Damper Outlet {i + 1}", supply_node(room, i)]
+            added += ("\n" + _render("AirTerminal:SingleDuct:VAV:Reheat", t) + "\n"
+                      + _render("Coil:Heating:Electric", c) + "\n"
+                      + _render("ZoneHVAC:AirDistributionUnit",
+                                [f"{room} ATU {i + 1}", supply_node(room, i),
+                                 "AirTerminal:SingleDuct:VAV:Reheat", t[0]]))
+        out = _replace(out, "AirTerminal:SingleDuct:VAV:Reheat", f"{room} VAV Reheat", term)
+        out = _replace(out, "Coil:Heating:Electric", reheat_coil(room), coil, added)
+        _, _, eq = _find(out, "ZoneHVAC:EquipmentList", f"{room} Equipment")
+        eq = eq[:8] + [""] * (8 - len(eq[:8]))
+        eq[1] = "UniformLoad"
+        for i in range(1, len(shares)):
+            eq += ["ZoneHVAC:AirDistributionUnit", f"{room} ATU {i + 1}", i + 1, i + 1, "", ""]
+        out = _replace(out, "ZoneHVAC:EquipmentList", f"{room} Equipment", eq)
+        _, _, conn = _find(out, "ZoneHVAC:EquipmentConnections", room)
+        conn[2] = f"{room} Inlet Nodes"
+        out = _replace(out, "ZoneHVAC:EquipmentConnections", room, conn,
+                       "\n" + _render("NodeList", [f"{room} Inlet Nodes"]
+                                       + [supply_node(room, i) for i in range(len(shares))]))
+        _, _, split = _find(out, "AirLoopHVAC:ZoneSplitter", "AHU Zone Splitter")
+        split += [f"{room} Zone Equip Inlet {i + 1}" for i in range(1, len(shares))]
+        out = _replace(out, "AirLoopHVAC:ZoneSplitter", "AHU Zone Splitter", split)
     return out
 
 
@@ -184,24 +285,25 @@ def _col(wide: pd.DataFrame, key: str, var: str) -> np.ndarray:
 
 def point_names(cfg: BuildingConfig) -> dict:
     """Telemetry column names a BMS of this building would use."""
+    boxes = [b for r in cfg.rooms for _, b, _ in room_boxes(cfg, r)]
     return {"room_temp": {r: f"T_{r}" for r in cfg.rooms},
-            "flow": {r: f"{box_name(r)}_flow" for r in cfg.rooms},
-            "discharge": {r: f"{box_name(r)}_DAT" for r in cfg.rooms},
+            "flow": {b: f"{b}_flow" for b in boxes},
+            "discharge": {b: f"{b}_DAT" for b in boxes},
             "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI"}
 
 
 def make_site(cfg: BuildingConfig, experiments: list[tuple[dt.datetime, dt.datetime]],
               discharge_sensors: bool = True) -> Site:
     names = point_names(cfg)
-    dat = {r: {"discharge_temperature": {"point": names["discharge"][r], "unit": "degC"}}
-           if discharge_sensors else {} for r in cfg.rooms}
+    dat = {b: {"discharge_temperature": {"point": names["discharge"][b], "unit": "degC"}}
+           if discharge_sensors else {} for b in names["discharge"]}
     return Site.model_validate({
         "building": cfg.name, "idf": "building.idf", "timezone": cfg.location.timezone,
         "location": {"latitude": cfg.location.latitude, "longitude": cfg.location.longitude,
                      "elevation": cfg.location.elevation},
         "step": "15min", "zones": cfg.zones,
-        "boxes": {box_name(r): {"room": r, "airflow": {"point": names["flow"][r], "unit": "kg/s"},
-                                **dat[r]} for r in cfg.rooms},
+        "boxes": {b: {"room": r, "airflow": {"point": names["flow"][b], "unit": "kg/s"},
+                      **dat[b]} for r in cfg.rooms for _, b, _ in room_boxes(cfg, r)},
         "points": {
             "zone_temperature": {z: [{"point": names["room_temp"][r], "unit": "degC", "room": r}
                                      for r in rooms] for z, rooms in cfg.zones.items()},
@@ -286,15 +388,16 @@ def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Time
         if effects.sensor_resolution > 0:
             reading = np.round(reading / effects.sensor_resolution) * effects.sensor_resolution
         tel[names["room_temp"][r]] = reading
-        flow = _col(iv, supply_node(r), "System Node Mass Flow Rate")
-        tru[f"airflow:{box_name(r)}"] = flow
-        if effects.airflow_noise > 0:
-            flow = flow * (1 + rng.normal(0.0, effects.airflow_noise, len(flow)))
-        tel[names["flow"][r]] = flow
-        # the box's discharge-air sensor: mean over the step of the zone inlet node (after
-        # the reheat coil); where the box is shut the node keeps its last value
-        if effects.discharge_sensors:
-            tel[names["discharge"][r]] = _col(iv, supply_node(r), "System Node Temperature")
+        for i, b, _ in room_boxes(cfg, r):
+            flow = _col(iv, supply_node(r, i), "System Node Mass Flow Rate")
+            tru[f"airflow:{b}"] = flow
+            if effects.airflow_noise > 0:
+                flow = flow * (1 + rng.normal(0.0, effects.airflow_noise, len(flow)))
+            tel[names["flow"][b]] = flow
+            # the box's discharge-air sensor: mean over the step of its outlet node (after
+            # the reheat coil); where the box is shut the node keeps its last value
+            if effects.discharge_sensors:
+                tel[names["discharge"][b]] = _col(iv, supply_node(r, i), "System Node Temperature")
         tru[f"air_temperature:{r}"] = true_t
         tru[f"people:{r}"] = _opt(iv, r, "Zone People Total Heating Rate")
         tru[f"lights:{r}"] = _col(iv, r, "Zone Lights Total Heating Rate")
@@ -306,7 +409,8 @@ def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Time
                 and c.startswith(f"{r.upper()}_WALL")]
         tru[f"window_solar:{r}"] = sum((iv[f"{w}|Surface Window Transmitted Solar Radiation Rate"]
                                         .to_numpy() for w in wins), np.zeros(len(index)))
-        tru[f"reheat:{box_name(r)}"] = _opt(iv, f"{r} Reheat Coil", "Heating Coil Heating Rate")
+        for i, b, _ in room_boxes(cfg, r):
+            tru[f"reheat:{b}"] = _opt(iv, reheat_coil(r, i), "Heating Coil Heating Rate")
     # the AHU sensor reads the supply supply_offset low of what reaches the boxes
     tel[names["sat"]] = _col(iv, ahu_outlet_node(), "System Node Temperature") \
         - effects.supply_offset
@@ -319,7 +423,8 @@ def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Time
                                                for i, r in enumerate(rooms)) / w.sum()
         for q in ("people", "lights", "equipment", "infiltration", "window_solar"):
             tru[f"{q}:zone:{z}"] = sum(tru[f"{q}:{r}"] for r in rooms)
-        tru[f"reheat:zone:{z}"] = sum(tru[f"reheat:{box_name(r)}"] for r in rooms)
+        tru[f"reheat:zone:{z}"] = sum(tru[f"reheat:{b}"] for r in rooms
+                                      for _, b, _ in room_boxes(cfg, r))
     tel_df = pd.DataFrame(tel, index=index)
     tru_df = pd.DataFrame(tru, index=index)
     return tel_df, tru_df

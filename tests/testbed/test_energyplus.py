@@ -166,3 +166,47 @@ def test_campaign_is_the_papers_data_set(tmp_path):
     assert all((b - a).days > 7 for a, b in itertools.pairwise(starts))   # non-consecutive
     seasons = {e.start.month for e in site.experiments}
     assert len(site.experiments) == 6 and {10, 4, 6} <= seasons
+
+
+@pytest.fixture(scope="module")
+def multi_box(tmp_path_factory):
+    """office6 with two boxes in S_1 (60/40 %) and three in C_1 (30/33/37 %)."""
+    from zonecast.testbed.config import BuildingConfig
+    data = CFG.model_dump(mode="json")
+    data["rooms"]["S_1"]["box_shares"] = [0.6, 0.4]
+    data["rooms"]["C_1"]["box_shares"] = [0.3, 0.33, 0.37]
+    cfg = BuildingConfig.model_validate(data)
+    return cfg, run_weeks([WEEK], tmp_path_factory.mktemp("multi_box"), seed=7,
+                          excitation_weekends=[SATURDAY], config=cfg)
+
+
+def test_several_boxes_per_room_each_follow_the_command_at_their_share(multi_box):
+    """Every box of a room reaches its share of the room's design airflow when its zone is
+    the target and its commanded fraction of that in every block; the site lists every box
+    with its room, and the model built from it gives each box its room."""
+    from zonecast.estimator.pipeline import Pipeline
+    cfg, res = multi_box
+    site = load_site(res.out / "site.yaml")
+    assert len(site.boxes) == 21 + 1 + 2
+    assert [b for b, s in site.boxes.items() if s.room == "C_1"] == [
+        "VAV_C_1", "VAV_C_1_2", "VAV_C_1_3"]
+    blocks = pd.read_csv(res.out / "experiments.csv")
+    local = _local(res)
+    for room, shares in (("S_1", (0.6, 0.4)), ("C_1", (0.3, 0.33, 0.37))):
+        spec = cfg.rooms[room]
+        perim = spec.zone != "C"
+        design = spec.floor_area * (cfg.hvac.design_airflow_perimeter if perim
+                                    else cfg.hvac.design_airflow_core) * 1.2
+        for i, share in enumerate(shares):
+            box = f"VAV_{room}" if i == 0 else f"VAV_{room}_{i + 1}"
+            for _, b in blocks.iterrows():
+                sel = (local >= pd.Timestamp(b.start)) & (local < pd.Timestamp(b.end))
+                realised = res.telemetry[f"{box}_flow"][sel].to_numpy() / (share * design)
+                np.testing.assert_allclose(realised, b[f"fraction:{spec.zone}"], rtol=0.02)
+        zone_reheat = res.truth[f"reheat:zone:{spec.zone}"]
+        boxes = sum(res.truth[f"reheat:{b}"] for b, s in site.boxes.items()
+                    if cfg.rooms[s.room].zone == spec.zone)
+        np.testing.assert_allclose(zone_reheat, boxes)
+    structure = Pipeline.from_site(res.out / "site.yaml").structure()
+    rooms = [structure.labels[i].room.upper() for i in structure.room_of_box]
+    assert rooms.count("C_1") == 3 and rooms.count("S_1") == 2 and len(rooms) == 24

@@ -127,6 +127,17 @@ def test_drawn_parameters_stay_in_their_ranges_and_vary(family):
     plenums = [m.config.plenum for m in gen if m.config.plenum is not None]
     assert 0.25 < len(plenums) / len(gen) < 0.55
     assert all(0.6 <= p.height <= 1.2 and 0 <= p.lights_return_fraction <= 0.3 for p in plenums)
+    multi = [m for m in gen if m.params["most_boxes_per_room"] > 1]
+    assert 0.2 < len(multi) / len(gen) < 0.6
+    assert {m.params["most_boxes_per_room"] for m in multi} <= {2, 3}
+    for m in multi:  # only rooms larger than one box's area, unequal shares summing to 1
+        for room in m.config.rooms.values():
+            shares = room.box_shares
+            assert sum(shares) == pytest.approx(1.0, abs=1e-9)
+            if len(shares) > 1:
+                assert room.floor_area > 40.0 and min(shares) >= 0.15
+        assert m.params["boxes"] > len(m.config.rooms)
+    assert any(len(set(r.box_shares)) > 1 for m in multi for r in m.config.rooms.values())
     for m in gen:   # a ground floor carries the temperature under it, others none
         assert (m.config.ground_temperature is not None) == (m.config.floor_position == "ground")
     # SHGC follows U (clear single glass lets more sun in than low-e double glass)
@@ -317,14 +328,17 @@ def test_a_rotated_member_in_another_climate_runs_and_the_estimator_reads_it(tmp
     # a member with a return plenum has it as one more (unmeasured) room
     assert sorted(model.structure.rooms) == sorted([*cfg.rooms, *(["Plenum"] if cfg.plenum
                                                                   else [])])
-    assert len(model.structure.hvac_boxes) == len(cfg.rooms) == len(site.boxes)
+    # (this member has several boxes in its larger rooms: every one is a box of the model)
+    n_boxes = sum(len(r.box_shares) for r in cfg.rooms.values())
+    assert n_boxes > len(cfg.rooms)
+    assert len(model.structure.hvac_boxes) == n_boxes == len(site.boxes)
     # this member lies on the ground: each room's floor is a ground contact held near the
     # file's monthly ground temperature (docs/model.md "Ground contact")
     assert cfg.floor_position == "ground"
     ground = [b for b in model.structure.scheduled if b.startswith("ground:")]
     assert sorted(ground) == sorted(f"ground:{r}_Floor" for r in cfg.rooms)
     assert model.structure.scheduled[ground[0]]["monthly"] == pytest.approx(cfg.ground_temperature)
-    assert model.n_boxes == 2 * len(cfg.rooms)
+    assert model.n_boxes == n_boxes + len(cfg.rooms)
     # the estimator reads the facades' azimuths as EnergyPlus used them (north axis applied)
     con = sqlite3.connect(tmp_path / "eplus" / "eplusout.sql")
     eplus = dict(con.execute("select SurfaceName, Azimuth from Surfaces where ClassName = 'Wall'"))

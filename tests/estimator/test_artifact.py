@@ -20,7 +20,7 @@ from zonecast.estimator.artifact import (
     save_structure,
     write_model_file,
 )
-from zonecast.estimator.pipeline import Pipeline
+from zonecast.estimator.pipeline import Pipeline, PipelineError
 
 
 def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
@@ -155,3 +155,9 @@ def test_structure_file_errors_say_what_to_fix(vb, tmp_path):
     with pytest.raises(ValueError, match="give room_volume"):
         write_model_file(tmp_path / "x.json", vb / "site.yaml",
                          structure=load_model_file(vb / "model.json").model.structure)
+
+
+def test_pipeline_rejects_an_unknown_weekend_gains_mode(vb):
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    with pytest.raises(PipelineError, match="use 'none', 'known' or 'scaled'"):
+        pipe.identify(pipe.data(pipe.telemetry(vb)), weekend_gains="sometimes")

@@ -23,6 +23,7 @@ from zoneinfo import ZoneInfo
 
 import numpy as np
 import pandas as pd
+from zonecast.estimator.idf import idf_objects
 from zonecast.estimator.site import Site
 from zonecast.testbed.config import BuildingConfig, load_config
 from zonecast.testbed.effects import Effects
@@ -104,30 +105,22 @@ def _room_flow(cfg: BuildingConfig, room: str) -> float:
 
 def _find(text: str, cls: str, name: str) -> tuple[int, int, list[str]]:
     """Start and end offsets of the IDF object ``cls`` named ``name`` in ``text`` and its
-    fields (comments dropped)."""
+    fields (:func:`~zonecast.estimator.idf.idf_objects`, comments dropped)."""
     # an object's class starts its line (a field naming a class, e.g. a terminal's reheat
     # coil type, is indented)
     m = re.search(rf"^{re.escape(cls)},[ \t]*(?:!.*)?\n[ \t]*{re.escape(name)}[ \t]*[,;]",
                   text, flags=re.MULTILINE | re.IGNORECASE)
     if m is None:
         raise EnergyPlusError(f"the expanded IDF has no {cls} {name!r}")
-    body, i = [], m.start()
-    for end, line in _lines_from(text, i):
-        body.append(line.split("!", 1)[0])
-        if ";" in body[-1]:
-            break
-    flat = "".join(body)
-    fields = [f.strip() for f in flat[:flat.index(";")].split(",")]
-    return m.start(), end, fields[1:]
-
-
-def _lines_from(text: str, start: int):
-    pos = start
-    while pos < len(text):
+    # the object ends at the first ';' outside a comment, then its line's end
+    pos = m.start()
+    while True:
         nl = text.find("\n", pos)
         nl = len(text) if nl < 0 else nl + 1
-        yield nl, text[pos:nl]
+        if ";" in text[pos:nl].split("!", 1)[0] or nl >= len(text):
+            break
         pos = nl
+    return m.start(), nl, idf_objects(text[m.start():nl])[0][1:]
 
 
 def _render(cls: str, fields: list) -> str:

@@ -32,6 +32,7 @@ from zonecast.testbed.idfgen import (
     SCHEDULE_FILE,
     ahu_outlet_node,
     build_idf,
+    obj,
     reheat_coil,
     room_boxes,
     supply_node,
@@ -123,14 +124,9 @@ def _find(text: str, cls: str, name: str) -> tuple[int, int, list[str]]:
     return m.start(), nl, idf_objects(text[m.start():nl])[0][1:]
 
 
-def _render(cls: str, fields: list) -> str:
-    vals = [f"{f:.6g}" if isinstance(f, float) else str(f) for f in fields]
-    return f"{cls},\n" + "".join(f"  {v},\n" for v in vals[:-1]) + f"  {vals[-1]};\n"
-
-
 def _replace(text: str, cls: str, name: str, fields: list, extra: str = "") -> str:
     a, b, _ = _find(text, cls, name)
-    return text[:a] + _render(cls, fields) + extra + text[b:]
+    return text[:a] + obj(cls, *fields) + extra + text[b:]
 
 
 def add_boxes(expanded: str, cfg: BuildingConfig) -> str:
@@ -158,11 +154,10 @@ def add_boxes(expanded: str, cfg: BuildingConfig) -> str:
             t[4], t[10], t[13] = share * flow, reheat_coil(room, i), supply_node(room, i)
             c = [reheat_coil(room, i), coil[1], coil[2], share * capacity,
                  f"{room} Damper Outlet {i + 1}", supply_node(room, i)]
-            added += ("\n" + _render("AirTerminal:SingleDuct:VAV:Reheat", t) + "\n"
-                      + _render("Coil:Heating:Electric", c) + "\n"
-                      + _render("ZoneHVAC:AirDistributionUnit",
-                                [f"{room} ATU {i + 1}", supply_node(room, i),
-                                 "AirTerminal:SingleDuct:VAV:Reheat", t[0]]))
+            added += ("\n" + obj("AirTerminal:SingleDuct:VAV:Reheat", *t) + "\n"
+                      + obj("Coil:Heating:Electric", *c) + "\n"
+                      + obj("ZoneHVAC:AirDistributionUnit", f"{room} ATU {i + 1}",
+                            supply_node(room, i), "AirTerminal:SingleDuct:VAV:Reheat", t[0]))
         out = _replace(out, "AirTerminal:SingleDuct:VAV:Reheat", f"{room} VAV Reheat", term)
         out = _replace(out, "Coil:Heating:Electric", reheat_coil(room), coil, added)
         _, _, eq = _find(out, "ZoneHVAC:EquipmentList", f"{room} Equipment")
@@ -174,7 +169,7 @@ def add_boxes(expanded: str, cfg: BuildingConfig) -> str:
         _, _, conn = _find(out, "ZoneHVAC:EquipmentConnections", room)
         conn[2] = f"{room} Inlet Nodes"
         out = _replace(out, "ZoneHVAC:EquipmentConnections", room, conn,
-                       "\n" + _render("NodeList", [f"{room} Inlet Nodes"]
+                       "\n" + obj("NodeList", *[f"{room} Inlet Nodes"]
                                        + [supply_node(room, i) for i in range(len(shares))]))
         _, _, split = _find(out, "AirLoopHVAC:ZoneSplitter", "AHU Zone Splitter")
         split += [f"{room} Zone Equip Inlet {i + 1}" for i in range(1, len(shares))]

@@ -12,6 +12,16 @@ import pandas as pd
 import pytest
 import yaml
 
+
+def pytest_collection_modifyitems(session, config, items):
+    """Start the service-only environment of tests/test_serve_without_energyplus.py in the
+    background as soon as its test is selected."""
+    if any(item.module.__name__.endswith("test_serve_without_energyplus") for item in items
+           if getattr(item, "module", None) is not None):
+        from tests.serve_only_env import start_background_build
+        start_background_build(config)
+
+
 SITE = {
     "building": "tiny",
     "idf": "building.idf",

@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import socket
 import subprocess
-import sys
 import time
 import urllib.request
 from pathlib import Path
@@ -21,6 +20,8 @@ import numpy as np
 import pandas as pd
 import pytest
 from zonecast.estimator.streaming import offline_forecasts
+
+from tests.serve_only_env import BUILD_KEY, build_venv
 
 ROOT = Path(__file__).resolve().parents[1]
 TOKEN = "serve-only-token"
@@ -44,13 +45,15 @@ def _http(url: str, body: dict | None = None, timeout: float = 10.0) -> tuple[in
 
 
 @pytest.fixture(scope="module")
-def service_venv(tmp_path_factory) -> Path:
-    venv = tmp_path_factory.mktemp("serve-only") / "venv"
-    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
-    r = subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet",
-                        f"{ROOT}[service]"], capture_output=True, text=True, timeout=1500, check=False)
-    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-4000:]
-    return venv
+def service_venv(request, tmp_path_factory) -> Path:
+    started = request.config.stash.get(BUILD_KEY, None)
+    if started is None:  # the hook of tests/conftest.py did not run: build it now
+        folder = tmp_path_factory.mktemp("serve-only")
+        started = (folder, build_venv(folder))
+    folder, proc = started
+    code = proc.wait(timeout=1800)
+    assert code == 0, (folder / "build.log").read_text()[-4000:]
+    return folder / "venv"
 
 
 @pytest.mark.slow

@@ -49,6 +49,7 @@ from zonecast.estimator.gains import WeeklyProfile
 from zonecast.estimator.idf import read_building
 from zonecast.estimator.model import BilinearModel, build_model
 from zonecast.estimator.rc.network import (
+    DISTURBANCES,
     ModelDefinitionError,
     ModelOptions,
     RCStructure,
@@ -227,7 +228,7 @@ _OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration", "fa
                 "shading", "return_air")
 #: what a model file without an option was built with (options added later)
 _LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal", "ground": "adiabatic",
-                    "shading": "none", "return_air": "none"}
+                    "shading": "none", "return_air": "none", "roof_solar": "mean"}
 #: what a model file without ``model_options`` was built with (files written before the
 #: key existed put window solar on the room air, the paper's placement)
 LEGACY_OPTIONS = {"window_solar": "air"}
@@ -362,6 +363,17 @@ def _csr(name: str, z) -> sp.csr_matrix:
                          shape=tuple(int(s) for s in z[f"{name}.shape"]))
 
 
+def _disturbance_columns(m: sp.csr_matrix) -> sp.csr_matrix:
+    """A B_v block with a column per :data:`~.rc.network.DISTURBANCES`: files written
+    before the roofs' horizontal column ``solH`` have one fewer, which no element used."""
+    if m.shape[1] == len(DISTURBANCES) - 1:
+        m = sp.csr_matrix((m.data, m.indices, m.indptr), shape=(m.shape[0], len(DISTURBANCES)))
+    if m.shape[1] != len(DISTURBANCES):
+        raise ValueError(f"structure B_v has {m.shape[1]} columns; this version reads "
+                         f"{len(DISTURBANCES)} ({', '.join(DISTURBANCES)})")
+    return m
+
+
 def save_structure(path: str | Path, structure: RCStructure,
                    room_volume: dict[str, float]) -> Path:
     """Write an RC structure and the rooms' air volumes to ``path`` (.npz, no pickles).
@@ -427,7 +439,8 @@ def load_structure(path: str | Path) -> tuple[RCStructure, dict[str, float]]:
             rooms=list(meta["rooms"]), zones={k: list(v) for k, v in meta["zones"].items()},
             boxes=dict(meta["boxes"]), capacity=z["capacity"],
             A0=_csr("A0", z), A_p=[_csr(f"A_p{i}", z) for i in range(meta["n_A_p"])],
-            Bv0=_csr("Bv0", z), Bv_p=[_csr(f"Bv_p{i}", z) for i in range(meta["n_Bv_p"])],
+            Bv0=_disturbance_columns(_csr("Bv0", z)),
+            Bv_p=[_disturbance_columns(_csr(f"Bv_p{i}", z)) for i in range(meta["n_Bv_p"])],
             B_ig=z["B_ig"], room_of_box=z["room_of_box"], C=z["C"], cp_air=meta["cp_air"],
             notes=list(meta["notes"]), areas=dict(meta["areas"]),
             window_area={r: z[f"window_area.{r}"] for r in meta["window_rooms"]},

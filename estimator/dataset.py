@@ -1,9 +1,10 @@
 """Telemetry -> the paper's arrays: u(k), v(k), measured ȳ(k), on the model step.
 
-``v = [Ta, Ts, solE, solS, solW, solN]`` (paper section "Building Model"): outdoor and
-supply air temperature [degC] and irradiance on vertical facades facing east, south, west
-and north [W/m2], computed with pvlib from the weather station's GHI, DNI and DHI
-(:func:`zonecast.estimator.solar.facade_irradiance`). Row k holds y(k), u(k), v(k)
+``v = [Ta, Ts, solE, solS, solW, solN, solH]`` (paper section "Building Model", plus the
+roofs' horizontal column): outdoor and supply air temperature [degC] and irradiance on
+vertical facades facing east, south, west and north and on a horizontal plane [W/m2],
+computed with pvlib from the weather station's GHI, DNI and DHI
+(:func:`zonecast.estimator.solar.facade_columns`). Row k holds y(k), u(k), v(k)
 (docs/data.md), so x(k+1) = f(x(k), u(k), v(k)) maps row k to row k+1.
 """
 
@@ -15,13 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 from zonecast.estimator.constants import STEP
-from zonecast.estimator.rc.network import DISTURBANCES
+from zonecast.estimator.rc.network import DISTURBANCES, SOLAR_COLUMNS
 from zonecast.estimator.schedules import CompactSchedule, local_day_minute
 from zonecast.estimator.site import Site
 from zonecast.estimator.solar import (
     FACADE_AZIMUTHS,
     facade_columns,
-    facade_irradiance,
     sun_geometry,
 )
 from zonecast.estimator.telemetry import Telemetry, segments_of
@@ -39,7 +39,7 @@ class ModelData:
     ----------
     times : DatetimeIndex (UTC), the start of each step
     u : (N, n_boxes) box airflows [kg/s], site box order
-    v : (N, 6) disturbances [degC, degC, W/m2 x 4]
+    v : (N, 7) disturbances [degC, degC, W/m2 x 5] (:data:`DISTURBANCES`)
     y : (N, n_zones) measured zone temperatures [degC], NaN where no sensor reported
     zones, boxes : names in column order
     segments : contiguous row ranges [start, stop)
@@ -199,22 +199,15 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
     """
     site = tel.site
     w = tel.weather()
-    sol = np.full((len(w), 4), np.nan)
+    sol = np.full((len(w), len(SOLAR_COLUMNS)), np.nan)
     ok = w[["ghi", "dni", "dhi"]].notna().all(axis=1).to_numpy()
-    if ok.any() and shading:
+    if ok.any():
         loc = site.location
         geom = sun_geometry(w.index[ok], pd.Timedelta(site.step), loc.latitude, loc.longitude,
                             loc.elevation)
         sol[ok] = facade_columns(geom, w.ghi.to_numpy()[ok], w.dni.to_numpy()[ok],
                                  w.dhi.to_numpy()[ok], facade_azimuths, shading=shading,
                                  albedo=albedo, sky_model=sky_model)
-    elif ok.any():
-        sol[ok] = facade_irradiance(w.index[ok], w.ghi.to_numpy()[ok], w.dni.to_numpy()[ok],
-                                    w.dhi.to_numpy()[ok], site.location.latitude,
-                                    site.location.longitude, site.location.elevation,
-                                    albedo=albedo, sky_model=sky_model,
-                                    interval=pd.Timedelta(site.step), label="start",
-                                    azimuths=facade_azimuths)
     v = np.column_stack([w.Ta.to_numpy(), w.Ts.to_numpy(), sol])
     exc = np.zeros(len(w), dtype=bool)
     for e in site.experiments:

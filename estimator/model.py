@@ -74,10 +74,10 @@ class DiscreteBilinear:
     Attributes
     ----------
     A : ndarray (n, n)
-    Bv : ndarray (n, 6)
+    Bv : ndarray (n, 7)
     B_ig : ndarray (n, n_zones)
     Bxu : ndarray (n_boxes, n, n)
-    Bvu : ndarray (n_boxes, n, 6)
+    Bvu : ndarray (n_boxes, n, 7)
     C : ndarray (n_zones, n)
     u_nominal : ndarray (n_boxes,)
         Airflow around which the step map was linearised [kg/s].
@@ -350,7 +350,7 @@ class BilinearModel:
         Returns
         -------
         Phi : ndarray (n, n)
-        Gamma_v : ndarray (n, 6)
+        Gamma_v : ndarray (n, 7)
         Gamma_ig : ndarray (n, n_zones)
             x(k+1) = Phi x + Gamma_v v + Gamma_ig (c_IG + f_IG).
         """
@@ -439,7 +439,7 @@ class BilinearModel:
             x0 = np.full(self.n, float(x0))
         checks = [
             ("u", u, (nsteps, self.n_boxes), "kg/s per box"),
-            ("v", v, (nsteps, len(DISTURBANCES)), "Ta, Ts, solE, solS, solW, solN"),
+            ("v", v, (nsteps, len(DISTURBANCES)), ", ".join(DISTURBANCES)),
             ("f_ig", f_ig, (nsteps, self.n_zones), "W/m2 per zone"),
             ("x0", x0, (self.n,), "degC per state"),
         ]
@@ -468,7 +468,7 @@ class BilinearModel:
         u : ndarray (N, n_boxes)
             Airflow per box [kg/s], held over each step.
         v : ndarray (N, 6)
-            [Ta degC, Ts degC, solE, solS, solW, solN W/m2].
+            [Ta degC, Ts degC, solE, solS, solW, solN, solH W/m2].
         f_ig : ndarray (N, n_zones), optional
             Time-varying internal gains [W/m2]; default zero.
         method : {"exact", "eig", "bilinear"}, optional

@@ -56,6 +56,9 @@ __all__ = [
 #: Azimuths [deg, clockwise from north] of the paper's facade order E, S, W, N.
 FACADE_AZIMUTHS: tuple[float, float, float, float] = (90.0, 180.0, 270.0, 0.0)
 
+#: (tilt, azimuth) [deg] of the horizontal plane of the roofs' column ``solH``.
+HORIZONTAL: tuple[float, float] = (0.0, 180.0)
+
 #: Sky diffuse models accepted (pvlib names); see docs/numerics.md for the choice.
 SKY_MODELS = ("perez", "haydavies", "isotropic", "klucher", "reindl")
 
@@ -320,8 +323,9 @@ def _perez_shares(geometry: np.ndarray, dni: np.ndarray, dhi: np.ndarray,
 def facade_columns(geometry: np.ndarray, ghi, dni, dhi, azimuths: Sequence[float], *,
                    shading=None, albedo: float = 0.2, sky_model: str = "perez",
                    sunlit: np.ndarray | None = None) -> np.ndarray:
-    """The model's four solar columns: global irradiance on vertical facades facing
-    ``azimuths``, shaded where a facade's windows are.
+    """The model's five solar columns (:data:`~.rc.network.SOLAR_COLUMNS`): global
+    irradiance on vertical facades facing ``azimuths``, shaded where a facade's windows are,
+    then on a horizontal plane (roofs; never shaded).
 
     Parameters
     ----------
@@ -341,9 +345,9 @@ def facade_columns(geometry: np.ndarray, ghi, dni, dhi, azimuths: Sequence[float
 
     Returns
     -------
-    ndarray, shape (N, 4) [W/m²]; NaN where an input is missing.
+    ndarray, shape (N, 5) [W/m²]; NaN where an input is missing.
     """
-    planes = np.array([(90.0, float(a)) for a in azimuths])
+    planes = np.array([(90.0, float(a)) for a in azimuths] + [HORIZONTAL])
     if not shading:
         return transpose(geometry, ghi, dni, dhi, planes, albedo=albedo, sky_model=sky_model,
                          total=True)["poa_global"]

@@ -104,6 +104,7 @@ from zonecast.estimator.kalman import (
     initial_state_from_measurement,
     steady_state_covariance,
 )
+from zonecast.estimator.rc.network import SOLAR_COLUMNS
 from zonecast.estimator.shading import sun_vectors
 from zonecast.estimator.solar import SKY_MODELS, SolarGeometryCache, facade_columns
 from zonecast.estimator.telemetry import Telemetry, load_telemetry, segments_of
@@ -127,6 +128,8 @@ __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "
            "rows_from_frame", "telemetry_frame"]
 
 _DAY_NS = 86_400 * 10**9
+#: disturbances per input row, after the boxes (:data:`DISTURBANCES`)
+NV = len(DISTURBANCES)
 _CKPT_MAGIC = b"ZCE2"
 
 
@@ -161,7 +164,7 @@ def model_rows(bundle: ModelBundle, frame: pd.DataFrame) -> ModelData:
 
 def rows_from_frame(bundle: ModelBundle, frame: pd.DataFrame):
     """Telemetry in SI units (UTC index on the step grid, one column per point) -> the
-    model's arrays: times, u (N, boxes) [kg/s], v (N, 6), y (N, zones) [degC]
+    model's arrays: times, u (N, boxes) [kg/s], v (N, 7), y (N, zones) [degC]
     (:func:`model_rows` also gives the discharge-air rise).
 
     Missing points are NaN columns. The same function serves the runner (a few rows
@@ -248,7 +251,7 @@ class OnlineEstimator:
         m = bundle.model
         self._n, self._nz = m.n, m.n_zones
         self._rh = has_discharge(bundle)  # inputs end with the boxes' discharge-air rise
-        self._nin = m.n_boxes + 6 + (m.n_boxes if self._rh else 0)
+        self._nin = m.n_boxes + NV + (m.n_boxes if self._rh else 0)
         air = m.structure.air_states(measured_only=True)
         ns = bundle.noise
         Q = air_wall_covariance(m.n, air, ns.sigma_air, ns.sigma_wall)
@@ -398,18 +401,18 @@ class OnlineEstimator:
     def _step(self, t: pd.Timestamp, y: np.ndarray) -> tuple[float, int]:
         m = self.bundle.model
         nb = m.n_boxes
-        if not np.isfinite(self._pending[:nb + 6]).all():
+        if not np.isfinite(self._pending[:nb + NV]).all():
             # an input never seen since the start: the model cannot be stepped; the
             # filter restarts at the next measurement
             self.reset()
             self.resets += 1
             return float("nan"), 0
-        u, v = self._pending[:nb], self._pending[nb:nb + 6]
+        u, v = self._pending[:nb], self._pending[nb:nb + NV]
         st = self._ladder.for_airflows(u)
         base = m.Bv @ v + m.B_ig @ m.params.c_ig
         if self._rh:
             # a discharge-air point never heard from: no rise (the paper's supply-air term)
-            base = base + m.reheat_forcing(u, np.nan_to_num(self._pending[nb + 6:]))
+            base = base + m.reheat_forcing(u, np.nan_to_num(self._pending[nb + NV:]))
         x_tilde = st.step(self._x, u, base, v[1])  # Eq:xnoig_ynoig (f_IG = 0)
         gig, cgig = self._gamma_ig(st, u)           # Gamma_IG(u), C Gamma_IG(u)
         try:
@@ -483,10 +486,10 @@ class OnlineEstimator:
         inputs ``ins`` and gains ``f_ig`` over the horizon."""
         m = self.bundle.model
         nb = m.n_boxes
-        u, v = ins[:, :nb], ins[:, nb:nb + 6]
+        u, v = ins[:, :nb], ins[:, nb:nb + NV]
         forcing = v @ m.Bv.T + (f_ig + m.params.c_ig) @ m.B_ig.T
         if self._rh:  # the boxes' discharge-air rise (docs/model.md "Discharge air")
-            forcing = forcing + m.reheat_forcing(u, ins[:, nb + 6:])
+            forcing = forcing + m.reheat_forcing(u, ins[:, nb + NV:])
         xs = self._ladder.for_airflows(u).run(self._x, u, forcing, v[:, 1])
         mean = xs[1:] @ m.C.T
         if self.hold_setpoints and self._band is not None:
@@ -520,19 +523,19 @@ class OnlineEstimator:
         site, nb = self.bundle.site, self.bundle.model.n_boxes
         self.calendar = DayCalendar.for_site(site)
         d = INPUT_FORECAST_DEFAULTS
-        # HVAC channels: every input but the weather (Ta at nb, facade solar at nb + 2 ...
-        # nb + 5): the airflows, the supply-air temperature, and any per-box input after
-        # the six disturbances (e.g. a discharge-air rise); all but T_s are >= 0
+        # HVAC channels: every input but the weather (Ta at nb, solar at nb + 2 ... nb + 6):
+        # the airflows, the supply-air temperature, and any per-box input after the
+        # disturbances (e.g. a discharge-air rise); all but T_s are >= 0
         # (a scheduled input's airflow and rise are known ahead, not learned: the last
         # columns of u and of the rises, filled by forecast_inputs)
         k = len(self.bundle.model.structure.scheduled)
         self._hv_cols = np.array(list(range(nb - k)) + [nb + 1]
-                                 + list(range(nb + 6, self._nin - (k if self._rh else 0))))
+                                 + list(range(nb + NV, self._nin - (k if self._rh else 0))))
         nonneg = [c != nb + 1 for c in self._hv_cols]
         # regressors: outdoor temperature and the irradiance of each of the building's
         # four facades (a box's cooling airflow follows the sun on its own zone's facade:
         # docs/forecasts.md "Served forecast")
-        self._wx_cols = np.array([nb] + list(range(nb + 2, nb + 6)))
+        self._wx_cols = np.array([nb] + list(range(nb + 2, nb + 6)))  # Ta, E, S, W, N
         self.inputs_fc = HvacInputForecaster(self.calendar, len(self._hv_cols), n_regressors=5,
                                              shrink=[d["sigma0"]] + [d["sigma0_solar"]] * 4,
                                              nonnegative=nonneg)
@@ -547,7 +550,7 @@ class OnlineEstimator:
         self._fc_solar = SolarGeometryCache(loc.latitude, loc.longitude, loc.elevation,
                                             site.step, max_days=4)
         self.weather: WeatherForecast | None = None
-        self._wx: tuple[int, np.ndarray] | None = None  # (first grid ns, (N, 5) Ta, sol x 4)
+        self._wx: tuple[int, np.ndarray] | None = None  # (first grid ns, (N, 6) Ta, sol x 5)
         # the thermostat's band: a forecast zone temperature outside it is held at the set
         # point it crossed (docs/forecasts.md "Set points")
         self._band = site.thermostat
@@ -566,7 +569,7 @@ class OnlineEstimator:
         if operating:
             self.inputs_fc.update(tn, inputs[self._wx_cols], inputs[self._hv_cols])
             tod = int(self.calendar.slots([tn])[0]) % self.calendar.per_day
-            self.weather_fb.update(tod, inputs[nb], inputs[nb + 2:nb + 6])
+            self.weather_fb.update(tod, inputs[nb], inputs[nb + 2:nb + NV])
         k = tn // STEP.value
         std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
         self.calibrator.resolve(k, y if operating else np.full(self._nz, np.nan), std)
@@ -588,7 +591,7 @@ class OnlineEstimator:
         if len(grid) == 0:
             return
         vals = wf.values_at(grid + step // 2)  # Ta, GHI, DNI, DHI at interval middles
-        sol = np.full((len(grid), 4), np.nan)
+        sol = np.full((len(grid), len(SOLAR_COLUMNS)), np.nan)
         ok = np.isfinite(vals).all(axis=1)
         if ok.any():
             geom = self._fc_solar.geometry(grid[ok])
@@ -599,7 +602,7 @@ class OnlineEstimator:
         self._wx = (int(first), np.column_stack([vals[:, 0], sol]))
 
     def persistence_inputs(self) -> np.ndarray:
-        """(HORIZON, n_boxes + 6) persistence inputs: row t for interval t, the row 24 h
+        """(HORIZON, n_boxes + 7) persistence inputs: row t for interval t, the row 24 h
         earlier for t + h (the current row where none): the served inputs before input
         forecasts, kept as a reference."""
         t = self.time
@@ -612,19 +615,19 @@ class OnlineEstimator:
         for h in range(1, HORIZON):
             ins[h] = past.get(day_ago + h * STEP.value, current)
         nb = self.bundle.model.n_boxes
-        ins[:, nb + 6:] = np.nan_to_num(ins[:, nb + 6:])  # per-box extras never heard: 0
+        ins[:, nb + NV:] = np.nan_to_num(ins[:, nb + NV:])  # per-box extras never heard: 0
         return ins
 
     def weather_inputs(self) -> tuple[np.ndarray, np.ndarray]:
-        """(HORIZON, 5) outdoor temperature [degC] and facade irradiance E, S, W, N
-        [W/m2] over the forecast intervals, and a (HORIZON,) mask of the intervals taken
+        """(HORIZON, 6) outdoor temperature [degC] and irradiance on the facades E, S, W,
+        N and the horizontal [W/m2] over the forecast intervals, and a (HORIZON,) mask of the intervals taken
         from the weather forecast. Interval t is the measured row; later ones come from
         the weather forecast in use when it is fresh and covers them, else from the
         diurnal fallback, else persistence."""
         t = self.time.value
         nb = self.bundle.model.n_boxes
         pers = self.persistence_inputs()
-        cols = [nb] + list(range(nb + 2, nb + 6))
+        cols = [nb] + list(range(nb + 2, nb + NV))
         out = pers[:, cols].copy()
         times = t + STEP.value * np.arange(HORIZON, dtype=np.int64)
         tods = self.calendar.slots(times) % self.calendar.per_day
@@ -650,7 +653,7 @@ class OnlineEstimator:
         return out, from_wf
 
     def forecast_inputs(self) -> np.ndarray:
-        """(HORIZON, n_boxes + 6) served inputs: weather from :meth:`weather_inputs`,
+        """(HORIZON, n_boxes + 7) served inputs: weather from :meth:`weather_inputs`,
         airflows and supply-air temperature from the HVAC-input forecaster
         (:mod:`zonecast.estimator.inputs_forecast`) at the forecast outdoor temperature,
         persistence where it has not learned a slot."""
@@ -659,11 +662,11 @@ class OnlineEstimator:
         wx, _ = self.weather_inputs()
         times = self.time.value + STEP.value * np.arange(HORIZON, dtype=np.int64)
         hv_cols = self._hv_cols
-        hv = self.inputs_fc.forecast(times, wx, pers[0, hv_cols], pers[:, hv_cols])
+        hv = self.inputs_fc.forecast(times, wx[:, :5], pers[0, hv_cols], pers[:, hv_cols])
         ins = np.empty((HORIZON, self._nin))
         ins[:, hv_cols] = hv
         ins[:, nb] = wx[:, 0]
-        ins[:, nb + 2:nb + 6] = wx[:, 1:]
+        ins[:, nb + 2:nb + NV] = wx[:, 1:]
         sched = self.bundle.model.structure.scheduled
         if sched:  # known ahead: their airflows, and their supply (the forecast outdoor
             k = len(sched)  # air, the ground's month) over the forecast supply air
@@ -770,6 +773,11 @@ class OnlineEstimator:
                 arr = {k: z[k] for k in z.files if k != "meta"}
             gain_times = [pd.Timestamp(s) for s in meta["gain_times"]]
             input_times = [pd.Timestamp(s) for s in meta["input_times"]]
+        if np.shape(arr["pending"]) != (self._nin,):
+            raise ValueError(f"checkpoint rows hold {np.shape(arr['pending'])[0]} inputs, this "
+                             f"estimator's {self._nin} (written by a version with another "
+                             "disturbance vector, e.g. before the roofs' horizontal solar "
+                             "column): start the filter afresh")
         self.reset()
         self.time = None if meta["time"] is None else pd.Timestamp(meta["time"])
         self.steps, self.resets = meta["steps"], meta["resets"]
@@ -900,7 +908,7 @@ class RowConverter:
 
         Returns
         -------
-        u (N, n_boxes) [kg/s], v (N, 6) [degC, degC, W/m2 x 4], y (N, n_zones) [degC],
+        u (N, n_boxes) [kg/s], v (N, 7) [degC, degC, W/m2 x 5], y (N, n_zones) [degC],
         reheat (N, n_boxes) discharge-air rise over the supply air [K] (as
         :meth:`~zonecast.estimator.telemetry.Telemetry.discharge_rise`, zero for a box
         without a discharge-air point or shut)
@@ -912,7 +920,7 @@ class RowConverter:
         for unit, idx in self._groups:
             si[:, idx] = to_si(raw[:, idx], unit)
         n = len(si)
-        sol = np.full((n, 4), np.nan)
+        sol = np.full((n, len(SOLAR_COLUMNS)), np.nan)
         sun = si[:, self._sun]
         ok = np.isfinite(sun).all(axis=1)
         if ok.any():
@@ -1005,7 +1013,7 @@ def offline_forecasts(model_file: ModelBundle | str | Path,
     max_gap : pandas.Timedelta
         As for :class:`OnlineEstimator`.
     inputs : mapping, optional
-        UTC issue time -> (96, n_boxes + 6) inputs over the horizon for
+        UTC issue time -> (96, n_boxes + 7) inputs over the horizon for
         :meth:`OnlineEstimator.forecast` (default the served input forecasts).
     weather : iterable of WeatherForecast, optional
         Weather forecasts; each is handed to the estimator

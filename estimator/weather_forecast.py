@@ -293,7 +293,9 @@ class DiurnalWeather:
             raise ValueError(f"lam must lie in (0, 1], got {lam}")
         self.per_day, self.lam, self.tau_h = int(per_day), float(lam), float(tau_h)
         self.w = np.zeros(self.per_day)
-        self.mean = np.zeros((self.per_day, 5))  # Ta [degC], solE, solS, solW, solN [W/m2]
+        # Ta [degC], solE, solS, solW, solN, solH [W/m2] (a checkpoint of another shape is
+        # not loaded: load_state_arrays)
+        self.mean = np.zeros((self.per_day, 6))
 
     def update(self, tod: int, ta: float, sol: np.ndarray) -> bool:
         """Learn one row (local time-of-day bin ``tod``); skipped when anything is missing."""
@@ -306,8 +308,8 @@ class DiurnalWeather:
         return True
 
     def forecast(self, tods: np.ndarray, lead_h: np.ndarray, current: np.ndarray) -> np.ndarray:
-        """(H, 5) Ta, solE..solN at the bins ``tods`` and leads ``lead_h`` [h]; ``current``
-        the measured (Ta, sol x 4) of the issue row (NaN where none; bins never seen are
+        """(H, 6) Ta, solE..solH at the bins ``tods`` and leads ``lead_h`` [h]; ``current``
+        the measured (Ta, sol x 5) of the issue row (NaN where none; bins never seen are
         NaN)."""
         tods = np.asarray(tods, dtype=np.int64)
         seen = self.w[tods] > 0

@@ -153,7 +153,13 @@ class Runner:
                         meta.get("version"), self.bundle.version,
                         extra={"building": self.building})
         else:
-            self.est.load_bytes(blob)
+            try:
+                self.est.load_bytes(blob)
+            except ValueError as exc:  # another layout of the same model's rows
+                log.warning("building %s: checkpoint not loaded (%s): starting the filter "
+                            "afresh from the checkpoint's next row", self.building, exc,
+                            extra={"building": self.building})
+                self.est.reset()
             if self.est.started:
                 self._set_forecast(self.est.forecast())
         self.next_time = pd.Timestamp(meta["next_time"]) if meta.get("next_time") else None

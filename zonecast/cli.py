@@ -264,6 +264,11 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                      help="'idf' (the default): the boxes' return air flows through the "
                           "IDF's return plenums (docs/model.md \"Return plenum\"), or "
                           "'none' (the paper)")] = "idf",
+                 roof_solar: Annotated[str, typer.Option(
+                     help="solar input of roofs and skylights: 'horizontal' (the default, "
+                          "chosen on the building family): the global horizontal irradiance "
+                          "(docs/model.md); 'mean' of the four facade irradiances (before "
+                          "2026-11-25); or 'none'")] = "horizontal",
                  weekend_gains: Annotated[str, typer.Option(
                      help="'none' (the default, the paper's f_IG = 0 at weekends); 'known': "
                           "identify again with the weekly gains profile of the weeks without "
@@ -282,6 +287,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  seed=seed, priors=priors, sigma_e=sigma_e, window=window,
                                  infiltration=infiltration, weekend_gains=weekend_gains,
                                  ground=ground, shading=shading, return_air=return_air,
+                                 roof_solar=roof_solar,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -359,6 +365,9 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   return_air: Annotated[str, typer.Option(
                       help="'idf' (the default): return air through the IDF's return "
                            "plenums, or 'none' (the paper)")] = "idf",
+                  roof_solar: Annotated[str, typer.Option(
+                      help="roofs' solar: 'horizontal' (the default), 'mean' or 'none' "
+                           "(as zonecast identify)")] = "horizontal",
                   weekend_gains: Annotated[str, typer.Option(
                       help="'none' (the default), 'known' (identify again with the weekly "
                            "gains profile of the training weeks as known f_IG) or 'scaled' "
@@ -374,7 +383,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 priors=priors, sigma_e=sigma_e, window=window,
                                 sensitivity=sensitivity, infiltration=infiltration,
                                 weekend_gains=weekend_gains, ground=ground,
-                                shading=shading, return_air=return_air)
+                                shading=shading, return_air=return_air,
+                                roof_solar=roof_solar)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

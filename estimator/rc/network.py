@@ -21,7 +21,8 @@ External heat flux models, exactly as the paper:
 * HVAC, eq:q_hvac -- c_p sum_{j in B_i} u_j (v_Ts - x_i) on room air;
 * internal gains, eq:q_ig -- a_floor,i (c_IG + f_IG) on room air.
 
-Disturbance order is the paper's: v = [Ta, Ts, solE, solS, solW, solN].
+Disturbance order is the paper's, v = [Ta, Ts, solE, solS, solW, solN], with the global
+horizontal irradiance solH appended for roofs (``ModelOptions.roof_solar``).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ __all__ = [
     "CP_AIR",
     "DISTURBANCES",
     "RHO_AIR",
+    "SOLAR_COLUMNS",
     "ModelDefinitionError",
     "ModelOptions",
     "RCStructure",
@@ -48,8 +50,12 @@ __all__ = [
     "facade_of",
 ]
 
-#: Disturbance vector, paper order (sec:model): ambient, supply air, solar E, S, W, N.
-DISTURBANCES = ("Ta", "Ts", "solE", "solS", "solW", "solN")
+#: Disturbance vector, paper order (sec:model): ambient, supply air, solar E, S, W, N; then
+#: the global irradiance on a horizontal plane (roofs, ``ModelOptions.roof_solar``), which
+#: the paper's model does not have.
+DISTURBANCES = ("Ta", "Ts", "solE", "solS", "solW", "solN", "solH")
+#: The solar columns of v: the four facades, then horizontal.
+SOLAR_COLUMNS = DISTURBANCES[2:]
 #: conductance between a ground-contact outer face and the ground temperature [W/(m2 K)]:
 #: EnergyPlus puts the face at the ground temperature; 100 W/m2K holds it there within a few
 #: per cent of the drop across any slab (U <= 5 W/m2K) without stiffening the model beyond
@@ -109,10 +115,13 @@ class ModelOptions:
 
     Attributes
     ----------
-    roof_solar : {"mean", "none"}
+    roof_solar : {"horizontal", "mean", "none"}
         Solar input on roofs and other surfaces tilted less than 60 deg from
-        horizontal: the mean of the four facade irradiances, or none (v has no
-        horizontal component, paper sec:model).
+        horizontal (their opaque outer faces and skylights): the global horizontal
+        irradiance (v's ``solH`` column; the default since 2026-11-25, chosen on the
+        family's training members with roofs, docs/benchmarks.md), the mean of the four
+        facade irradiances (the paper's v has no horizontal column; the default before, and
+        what model files without the option were built with), or none.
     ground : {"idf", "adiabatic"}
         Ground-contact outer faces: held near the IDF's monthly temperature under the
         building (Site:GroundTemperature:BuildingSurface, EnergyPlus's boundary condition)
@@ -160,7 +169,7 @@ class ModelOptions:
         existed read as this).
     """
 
-    roof_solar: str = "mean"
+    roof_solar: str = "horizontal"
     ground: str = "idf"
     rho_air: float = RHO_AIR
     cp_air: float = CP_AIR
@@ -184,8 +193,8 @@ class ModelOptions:
             raise ModelDefinitionError("window_solar must be 'surfaces', 'floor' or 'air'")
         if not 0.0 <= self.floor_share <= 1.0:
             raise ModelDefinitionError("floor_share must be a fraction in [0, 1]")
-        if self.roof_solar not in ("mean", "none"):
-            raise ModelDefinitionError("roof_solar must be 'mean' or 'none'")
+        if self.roof_solar not in ("horizontal", "mean", "none"):
+            raise ModelDefinitionError("roof_solar must be 'horizontal', 'mean' or 'none'")
         if self.ground not in ("idf", "adiabatic"):
             raise ModelDefinitionError("ground must be 'idf' or 'adiabatic'")
 
@@ -200,7 +209,8 @@ def facade_of(tilt: float, azimuth: float, roof_solar: str = "mean",
         [deg] 0 facing up, 90 vertical.
     azimuth : float
         [deg] clockwise from north.
-    roof_solar : {"mean", "none"}
+    roof_solar : {"horizontal", "mean", "none"}
+        As :attr:`ModelOptions.roof_solar`.
     rotation : float
         [deg] the building's facade rotation (:func:`facade_rotation`): the solar columns
         are the irradiances on facades facing 90/180/270/0 deg plus it.
@@ -214,6 +224,8 @@ def facade_of(tilt: float, azimuth: float, roof_solar: str = "mean",
     if tilt > 120.0:
         return {}
     if tilt < 60.0:
+        if roof_solar == "horizontal":
+            return {"solH": 1.0}
         return {f: 0.25 for f in _FACADES.values()} if roof_solar == "mean" else {}
     diffs = {f: abs((azimuth - a - rotation + 180.0) % 360.0 - 180.0) for a, f in _FACADES.items()}
     return {min(diffs, key=diffs.get): 1.0}
@@ -685,14 +697,16 @@ def build_structure(
             cols = facade_of(parent.tilt, parent.azimuth, opts.roof_solar, rotation)
             shades = (building.shading.get(name, []) + building.shading.get("*", [])
                       if opts.shading == "idf" else [])
-            if shades and len(cols) == 1 and w.vertices is not None:
+            facade_cols = {c: wt for c, wt in cols.items() if c in _FACADES.values()}
+            if shades and len(cols) == 1 and facade_cols and w.vertices is not None:
                 shaded.append((name, DISTURBANCES.index(next(iter(cols))) - 2, w.area,
                                w.vertices, shades))
             elif shades:
                 notes.append(f"window {name}: not vertical, its shading is not modelled")
-            for col, wt in cols.items():
+            for col, wt in facade_cols.items():  # the facades' window areas
                 seen_area = window_area.setdefault(w.zone, np.zeros(4))
                 seen_area[DISTURBANCES.index(col) - 2] += wt * w.area
+            for col, wt in cols.items():
                 for node, share in targets:
                     asm.source(node, DISTURBANCES.index(col), wt * w.area * share, WINSOL)
             area_win += w.area

@@ -161,3 +161,27 @@ def test_pipeline_rejects_an_unknown_weekend_gains_mode(vb):
     pipe = Pipeline.from_site(vb / "site.yaml")
     with pytest.raises(PipelineError, match="use 'none', 'known' or 'scaled'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), weekend_gains="sometimes")
+
+
+def test_structure_files_without_the_horizontal_column_still_load(vb, bundle, tmp_path):
+    """Structure files written before the roofs' solH column have six columns in their
+    B_v blocks: they load with a seventh, empty one, and step exactly as before."""
+    path = save_structure(tmp_path / "s.npz", bundle.model.structure, bundle.room_volume)
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    for key in [k for k in arrays if k.startswith("Bv") and k.endswith(".shape")]:
+        assert arrays[key][1] == 7
+        name = key[:-len(".shape")]
+        assert (arrays[f"{name}.indices"] < 6).all()  # office6 has no roof: solH unused
+        arrays[key] = np.array([arrays[key][0], 6])
+    old = tmp_path / "old.npz"
+    with old.open("wb") as fh:
+        np.savez(fh, **arrays)
+    again, _ = load_structure(old)
+    assert again.Bv0.shape[1] == 7 and all(m.shape[1] == 7 for m in again.Bv_p)
+    assert (again.Bv0 != bundle.model.structure.Bv0).nnz == 0
+    arrays["Bv0.shape"] = np.array([arrays["Bv0.shape"][0], 5])
+    with (tmp_path / "bad.npz").open("wb") as fh:
+        np.savez(fh, **arrays)
+    with pytest.raises(ValueError, match="B_v has 5 columns"):
+        load_structure(tmp_path / "bad.npz")

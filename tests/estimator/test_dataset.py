@@ -19,13 +19,15 @@ def tel(tmp_path, site_dict, telemetry_csv):
 
 def test_arrays_follow_the_paper_order(tel):
     d = model_data(tel)
-    assert DISTURBANCES == ("Ta", "Ts", "solE", "solS", "solW", "solN")
-    assert d.u.shape == (8, 2) and d.v.shape == (8, 6) and d.y.shape == (8, 2)
+    assert DISTURBANCES == ("Ta", "Ts", "solE", "solS", "solW", "solN", "solH")
+    assert d.u.shape == (8, 2) and d.v.shape == (8, 7) and d.y.shape == (8, 2)
     np.testing.assert_allclose(d.v[:, 0], tel.frame["OAT"])
     np.testing.assert_allclose(d.v[:, 1], tel.frame["SAT"])
     assert np.all(d.v[:, 2:] >= 0) and np.all(np.isfinite(d.v))
     # morning (08:00-10:00 local): the east facade gets more than the west one
     assert np.all(d.v[:, 2] > d.v[:, 4])
+    # the roofs' column: a horizontal plane gets more than the north facade
+    assert np.all(d.v[:, 6] > d.v[:, 5])
     assert d.excitation.tolist() == [False, False, True, True, False, False, False, False]
 
 

@@ -57,7 +57,7 @@ def inputs():
     ts = 13 + np.repeat(rng.normal(0, 0.7, n // 4), 4)
     cloud = np.repeat(rng.uniform(0.2, 1.0, n // DAY), DAY)
     sun = np.clip(np.sin(2 * np.pi * (day - 0.25)), 0, None) * cloud
-    v = np.column_stack([ta, ts, 300 * sun, 500 * sun, 300 * sun, 80 * sun])
+    v = np.column_stack([ta, ts, 300 * sun, 500 * sun, 300 * sun, 80 * sun, 600 * sun])
     occ = np.clip(np.sin(2 * np.pi * (day - 0.3)), 0, None) * (day < 5)
     f = occ[:, None] * np.repeat(rng.uniform(5, 15, (n // DAY, 5)), DAY, axis=0)
     return times, u, v, f

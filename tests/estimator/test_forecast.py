@@ -43,7 +43,7 @@ def _weekly(n, seed=1):
     u_week = np.repeat(rng.uniform(0.05, 0.5, (7 * DAY // 4, 5)), 4, axis=0)
     u = u_week[k]
     v = np.column_stack([14 + 4 * np.sin(2 * np.pi * day), np.full(n, 13.0),
-                         np.zeros((n, 4)) + 100 * (np.sin(2 * np.pi * day) > 0)[:, None]])
+                         np.zeros((n, 5)) + 100 * (np.sin(2 * np.pi * day) > 0)[:, None]])
     scale = rng.uniform(0.5, 1.5, 5)
     f = np.clip(20 * np.sin(2 * np.pi * (day - 0.3)), 0, None)[:, None] * scale
     f[(day >= 5)] *= 0.3  # quieter weekends
@@ -63,7 +63,7 @@ def test_week_split_is_seeded_and_disjoint():
     n = 11 * 7 * DAY
     times = pd.DatetimeIndex(np.concatenate([_times(7 * DAY) + pd.Timedelta(weeks=3 * w)
                                              for w in range(11)]))
-    d = _data(times, np.zeros((n, 5)), np.zeros((n, 6)), np.zeros((n, 5)))
+    d = _data(times, np.zeros((n, 5)), np.zeros((n, 7)), np.zeros((n, 5)))
     a, b, c = week_split(d, 0), week_split(d, 0), week_split(d, 1)
     assert a == b
     assert len(a["weeks"]) == 11 and len(a["train"]) == 8 and len(a["validation"]) == 3

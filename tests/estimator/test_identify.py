@@ -35,7 +35,7 @@ def _model_and_inputs(five_zone, seed):
     day = np.arange(n) / 96.0
     sun = np.clip(600 * np.sin(2 * np.pi * (day - 0.25)), 0, None)
     v = np.column_stack([15 + 5 * np.sin(2 * np.pi * (day - 0.375)), np.full(n, 13.5),
-                         0.6 * sun, sun, 0.6 * sun, 0.2 * sun])
+                         0.6 * sun, sun, 0.6 * sun, 0.2 * sun, 1.3 * sun])
     return model, zones, boxes, rng, times, u, v, day
 
 

@@ -147,9 +147,9 @@ def test_diurnal_fallback_learns_the_shape_and_shifts_temperature():
     shape = 15 + 3 * np.sin(2 * np.pi * tod / 96)
     for _ in range(10):
         for k in tod:
-            d.update(int(k), shape[k], np.full(4, 100.0 * (k > 40)))
+            d.update(int(k), shape[k], np.full(5, 100.0 * (k > 40)))
     lead = np.arange(96) * 0.25
-    out = d.forecast(tod, lead, np.array([shape[0] + 2.0, 0, 0, 0, 0]))
+    out = d.forecast(tod, lead, np.array([shape[0] + 2.0, 0, 0, 0, 0, 0]))
     np.testing.assert_allclose(out[:, 0], shape + 2.0 * np.exp(-lead / 6.0), atol=1e-9)
     assert out[50, 1] == pytest.approx(100.0)
 

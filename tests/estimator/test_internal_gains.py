@@ -35,7 +35,7 @@ def _data(model, n=2 * 96, seed=1):
     u = np.repeat(rng.uniform(0.05, 0.5, (n // 4, 5)), 4, axis=0)
     day = np.arange(n) / 96
     v = np.column_stack([14 + 4 * np.sin(2 * np.pi * day), np.full(n, 13.0),
-                         np.zeros((n, 4)) + 100 * (np.sin(2 * np.pi * day) > 0)[:, None]])
+                         np.zeros((n, 5)) + 100 * (np.sin(2 * np.pi * day) > 0)[:, None]])
     f_true = np.clip(20 * np.sin(2 * np.pi * (day - 0.3)), 0, None)[:, None] * rng.uniform(0.5, 1.5, 5)
     x0 = model.steady_state(u[0], v[0])
     sim = model.simulate(x0, u, v, f_true)

@@ -84,7 +84,7 @@ def _inputs(n_steps, n_boxes, n_zones, seed=0):
     ta = 17.5 + 12.5 * np.sin(2 * np.pi * (day - 0.375))
     sun = np.clip(800 * np.sin(2 * np.pi * (day - 0.25)), 0, None)
     v = np.column_stack([ta, np.full(n_steps, 13.0), 0.7 * sun * (day % 1 < 0.5),
-                         sun, 0.7 * sun * (day % 1 >= 0.5), 0.15 * sun])
+                         sun, 0.7 * sun * (day % 1 >= 0.5), 0.15 * sun, 1.2 * sun])
     f = np.where((day % 1 > 0.33) & (day % 1 < 0.75), 15.0, 0.0)[:, None] * np.ones(n_zones)
     return u, v, f
 
@@ -114,7 +114,7 @@ def test_hand_wall_steady_flux():
     area = 12.0
     r = 1 / 20.0 + 0.1 / 0.72 + 2.0 + 0.0127 / 0.16 + 1 / 7.0
     # hold room at 20 C by stiff "HVAC": compute the flux from steady state with Ta = 0
-    v = np.array([0.0, 0, 0, 0, 0, 0])
+    v = np.array([0.0, 0, 0, 0, 0, 0, 0])
     # impose a room gain equal to U A dT and check the room settles at dT
     ua = area / r
     floor_area = b.zones["Room"].floor_area
@@ -137,7 +137,7 @@ def test_discretise_layers_conserves():
 @given(temp=st.floats(-10, 40), flows=st.lists(st.floats(0.0, 1.0), min_size=5, max_size=5))
 def test_uniform_temperature_equilibrium(five_model, temp, flows):
     model = five_model.with_params({"c_IG[Perim]": 0.0, "c_IG[Core]": 0.0})
-    v = np.array([temp, temp, 0, 0, 0, 0])
+    v = np.array([temp, temp, 0, 0, 0, 0, 0])
     x = model.steady_state(np.array(flows), v, np.zeros(2))
     assert np.allclose(x, temp, atol=1e-8)
     res = model.simulate(np.full(model.n, temp), np.tile(flows, (4, 1)), np.tile(v, (4, 1)),
@@ -288,7 +288,9 @@ def test_facades():
     assert facade_of(180, 0) == {}
     assert sum(facade_of(0, 0).values()) == pytest.approx(1.0)
     assert facade_of(0, 0, "none") == {}
-    assert DISTURBANCES == ("Ta", "Ts", "solE", "solS", "solW", "solN")
+    assert facade_of(0, 0, "horizontal") == facade_of(45, 200, "horizontal") == {"solH": 1.0}
+    assert facade_of(90, 100, "horizontal") == {"solE": 1.0}
+    assert DISTURBANCES == ("Ta", "Ts", "solE", "solS", "solW", "solN", "solH")
 
 
 def test_unknown_names(five_zone):
@@ -441,7 +443,7 @@ def test_scheduled_infiltration_is_a_box_of_outdoor_air():
     rng = np.random.default_rng(3)
     n = 96
     v = np.column_stack([5.0 + 3.0 * np.sin(np.arange(n) / 10.0), np.full(n, 13.0),
-                         rng.uniform(0, 300, (n, 4))])
+                         rng.uniform(0, 300, (n, 5))])
     x0 = np.full(fixed.n, 20.0)
     mf, mp, ms = BilinearModel(fixed), BilinearModel(plain), BilinearModel(sched)
     rise = np.repeat((v[:, 0] - v[:, 1])[:, None], 1, axis=1)
@@ -498,16 +500,16 @@ def test_ground_contact_holds_the_floor_at_the_monthly_ground_temperature():
     # no gains, outdoor air at the ground's 14 degC: a room starting at 21 cools towards 14,
     # and 14 everywhere is the steady state (the ground term vanishes only there)
     n = 96 * 20
-    v = np.column_stack([np.full(n, 14.0), np.full(n, 13.0), np.zeros((n, 4))])
+    v = np.column_stack([np.full(n, 14.0), np.full(n, 13.0), np.zeros((n, 5))])
     m = BilinearModel(st).with_params({"c_IG[Z]": 0.0})
     y = m.simulate(np.full(st.n, 21.0), np.full((n, 1), spec["flow"]), v,
                    reheat=np.full((n, 1), 14.0 - 13.0)).y[:, 0]
     assert y[0] == pytest.approx(21.0) and 14.0 < y[-1] < y[96] < 21.0
     # (steady_state has no rise: the only "box" is the ground's, so T_s stands for T_g)
-    ss = m.steady_state(np.array([spec["flow"]]), np.r_[14.0, 14.0, 0, 0, 0, 0])
+    ss = m.steady_state(np.array([spec["flow"]]), np.r_[14.0, 14.0, 0, 0, 0, 0, 0])
     np.testing.assert_allclose(ss, 14.0, atol=1e-9)
     # with the outdoor air at 21 the floor's outer face sits near the ground, not the room
-    warm = m.steady_state(np.array([spec["flow"]]), np.r_[21.0, 14.0, 0, 0, 0, 0])
+    warm = m.steady_state(np.array([spec["flow"]]), np.r_[21.0, 14.0, 0, 0, 0, 0, 0])
     assert abs(warm[face] - 14.0) < 0.1 * abs(warm[0] - 14.0)
     with pytest.raises(ModelDefinitionError, match="ground must be"):
         ModelOptions(ground="soil")
@@ -541,3 +543,31 @@ def test_structure_file_keeps_the_facade_rotation(tmp_path):
     back, _ = load_structure(save_structure(tmp_path / "s.npz", st, {"Room": 60.0}))
     assert back.facade_rotation == st.facade_rotation == pytest.approx(30.0)
     assert back.options == st.options
+
+
+def test_roofs_take_the_horizontal_column_only_with_roof_solar_horizontal(five_zone):
+    """The 5-zone's plenum roof: with ``roof_solar="horizontal"`` its outer face takes
+    gamma_absorp a v_solH and nothing from the facade columns; with ``"mean"`` a quarter
+    of each facade column and nothing from solH; the walls are the same either way."""
+    roofs = [s for s in five_zone.surfaces.values()
+             if s.boundary == "Outdoors" and s.tilt < 60.0]
+    assert roofs, "the 5-zone file has a roof"
+    area = sum(s.area for s in roofs)
+    absorp = 0.6
+    mats = {}
+    for mode in ("horizontal", "mean", "none"):
+        opts = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
+                            return_air="none", roof_solar=mode)
+        m = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, options=opts)
+        m = m.with_params({"gamma_absorp": absorp})
+        mats[mode] = m.Bv * m.structure.capacity[:, None]  # heat per unit input [W/(W/m2)]
+    h, mean, none = mats["horizontal"], mats["mean"], mats["none"]
+    col = DISTURBANCES.index("solH")
+    assert h[:, col].sum() == pytest.approx(absorp * area, rel=1e-9)
+    assert np.all(mean[:, col] == 0) and np.all(none[:, col] == 0)
+    facades = slice(2, 6)
+    np.testing.assert_allclose(h[:, facades], none[:, facades], rtol=0, atol=1e-12)
+    np.testing.assert_allclose((mean - none)[:, facades].sum(axis=0),
+                               np.full(4, 0.25 * absorp * area), rtol=1e-9)
+    with pytest.raises(ModelDefinitionError, match="'horizontal', 'mean' or 'none'"):
+        ModelOptions(roof_solar="sky")

@@ -43,7 +43,7 @@ def _inputs(n_steps=96, seed=3):
     u = np.clip(0.3 + 0.25 * rng.standard_normal((n_steps, 5)), 0.0, 0.9)
     hours = np.arange(n_steps) / 4.0
     v = np.column_stack([8 + 6 * np.sin(2 * np.pi * hours / 24), np.full(n_steps, 13.0),
-                         *[np.clip(400 * np.sin(2 * np.pi * (hours - 6) / 24), 0, None)] * 4])
+                         *[np.clip(400 * np.sin(2 * np.pi * (hours - 6) / 24), 0, None)] * 5])
     return u, v
 
 
@@ -122,7 +122,7 @@ def test_steps_equal_the_continuous_model_with_return_air(structures):
 
 def test_steady_state_plenum_balances_return_air_and_conduction(structures):
     st, plain = structures
-    u, v = np.full(5, 0.5), np.array([5.0, 13.0, 0, 0, 0, 0])
+    u, v = np.full(5, 0.5), np.array([5.0, 13.0, 0, 0, 0, 0, 0])
     for s in (st, plain):
         m = BilinearModel(s, ParameterSet(list(ZONES)))
         x = m.steady_state(u, v)

@@ -99,7 +99,7 @@ def _day(lat=40.0, lon=-105.0):
 
 def test_facade_columns_without_shading_are_transpose_exactly():
     geom, ghi, dni, dhi = _day()
-    planes = np.array([(90.0, a) for a in (90, 180, 270, 0)])
+    planes = np.array([(90.0, a) for a in (90, 180, 270, 0)] + [(0.0, 180.0)])
     ref = transpose(geom, ghi, dni, dhi, planes, total=True)["poa_global"]
     got = facade_columns(geom, ghi, dni, dhi, (90, 180, 270, 0))
     assert np.array_equal(got, ref)
@@ -108,13 +108,25 @@ def test_facade_columns_without_shading_are_transpose_exactly():
                                          shading=empty), ref)
 
 
+def test_horizontal_column_is_the_global_horizontal_irradiance():
+    """The roofs' column: on a horizontal plane beam and sky diffuse add up to the
+    station's GHI when its three readings close (Perez's circumsolar and horizon terms
+    vanish on a horizontal plane; no ground in its view)."""
+    geom, ghi, dni, dhi = _day()
+    got = facade_columns(geom, ghi, dni, dhi, (90, 180, 270, 0))[:, 4]
+    up = geom[1] < 85.0  # sun above 5 deg: Perez's circumsolar ratio is exact there
+    np.testing.assert_allclose(got[up], ghi[up], rtol=1e-9, atol=1e-9)
+    assert np.all(got[~up] <= ghi[~up] + 1e-9) and np.all(got >= 0)
+
+
 def test_facade_columns_shade_only_their_facade():
     geom, ghi, dni, dhi = _day()
     ws = sh.WindowShading("w", 1, 1.0, WIN, [sh.overhang_polygon(WIN, 0, 90, 1, 1, 1.0)])
     fs = sh.FacadeShading([ws])
     plain = facade_columns(geom, ghi, dni, dhi, (90, 180, 270, 0))
     shaded = facade_columns(geom, ghi, dni, dhi, (90, 180, 270, 0), shading=fs)
-    assert np.array_equal(shaded[:, [0, 2, 3]], plain[:, [0, 2, 3]])
+    assert shaded.shape == plain.shape == (len(ghi), 5)
+    assert np.array_equal(shaded[:, [0, 2, 3, 4]], plain[:, [0, 2, 3, 4]])
     noon = np.argmax(plain[:, 1])
     assert shaded[noon, 1] < 0.6 * plain[noon, 1]  # a high June sun under a 1 m overhang
     assert np.all(shaded[:, 1] <= plain[:, 1] + 1e-9) and np.all(shaded >= 0)

@@ -353,11 +353,12 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         progress=lambda s: None, *, priors: bool = True, sigma_e: float = 0.3,
         window: str = "weekend", sensitivity: bool = True,
         infiltration: str = "idf", weekend_gains: bool | str = False,
-        ground: str = "idf", shading: str = "idf", return_air: str = "idf") -> Results:
+        ground: str = "idf", shading: str = "idf", return_air: str = "idf",
+        roof_solar: str = "horizontal") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
-    ``infiltration``, ``ground``, ``shading``, ``return_air``:
+    ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
     the forecast study's split (never its validation weeks)."""
@@ -372,7 +373,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     timings["campaign"] = time.perf_counter() - t0
     pipe = Pipeline.from_site(campaign / "site.yaml",
                               options=ModelOptions(infiltration=infiltration, ground=ground,
-                                                   shading=shading, return_air=return_air))
+                                                   shading=shading, return_air=return_air,
+                                                   roof_solar=roof_solar))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()

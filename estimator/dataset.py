@@ -21,6 +21,7 @@ from zonecast.estimator.schedules import CompactSchedule, local_day_minute
 from zonecast.estimator.site import Site
 from zonecast.estimator.solar import (
     FACADE_AZIMUTHS,
+    clear_sky_temperature,
     facade_columns,
     sun_geometry,
 )
@@ -146,7 +147,9 @@ def scheduled_rise(scheduled: Mapping[str, Mapping], times, site: Site, ta: np.n
     """(N, len(scheduled)) supply temperature of each scheduled input over the supply air
     T_s [K] (the discharge-air rise the model adds to T_s): the outdoor air T_a for an
     infiltration (``"supply": "Ta"``), the month's ground temperature in the site's local
-    time for a ground contact (``"supply": "ground"``)."""
+    time for a ground contact (``"supply": "ground"``), the clear-sky temperature of the
+    outdoor air for a face's long-wave exchange with the sky (``"supply": "sky"``,
+    :func:`~zonecast.estimator.solar.clear_sky_temperature`)."""
     ta, ts = np.asarray(ta, float), np.asarray(ts, float)
     out = np.empty((len(ts), len(scheduled)))
     month = None
@@ -159,9 +162,11 @@ def scheduled_rise(scheduled: Mapping[str, Mapping], times, site: Site, ta: np.n
                 month = (np.datetime64("1970-01-01", "D") + days).astype("datetime64[M]")
                 month = month.astype(np.int64) % 12
             out[:, j] = np.asarray(spec["monthly"], float)[month] - ts
+        elif spec["supply"] == "sky":
+            out[:, j] = clear_sky_temperature(ta) - ts
         else:
-            raise ValueError(f"scheduled input supply {spec['supply']!r}: expected 'Ta' or "
-                             "'ground'")
+            raise ValueError(f"scheduled input supply {spec['supply']!r}: expected 'Ta', "
+                             "'ground' or 'sky'")
     return out
 
 

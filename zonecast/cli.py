@@ -269,6 +269,10 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "chosen on the building family): the global horizontal irradiance "
                           "(docs/model.md); 'mean' of the four facade irradiances (before "
                           "2026-11-25); or 'none'")] = "horizontal",
+                 sky: Annotated[str, typer.Option(
+                     help="long-wave exchange of exterior faces with the sky: 'none' (the "
+                          "default, the paper) or 'clear' (a clear sky colder than the air, "
+                          "docs/model.md \"Sky\")")] = "none",
                  weekend_gains: Annotated[str, typer.Option(
                      help="'none' (the default, the paper's f_IG = 0 at weekends); 'known': "
                           "identify again with the weekly gains profile of the weeks without "
@@ -287,7 +291,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  seed=seed, priors=priors, sigma_e=sigma_e, window=window,
                                  infiltration=infiltration, weekend_gains=weekend_gains,
                                  ground=ground, shading=shading, return_air=return_air,
-                                 roof_solar=roof_solar,
+                                 roof_solar=roof_solar, sky=sky,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -368,6 +372,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   roof_solar: Annotated[str, typer.Option(
                       help="roofs' solar: 'horizontal' (the default), 'mean' or 'none' "
                            "(as zonecast identify)")] = "horizontal",
+                  sky: Annotated[str, typer.Option(
+                      help="'none' (the default) or 'clear' (as zonecast identify)")] = "none",
                   weekend_gains: Annotated[str, typer.Option(
                       help="'none' (the default), 'known' (identify again with the weekly "
                            "gains profile of the training weeks as known f_IG) or 'scaled' "
@@ -384,7 +390,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 sensitivity=sensitivity, infiltration=infiltration,
                                 weekend_gains=weekend_gains, ground=ground,
                                 shading=shading, return_air=return_air,
-                                roof_solar=roof_solar)
+                                roof_solar=roof_solar, sky=sky)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

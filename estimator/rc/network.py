@@ -48,6 +48,7 @@ __all__ = [
     "StateLabel",
     "build_structure",
     "facade_of",
+    "sky_share",
 ]
 
 #: Disturbance vector, paper order (sec:model): ambient, supply air, solar E, S, W, N; then
@@ -61,6 +62,10 @@ SOLAR_COLUMNS = DISTURBANCES[2:]
 #: per cent of the drop across any slab (U <= 5 W/m2K) without stiffening the model beyond
 #: its film-coupled massless faces (docs/model.md "Ground contact")
 GROUND_CONDUCTANCE = 100.0
+#: linearised long-wave coefficient between an opaque exterior face and the sky [W/(m2 K)]:
+#: eps sigma (T_s^2 + T_sky^2)(T_s + T_sky) with eps = 0.9 (EnergyPlus's default thermal
+#: absorptance) between a face at 12 degC and a sky at -8 degC (docs/model.md "Sky")
+SKY_RADIATION = 4.2
 #: Specific heat capacity of air c_p [J/(kg K)].
 CP_AIR = 1005.0
 #: Air density for room air capacity [kg/m3].
@@ -167,6 +172,14 @@ class ModelOptions:
         (:attr:`RCStructure.return_of_box`; docs/model.md "Return plenum"), or the plenum
         exchanges heat by conduction only (the paper; model files written before the option
         existed read as this).
+    sky : {"none", "clear"}
+        Long-wave exchange of opaque exterior faces with the sky, which is colder than the
+        air: none (the paper; its exterior film gamma_EW exchanges with the air only), or
+        ``"clear"``: each face's sky share F_sky beta = ((1 + cos tilt) / 2)^1.5
+        (EnergyPlus's, 1 for a roof, 0.35 for a wall) exchanges :data:`SKY_RADIATION`
+        with the clear-sky temperature of the outdoor air
+        (:func:`~zonecast.estimator.solar.clear_sky_temperature`), a scheduled input per
+        surface (:attr:`RCStructure.scheduled`).
     """
 
     roof_solar: str = "horizontal"
@@ -179,8 +192,11 @@ class ModelOptions:
     facades: str = "building"
     shading: str = "idf"
     return_air: str = "idf"
+    sky: str = "none"
 
     def __post_init__(self):
+        if self.sky not in ("none", "clear"):
+            raise ModelDefinitionError("sky must be 'none' or 'clear'")
         if self.return_air not in ("idf", "none"):
             raise ModelDefinitionError("return_air must be 'idf' or 'none'")
         if self.shading not in ("idf", "none"):
@@ -229,6 +245,21 @@ def facade_of(tilt: float, azimuth: float, roof_solar: str = "mean",
         return {f: 0.25 for f in _FACADES.values()} if roof_solar == "mean" else {}
     diffs = {f: abs((azimuth - a - rotation + 180.0) % 360.0 - 180.0) for a, f in _FACADES.items()}
     return {min(diffs, key=diffs.get): 1.0}
+
+
+def sky_share(tilt: float) -> float:
+    """Share [-] of an exterior face's long-wave exchange that goes to the sky,
+    F_sky beta with F_sky = (1 + cos tilt) / 2 and beta = sqrt(F_sky) (EnergyPlus
+    Engineering Reference, "Exterior Long-Wavelength Radiation"): 1 for a roof, 0.354 for
+    a wall, 0 facing down.
+
+    Parameters
+    ----------
+    tilt : float
+        [deg] 0 facing up, 90 vertical.
+    """
+    f = 0.5 * (1.0 + np.cos(np.radians(tilt)))
+    return float(max(f, 0.0) ** 1.5)
 
 
 def _window_shading(shaded, window_area: Mapping[str, np.ndarray],
@@ -602,7 +633,8 @@ def build_structure(
     done: set[str] = set()
     area_ext = area_win = 0.0
     scheduled: dict[str, dict] = {}
-    ground_boxes: dict[str, tuple[str, int]] = {}  # box -> (room, state of its face)
+    # scheduled inputs at a face (ground, sky): box -> (room, state of its face)
+    ground_boxes: dict[str, tuple[str, int]] = {}
     # room -> (face node, area) of the element faces exposed to the room's air: floors, and
     # every other element (walls, ceilings, roofs, doors, internal mass)
     floor_faces: dict[str, list[tuple[int, float]]] = {}
@@ -655,6 +687,15 @@ def build_structure(
             asm.to_temperature(nodes[0], 0, s.area, EW)  # paper eq:q_bh, convection
             for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
                 asm.source(nodes[0], DISTURBANCES.index(col), w * s.area, ABSORP)
+            view = sky_share(s.tilt)
+            if opts.sky == "clear" and view > 1e-6:
+                # long-wave to the sky: a scheduled input of constant "airflow"
+                # h_sky F A / c_p at the outer face whose supply is the sky temperature
+                box = f"sky:{name}"
+                ground_boxes[box] = (s.zone, nodes[0])
+                box_rooms[box] = s.zone
+                scheduled[box] = {"flow": SKY_RADIATION * view * s.area / opts.cp_air,
+                                  "supply": "sky"}
             area_ext += s.area
         else:
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)

@@ -571,3 +571,37 @@ def test_roofs_take_the_horizontal_column_only_with_roof_solar_horizontal(five_z
                                np.full(4, 0.25 * absorp * area), rtol=1e-9)
     with pytest.raises(ModelDefinitionError, match="'horizontal', 'mean' or 'none'"):
         ModelOptions(roof_solar="sky")
+
+
+def test_sky_exchange_is_a_scheduled_input_at_each_exterior_face(five_zone):
+    """``sky="clear"``: every opaque exterior face of the 5-zone gets a scheduled input of
+    conductance SKY_RADIATION F_sky beta A at its outer face, whose supply is the clear-sky
+    temperature."""
+    from zonecast.estimator.dataset import scheduled_rise
+    from zonecast.estimator.rc.network import SKY_RADIATION, sky_share
+    from zonecast.estimator.solar import clear_sky_temperature
+
+    assert sky_share(0.0) == 1.0 and sky_share(180.0) == 0.0
+    assert sky_share(90.0) == pytest.approx(0.5 ** 1.5)
+    opts = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
+                        return_air="none", sky="clear")
+    m = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, options=opts)
+    st = m.structure
+    outdoors = {s.name: s for s in five_zone.surfaces.values() if s.boundary == "Outdoors"}
+    sky = {b: spec for b, spec in st.scheduled.items() if spec["supply"] == "sky"}
+    assert {b.split(":", 1)[1] for b in sky} == set(outdoors)
+    for b, spec in sky.items():
+        s = outdoors[b.split(":", 1)[1]]
+        assert spec["flow"] * opts.cp_air == pytest.approx(SKY_RADIATION * sky_share(s.tilt)
+                                                             * s.area)
+        node = st.room_of_box[list(st.boxes).index(b)]
+        assert st.labels[node].kind != "room_air"  # the outer face, not the room
+    # no sky input without the option; a scheduled rise of the sky's supply
+    plain = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, options=NO_LEAK)
+    assert not plain.structure.scheduled
+    ta, ts = np.array([10.0, 30.0]), np.array([13.0, 13.0])
+    rise = scheduled_rise({"s": {"flow": 1.0, "supply": "sky"}}, None, None, ta, ts)
+    np.testing.assert_allclose(rise[:, 0], clear_sky_temperature(ta) - ts)
+    assert clear_sky_temperature(10.0) == pytest.approx(-9.58, abs=0.01)  # Swinbank
+    with pytest.raises(ModelDefinitionError, match="sky must be 'none' or 'clear'"):
+        ModelOptions(sky="cloudy")

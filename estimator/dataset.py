@@ -21,6 +21,7 @@ from zonecast.estimator.schedules import CompactSchedule, local_day_minute
 from zonecast.estimator.site import Site
 from zonecast.estimator.solar import (
     FACADE_AZIMUTHS,
+    SKY_DEPRESSION_ISO,
     clear_sky_temperature,
     facade_columns,
     sun_geometry,
@@ -149,7 +150,8 @@ def scheduled_rise(scheduled: Mapping[str, Mapping], times, site: Site, ta: np.n
     infiltration (``"supply": "Ta"``), the month's ground temperature in the site's local
     time for a ground contact (``"supply": "ground"``), the clear-sky temperature of the
     outdoor air for a face's long-wave exchange with the sky (``"supply": "sky"``,
-    :func:`~zonecast.estimator.solar.clear_sky_temperature`)."""
+    :func:`~zonecast.estimator.solar.clear_sky_temperature`), or the outdoor air less
+    :data:`~zonecast.estimator.solar.SKY_DEPRESSION_ISO` (``"sky": "iso"``)."""
     ta, ts = np.asarray(ta, float), np.asarray(ts, float)
     out = np.empty((len(ts), len(scheduled)))
     month = None
@@ -162,6 +164,8 @@ def scheduled_rise(scheduled: Mapping[str, Mapping], times, site: Site, ta: np.n
                 month = (np.datetime64("1970-01-01", "D") + days).astype("datetime64[M]")
                 month = month.astype(np.int64) % 12
             out[:, j] = np.asarray(spec["monthly"], float)[month] - ts
+        elif spec["supply"] == "sky" and spec.get("sky", "clear") == "iso":
+            out[:, j] = ta - SKY_DEPRESSION_ISO - ts
         elif spec["supply"] == "sky":
             out[:, j] = clear_sky_temperature(ta) - ts
         else:

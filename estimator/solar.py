@@ -43,6 +43,7 @@ from zonecast.estimator.shading import sun_vectors
 
 __all__ = [
     "FACADE_AZIMUTHS",
+    "SKY_DEPRESSION_ISO",
     "SKY_MODELS",
     "SolarGeometryCache",
     "SolarInputError",
@@ -205,6 +206,13 @@ class SolarGeometryCache:
             sel = days == day
             out[:, sel] = self._day(int(day))[:, (times_ns[sel] - day * _DAY_NS) // self._step_ns]
         return out
+
+
+#: Average difference [K] between the outdoor air and the apparent sky temperature for
+#: intermediate climates, ISO 13790:2008 sec. 11.4.6 (also ISO 52016-1): 11 K. The TMY3
+#: files of the building family's five climates give 9.5-11.7 K (their horizontal
+#: infrared, from which EnergyPlus takes its sky; docs/model.md "Sky").
+SKY_DEPRESSION_ISO = 11.0
 
 
 def clear_sky_temperature(ta):

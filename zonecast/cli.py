@@ -271,8 +271,8 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "2026-11-25); or 'none'")] = "horizontal",
                  sky: Annotated[str, typer.Option(
                      help="long-wave exchange of exterior faces with the sky: 'none' (the "
-                          "default, the paper) or 'clear' (a clear sky colder than the air, "
-                          "docs/model.md \"Sky\")")] = "none",
+                          "default, the paper), 'clear' (a clear sky, Swinbank) or 'iso' (the "
+                          "air less ISO 13790's 11 K; docs/model.md \"Sky\")")] = "none",
                  weekend_gains: Annotated[str, typer.Option(
                      help="'none' (the default, the paper's f_IG = 0 at weekends); 'known': "
                           "identify again with the weekly gains profile of the weeks without "
@@ -373,7 +373,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                       help="roofs' solar: 'horizontal' (the default), 'mean' or 'none' "
                            "(as zonecast identify)")] = "horizontal",
                   sky: Annotated[str, typer.Option(
-                      help="'none' (the default) or 'clear' (as zonecast identify)")] = "none",
+                      help="'none' (the default), 'clear' or 'iso' (as zonecast "
+                           "identify)")] = "none",
                   weekend_gains: Annotated[str, typer.Option(
                       help="'none' (the default), 'known' (identify again with the weekly "
                            "gains profile of the training weeks as known f_IG) or 'scaled' "

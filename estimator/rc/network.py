@@ -172,14 +172,16 @@ class ModelOptions:
         (:attr:`RCStructure.return_of_box`; docs/model.md "Return plenum"), or the plenum
         exchanges heat by conduction only (the paper; model files written before the option
         existed read as this).
-    sky : {"none", "clear"}
+    sky : {"none", "clear", "iso"}
         Long-wave exchange of opaque exterior faces with the sky, which is colder than the
         air: none (the paper; its exterior film gamma_EW exchanges with the air only), or
-        ``"clear"``: each face's sky share F_sky beta = ((1 + cos tilt) / 2)^1.5
-        (EnergyPlus's, 1 for a roof, 0.35 for a wall) exchanges :data:`SKY_RADIATION`
-        with the clear-sky temperature of the outdoor air
-        (:func:`~zonecast.estimator.solar.clear_sky_temperature`), a scheduled input per
-        surface (:attr:`RCStructure.scheduled`).
+        each face's sky share F_sky beta = ((1 + cos tilt) / 2)^1.5 (EnergyPlus's, 1 for a
+        roof, 0.35 for a wall) exchanges :data:`SKY_RADIATION` with a sky temperature, a
+        scheduled input per surface (:attr:`RCStructure.scheduled`): the clear-sky
+        temperature of the outdoor air (``"clear"``,
+        :func:`~zonecast.estimator.solar.clear_sky_temperature`), or the air temperature
+        less the average sky temperature difference of ISO 52016-1 / ISO 13790,
+        :data:`~zonecast.estimator.solar.SKY_DEPRESSION_ISO` (``"iso"``).
     """
 
     roof_solar: str = "horizontal"
@@ -195,8 +197,8 @@ class ModelOptions:
     sky: str = "none"
 
     def __post_init__(self):
-        if self.sky not in ("none", "clear"):
-            raise ModelDefinitionError("sky must be 'none' or 'clear'")
+        if self.sky not in ("none", "clear", "iso"):
+            raise ModelDefinitionError("sky must be 'none', 'clear' or 'iso'")
         if self.return_air not in ("idf", "none"):
             raise ModelDefinitionError("return_air must be 'idf' or 'none'")
         if self.shading not in ("idf", "none"):
@@ -688,14 +690,14 @@ def build_structure(
             for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
                 asm.source(nodes[0], DISTURBANCES.index(col), w * s.area, ABSORP)
             view = sky_share(s.tilt)
-            if opts.sky == "clear" and view > 1e-6:
+            if opts.sky != "none" and view > 1e-6:
                 # long-wave to the sky: a scheduled input of constant "airflow"
                 # h_sky F A / c_p at the outer face whose supply is the sky temperature
                 box = f"sky:{name}"
                 ground_boxes[box] = (s.zone, nodes[0])
                 box_rooms[box] = s.zone
                 scheduled[box] = {"flow": SKY_RADIATION * view * s.area / opts.cp_air,
-                                  "supply": "sky"}
+                                  "supply": "sky", "sky": opts.sky}
             area_ext += s.area
         else:
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)

@@ -603,5 +603,14 @@ def test_sky_exchange_is_a_scheduled_input_at_each_exterior_face(five_zone):
     rise = scheduled_rise({"s": {"flow": 1.0, "supply": "sky"}}, None, None, ta, ts)
     np.testing.assert_allclose(rise[:, 0], clear_sky_temperature(ta) - ts)
     assert clear_sky_temperature(10.0) == pytest.approx(-9.58, abs=0.01)  # Swinbank
-    with pytest.raises(ModelDefinitionError, match="sky must be 'none' or 'clear'"):
+    iso = scheduled_rise({"s": {"flow": 1.0, "supply": "sky", "sky": "iso"}}, None, None, ta,
+                         ts)
+    np.testing.assert_allclose(iso[:, 0], ta - 11.0 - ts)
+    m_iso = build_model(five_zone, FIVE_ZONES, FIVE_BOXES,
+                        options=ModelOptions(infiltration="none", ground="adiabatic",
+                                             shading="none", return_air="none", sky="iso"))
+    assert {b: sp["flow"] for b, sp in m_iso.structure.scheduled.items()} == \
+        {b: sp["flow"] for b, sp in sky.items()}
+    assert {sp["sky"] for sp in m_iso.structure.scheduled.values()} == {"iso"}
+    with pytest.raises(ModelDefinitionError, match="sky must be 'none', 'clear' or 'iso'"):
         ModelOptions(sky="cloudy")

@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 import pandas as pd
+import pytest
 
 
 def si_frame(bundle, telemetry) -> pd.DataFrame:
@@ -109,6 +110,35 @@ def test_npz_checkpoint_of_the_earlier_format_still_loads(bundle, telemetry):
         assert np.array_equal(e.x, a.x) and e.steps == a.steps
         fa, fe = a.forecast(), e.forecast()
         assert np.array_equal(fa.mean, fe.mean) and np.array_equal(fa.f_ig, fe.f_ig)
+
+
+def test_checkpoint_rows_of_another_width_are_refused(bundle, telemetry):
+    """A checkpoint written before v gained the roofs' solH column holds one input fewer per
+    row: it is refused with a message (the runner then starts the filter afresh), never
+    loaded into the wrong columns."""
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:8]))
+    a = OnlineEstimator(bundle)
+    for k in range(8):
+        a.advance(tt[k], u[k], v[k], y[k])
+    nb = bundle.model.n_boxes
+    drop = nb + 6  # the seventh disturbance, solH
+    meta = {"time": a.time.isoformat(), "started": True, "steps": a.steps,
+            "resets": a.resets, "nis_sum": a.nis_sum, "dof_sum": a.dof_sum,
+            "gain_times": [s.isoformat() for s, _ in a._gains],
+            "input_times": [s.isoformat() for s, _ in a._inputs],
+            "version": bundle.version, "since": a._since}
+    inputs = np.array([r for _, r in a._inputs])
+    buf = io.BytesIO()
+    np.savez(buf, meta=np.array(json.dumps(meta)), pending=np.delete(a._pending, drop),
+             held=np.delete(a._held, drop), online=a._online, last_y=a.last_y,
+             last_f=a.last_f, observed=a._observed, gains=np.array([f for _, f in a._gains]),
+             inputs=np.delete(inputs, drop, axis=1), x=a._x)
+    b = OnlineEstimator(bundle)
+    with pytest.raises(ValueError, match="start the filter afresh"):
+        b.load_bytes(buf.getvalue())
+    assert b.time is None and not b.started  # untouched
 
 
 def test_discharge_air_enters_the_online_step_and_a_silent_point_means_no_rise(bundle, telemetry):

@@ -620,10 +620,10 @@ class OnlineEstimator:
 
     def weather_inputs(self) -> tuple[np.ndarray, np.ndarray]:
         """(HORIZON, 6) outdoor temperature [degC] and irradiance on the facades E, S, W,
-        N and the horizontal [W/m2] over the forecast intervals, and a (HORIZON,) mask of the intervals taken
-        from the weather forecast. Interval t is the measured row; later ones come from
-        the weather forecast in use when it is fresh and covers them, else from the
-        diurnal fallback, else persistence."""
+        N and the horizontal [W/m2] over the forecast intervals, and a (HORIZON,) mask of
+        the intervals taken from the weather forecast. Interval t is the measured row;
+        later ones come from the weather forecast in use when it is fresh and covers them,
+        else from the diurnal fallback, else persistence."""
         t = self.time.value
         nb = self.bundle.model.n_boxes
         pers = self.persistence_inputs()
@@ -662,7 +662,9 @@ class OnlineEstimator:
         wx, _ = self.weather_inputs()
         times = self.time.value + STEP.value * np.arange(HORIZON, dtype=np.int64)
         hv_cols = self._hv_cols
-        hv = self.inputs_fc.forecast(times, wx[:, :5], pers[0, hv_cols], pers[:, hv_cols])
+        # the HVAC forecaster's regressors: Ta and the four facades (self._wx_cols)
+        hv = self.inputs_fc.forecast(times, wx[:, :len(self._wx_cols)], pers[0, hv_cols],
+                                     pers[:, hv_cols])
         ins = np.empty((HORIZON, self._nin))
         ins[:, hv_cols] = hv
         ins[:, nb] = wx[:, 0]

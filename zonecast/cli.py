@@ -184,6 +184,14 @@ def check(site: Annotated[Path, typer.Option(help="site.yaml")],
         typer.echo(f"columns not mapped by the site (kept, unused): {', '.join(tel.unused_columns)}")
 
 
+RoofSolar = Annotated[str, typer.Option(
+    help="solar input of roofs and skylights: 'horizontal' (the default, chosen on the "
+         "building family): the global horizontal irradiance (docs/model.md); 'mean' of the "
+         "four facade irradiances (before 2026-11-25); or 'none'")]
+Sky = Annotated[str, typer.Option(
+    help="long-wave exchange of exterior faces with the sky: 'none' (the default, the "
+         "paper), 'clear' (a clear sky, Swinbank) or 'iso' (the air less ISO 13790's 11 K; "
+         "docs/model.md \"Sky\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -264,15 +272,8 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                      help="'idf' (the default): the boxes' return air flows through the "
                           "IDF's return plenums (docs/model.md \"Return plenum\"), or "
                           "'none' (the paper)")] = "idf",
-                 roof_solar: Annotated[str, typer.Option(
-                     help="solar input of roofs and skylights: 'horizontal' (the default, "
-                          "chosen on the building family): the global horizontal irradiance "
-                          "(docs/model.md); 'mean' of the four facade irradiances (before "
-                          "2026-11-25); or 'none'")] = "horizontal",
-                 sky: Annotated[str, typer.Option(
-                     help="long-wave exchange of exterior faces with the sky: 'none' (the "
-                          "default, the paper), 'clear' (a clear sky, Swinbank) or 'iso' (the "
-                          "air less ISO 13790's 11 K; docs/model.md \"Sky\")")] = "none",
+                 roof_solar: RoofSolar = "horizontal",
+                 sky: Sky = "none",
                  weekend_gains: Annotated[str, typer.Option(
                      help="'none' (the default, the paper's f_IG = 0 at weekends); 'known': "
                           "identify again with the weekly gains profile of the weeks without "
@@ -369,12 +370,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   return_air: Annotated[str, typer.Option(
                       help="'idf' (the default): return air through the IDF's return "
                            "plenums, or 'none' (the paper)")] = "idf",
-                  roof_solar: Annotated[str, typer.Option(
-                      help="roofs' solar: 'horizontal' (the default), 'mean' or 'none' "
-                           "(as zonecast identify)")] = "horizontal",
-                  sky: Annotated[str, typer.Option(
-                      help="'none' (the default), 'clear' or 'iso' (as zonecast "
-                           "identify)")] = "none",
+                  roof_solar: RoofSolar = "horizontal",
+                  sky: Sky = "none",
                   weekend_gains: Annotated[str, typer.Option(
                       help="'none' (the default), 'known' (identify again with the weekly "
                            "gains profile of the training weeks as known f_IG) or 'scaled' "

@@ -38,7 +38,7 @@ from zonecast.estimator.gains import WeeklyProfile
 from zonecast.estimator.identify import IdentificationResult, excitation_saturdays, identify
 from zonecast.estimator.idf import Building, read_building
 from zonecast.estimator.model import BilinearModel
-from zonecast.estimator.priors import Prior, building_priors
+from zonecast.estimator.priors import CONVECTIVE_FILMS, Prior, building_priors
 from zonecast.estimator.rc.network import ModelOptions, RCStructure, build_structure
 from zonecast.estimator.rc.parameters import ParameterSet
 from zonecast.estimator.site import Site, load_site
@@ -232,11 +232,15 @@ class Pipeline:
             raise PipelineError("no excitation weekend found: give the training Saturdays "
                                 "(the site's experiments list marks excitation periods)")
         start = ParameterSet(list(self.site.zones))
+        convective = self.options.interior_radiation == "star"
+        if convective:  # films as convection alone: start where their priors are
+            start = start.copy({k: v[0] for k, v in CONVECTIVE_FILMS.items()})
         if priors is True:
-            priors = building_priors(start, self._building_or_none())
+            priors = building_priors(start, self._building_or_none(), convective=convective)
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
                        seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,
-                       window=window, agree_rtol=agree_rtol)
+                       window=window, agree_rtol=agree_rtol,
+                       start=start.values if convective else None)
         if weekend_gains:
             self.params = res.model.params
             progress("weekly internal-gains profile for the weekends' gains")

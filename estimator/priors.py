@@ -26,7 +26,7 @@ import numpy as np
 from zonecast.estimator.idf import Building
 from zonecast.estimator.rc.parameters import ParameterSet
 
-__all__ = ["Prior", "building_priors", "prior_jacobian", "prior_residuals"]
+__all__ = ["CONVECTIVE_FILMS", "Prior", "building_priors", "prior_jacobian", "prior_residuals"]
 
 
 @dataclass(frozen=True)
@@ -64,12 +64,23 @@ _HANDBOOK = {
     "gamma_winSolAbs": (0.4, 0.2, "SHGC of common glazing 0.25-0.7"),
     "U_win": (2.8, 1.4, "double glazing in an aluminium frame (ASHRAE ch. 15)"),
 }
+#: inside films as convection alone, for a structure whose faces exchange long-wave radiation
+#: among themselves (``ModelOptions.interior_radiation="star"``): EnergyPlus's "Simple"
+#: natural-convection coefficients, vertical 3.08, horizontal 4.04 (heat flowing up) and
+#: 0.95 (down); a floor or ceiling sees both directions over a day
+_HORIZONTAL = ("natural convection at a horizontal face, 0.95-4.04 by the direction of heat "
+               "flow (EnergyPlus Simple)")
+CONVECTIVE_FILMS = {
+    "gamma_IW": (3.1, 1.5, "natural convection at a vertical face (EnergyPlus Simple 3.08)"),
+    "gamma_floor": (2.5, 1.5, _HORIZONTAL),
+    "gamma_ceil": (2.5, 1.5, _HORIZONTAL),
+}
 #: c_IG: background gains, weakly held near idle equipment and lighting
 _C_IG = (5.0, 10.0, "idle equipment and lighting 2-10 W/m2, weak")
 
 
 def building_priors(params: ParameterSet, building: Building | None = None, *,
-                    window_sd: float = 0.25) -> dict[str, Prior]:
+                    window_sd: float = 0.25, convective: bool = False) -> dict[str, Prior]:
     """Priors of every parameter of ``params``.
 
     Parameters
@@ -81,6 +92,10 @@ def building_priors(params: ParameterSet, building: Building | None = None, *,
         area-weighted means are the nominal U_win and gamma_winSolAbs.
     window_sd : float
         Relative standard deviation [-] of the window priors taken from the building.
+    convective : bool
+        The inside films are convection alone (:data:`CONVECTIVE_FILMS`), as in a model
+        whose faces exchange long-wave radiation with each other; otherwise the handbook's
+        combined films.
 
     Returns
     -------
@@ -90,6 +105,8 @@ def building_priors(params: ParameterSet, building: Building | None = None, *,
     out = {}
     for name, (mean, sd, source) in _HANDBOOK.items():
         out[name] = Prior(mean, sd, source)
+    if convective:
+        out.update({name: Prior(*v) for name, v in CONVECTIVE_FILMS.items()})
     if building is not None:
         wins = [w for w in building.windows.values() if w.area > 0]
         with_u = [w for w in wins if w.u_value is not None]

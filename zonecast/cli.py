@@ -192,6 +192,10 @@ Sky = Annotated[str, typer.Option(
     help="long-wave exchange of exterior faces with the sky: 'none' (the default, the "
          "paper), 'clear' (a clear sky, Swinbank) or 'iso' (the air less ISO 13790's 11 K; "
          "docs/model.md \"Sky\")")]
+InteriorRadiation = Annotated[str, typer.Option(
+    help="long-wave exchange between a room's inside faces: 'none' (the paper: combined "
+         "films to the air) or 'star' (a star network; the films are convection alone; "
+         "docs/model.md \"Interior long-wave exchange\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -274,6 +278,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "'none' (the paper)")] = "idf",
                  roof_solar: RoofSolar = "horizontal",
                  sky: Sky = "none",
+                 interior_radiation: InteriorRadiation = "none",
                  weekend_gains: Annotated[str, typer.Option(
                      help="'none' (the default, the paper's f_IG = 0 at weekends); 'known': "
                           "identify again with the weekly gains profile of the weeks without "
@@ -293,6 +298,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  infiltration=infiltration, weekend_gains=weekend_gains,
                                  ground=ground, shading=shading, return_air=return_air,
                                  roof_solar=roof_solar, sky=sky,
+                                 interior_radiation=interior_radiation,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -372,6 +378,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                            "plenums, or 'none' (the paper)")] = "idf",
                   roof_solar: RoofSolar = "horizontal",
                   sky: Sky = "none",
+                  interior_radiation: InteriorRadiation = "none",
                   weekend_gains: Annotated[str, typer.Option(
                       help="'none' (the default), 'known' (identify again with the weekly "
                            "gains profile of the training weeks as known f_IG) or 'scaled' "
@@ -388,7 +395,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 sensitivity=sensitivity, infiltration=infiltration,
                                 weekend_gains=weekend_gains, ground=ground,
                                 shading=shading, return_air=return_air,
-                                roof_solar=roof_solar, sky=sky)
+                                roof_solar=roof_solar, sky=sky,
+                                interior_radiation=interior_radiation)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

@@ -66,6 +66,11 @@ GROUND_CONDUCTANCE = 100.0
 #: eps sigma (T_s^2 + T_sky^2)(T_s + T_sky) with eps = 0.9 (EnergyPlus's default thermal
 #: absorptance) between a face at 12 degC and a sky at -8 degC (docs/model.md "Sky")
 SKY_RADIATION = 4.2
+#: linearised long-wave coefficient between the inside faces of a room [W/(m2 K)]:
+#: 4 eps sigma T^3 with eps = 0.9 (EnergyPlus's default thermal absorptance) at 20 degC, the
+#: radiative share of a combined inside film (ISO 6946 h_r0 = 5.7 for eps = 1); with
+#: ``interior_radiation="star"`` (docs/model.md "Interior long-wave exchange")
+INTERIOR_RADIATION = 5.1
 #: Specific heat capacity of air c_p [J/(kg K)].
 CP_AIR = 1005.0
 #: Air density for room air capacity [kg/m3].
@@ -182,6 +187,18 @@ class ModelOptions:
         :func:`~zonecast.estimator.solar.clear_sky_temperature`), or the air temperature
         less the average sky temperature difference of ISO 52016-1 / ISO 13790,
         :data:`~zonecast.estimator.solar.SKY_DEPRESSION_ISO` (``"iso"``).
+    interior_radiation : {"none", "star"}
+        Long-wave exchange between the inside faces of a room. ``"none"`` (the paper): each
+        face exchanges heat with the room air only, through a film coefficient that must
+        carry convection and radiation at once (the handbook's combined 8.3 W/m2K for a
+        wall). ``"star"``: the faces of a room also exchange long-wave radiation with each
+        other through a massless star node, :data:`INTERIOR_RADIATION` A_i to it from each
+        face (eliminated: A_i A_j / sum A between each pair of faces), so gamma_IW,
+        gamma_floor and gamma_ceil are convection only and the room air answers its own
+        heat (reheat, convective gains) as fast as its own capacity lets it, while the
+        surfaces share the sun and radiant heat among themselves (EnergyPlus's inside heat
+        balance; the star network of ISO 13790 / ISO 52016-1). Windows take no part (U_win
+        stays a conductance to the air).
     """
 
     roof_solar: str = "horizontal"
@@ -195,8 +212,11 @@ class ModelOptions:
     shading: str = "idf"
     return_air: str = "idf"
     sky: str = "none"
+    interior_radiation: str = "none"
 
     def __post_init__(self):
+        if self.interior_radiation not in ("none", "star"):
+            raise ModelDefinitionError("interior_radiation must be 'none' or 'star'")
         if self.sky not in ("none", "clear", "iso"):
             raise ModelDefinitionError("sky must be 'none', 'clear' or 'iso'")
         if self.return_air not in ("idf", "none"):
@@ -543,6 +563,38 @@ def _add_element(
     return nodes
 
 
+def interior_radiation_links(faces: Sequence[tuple[int, float]],
+                             h_r: float = INTERIOR_RADIATION) -> list[tuple[int, int, float]]:
+    """Face-to-face conductances [W/K] of a room's star network with its node eliminated.
+
+    Each face i (state, area A_i [m2]) is linked to a massless star node by h_r A_i; the
+    node's elimination (a star-mesh transform) leaves g_ij = h_r A_i A_j / sum_k A_k between
+    every pair, which passes the same heat for any face temperatures. A state listed twice
+    (both faces of one node) counts once with the summed area.
+    """
+    area: dict[int, float] = {}
+    for node, a in faces:
+        area[node] = area.get(node, 0.0) + float(a)
+    total = sum(area.values())
+    nodes = sorted(area)
+    if total <= 0:
+        return []
+    return [(i, j, h_r * area[i] * area[j] / total)
+            for k, i in enumerate(nodes) for j in nodes[k + 1:]]
+
+
+def _interior_radiation(asm: _Assembler, floor_faces: Mapping[str, list],
+                        other_faces: Mapping[str, list]) -> int:
+    """Add every room's long-wave star network (parameter-free links); returns the count."""
+    count = 0
+    for room in sorted(set(floor_faces) | set(other_faces)):
+        for i, j, g in interior_radiation_links(floor_faces.get(room, [])
+                                                + other_faces.get(room, [])):
+            asm.link(i, j, g)
+            count += 1
+    return count
+
+
 def _solar_targets(opts: ModelOptions, floors: list, others: list,
                    air: int) -> list[tuple[int, float]]:
     """(state, share) pairs that receive a window's solar heat (shares sum to 1)."""
@@ -726,6 +778,11 @@ def build_structure(
         nodes = _add_element(asm, "internal_mass", name, room_state, layout, m.area, m.zone, IW)
         asm.link(nodes[0], room_state[m.zone], m.area, IW)
         other_faces.setdefault(m.zone, []).extend([(nodes[0], m.area), (nodes[-1], m.area)])
+
+    if opts.interior_radiation == "star":
+        n_links = _interior_radiation(asm, floor_faces, other_faces)
+        notes.append(f"interior long-wave exchange: {n_links} face-to-face links "
+                     f"({INTERIOR_RADIATION} W/m2K star network)")
 
     window_area: dict[str, np.ndarray] = {}
     shaded: list[tuple[str, int, float, np.ndarray, list[np.ndarray]]] = []

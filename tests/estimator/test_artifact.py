@@ -34,6 +34,10 @@ def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
     air = load_model_file(write_model_file(tmp_path / "a.json", vb / "site.yaml",
                                            model_options={"window_solar": "air"}))
     assert air.model.structure.options.window_solar == "air"
+    star = load_model_file(write_model_file(tmp_path / "s.json", vb / "site.yaml",
+                                            model_options={"interior_radiation": "star"}))
+    assert star.model.structure.options.interior_radiation == "star"
+    assert air.model.structure.options.interior_radiation == "none"  # a file not naming it
     legacy = json.loads((tmp_path / "a.json").read_text())
     del legacy["model_options"]
     (tmp_path / "legacy.json").write_text(json.dumps(legacy))

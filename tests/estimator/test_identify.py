@@ -185,6 +185,10 @@ def test_building_priors_take_window_u_and_shgc_from_the_idf(five_zone):
         assert "IDF" in pri["U_win"].source
     else:
         assert pri["U_win"].mean == 2.8
+    # films as convection alone (a model with interior long-wave exchange): their own priors
+    conv = building_priors(model.params, five_zone, convective=True)
+    assert conv["gamma_IW"].mean == pytest.approx(3.1) and conv["gamma_ceil"].mean < 4.1
+    assert conv["U_win"] == pri["U_win"] and pri["gamma_IW"].mean == pytest.approx(8.3)
 
 
 def test_identification_on_declared_experiments_with_a_lead_in(truth_and_data):

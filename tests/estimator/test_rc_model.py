@@ -614,3 +614,57 @@ def test_sky_exchange_is_a_scheduled_input_at_each_exterior_face(five_zone):
     assert {sp["sky"] for sp in m_iso.structure.scheduled.values()} == {"iso"}
     with pytest.raises(ModelDefinitionError, match="sky must be 'none', 'clear' or 'iso'"):
         ModelOptions(sky="cloudy")
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.1, 50.0), st.floats(-10.0, 40.0)), min_size=2,
+                max_size=8))
+def test_interior_radiation_mesh_passes_the_stars_heat(faces):
+    """The eliminated star node: for any face temperatures, the pairwise links give each face
+    the heat h_r A_i (T_star - T_i) of the star network, T_star the area-weighted mean."""
+    from zonecast.estimator.rc.network import INTERIOR_RADIATION, interior_radiation_links
+
+    area = np.array([a for a, _ in faces])
+    temp = np.array([t for _, t in faces])
+    heat = np.zeros(len(faces))
+    for i, j, g in interior_radiation_links([(k, a) for k, a in enumerate(area)]):
+        heat[i] += g * (temp[j] - temp[i])
+        heat[j] += g * (temp[i] - temp[j])
+    star = np.dot(area, temp) / area.sum()
+    np.testing.assert_allclose(heat, INTERIOR_RADIATION * area * (star - temp), atol=1e-8)
+    assert abs(heat.sum()) < 1e-8  # nothing made or lost
+
+
+def test_interior_radiation_star_links_a_rooms_faces(five_zone):
+    """``interior_radiation="star"``: each room's inside faces are linked pairwise by
+    parameter-free conductances (A0), A stays Metzler and stable with the same equilibrium,
+    and the option is validated."""
+    from zonecast.estimator.rc.network import INTERIOR_RADIATION
+
+    plain = build_structure(five_zone, FIVE_ZONES, FIVE_BOXES, NO_LEAK)
+    star = build_structure(five_zone, FIVE_ZONES, FIVE_BOXES,
+                           ModelOptions(infiltration="none", ground="adiabatic",
+                                        shading="none", return_air="none",
+                                        interior_radiation="star"))
+    assert star.n == plain.n and star.labels == plain.labels
+    extra = ((star.A0 - plain.A0).toarray() * star.capacity[:, None])  # [W/K]
+    np.fill_diagonal(extra, 0.0)
+    assert np.all(extra >= -1e-9) and np.allclose(extra, extra.T)
+    air = set(plain.air_states())
+    linked = np.flatnonzero(extra.any(axis=1))
+    assert linked.size and not air & set(linked)  # faces only, never the room air
+    # the conductance out of one room's faces is h_r (sum A - A_i) A_i / sum A each: below
+    # h_r A_i, so the links of each face sum to less than h_r times the largest face area
+    assert extra.sum() > 0 and any("interior long-wave" in n for n in star.notes)
+    theta = ParameterSet(list(FIVE_ZONES)).physical
+    for s in (plain, star):
+        a = s.A(theta).toarray()
+        off = a - np.diag(np.diag(a))
+        assert np.all(off >= -1e-12)
+        assert np.max(np.linalg.eigvals(a).real) < 0
+    # equal temperatures everywhere: the links carry nothing (rows of the extra sum to 0)
+    d = (star.A0 - plain.A0).toarray()
+    np.testing.assert_allclose(d.sum(axis=1), 0.0, atol=1e-12)
+    assert INTERIOR_RADIATION == pytest.approx(4 * 0.9 * 5.670e-8 * 293.15 ** 3, rel=0.01)
+    with pytest.raises(ModelDefinitionError, match="interior_radiation must be 'none' or 'star'"):
+        ModelOptions(interior_radiation="yes")

@@ -75,16 +75,20 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   infiltration: str = "idf", weekend_gains: bool | str = False,
                   ground: str = "idf", shading: str = "idf", return_air: str = "idf",
                   roof_solar: str = "horizontal", sky: str = "none",
+                  interior_radiation: str = "none",
                   progress: Progress = _quiet) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
-    ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``: as :class:`~zonecast.estimator.rc.network.ModelOptions`; ``weekend_gains``: as
+    ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
+    ``interior_radiation``: as :class:`~zonecast.estimator.rc.network.ModelOptions`;
+    ``weekend_gains``: as
     :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
     pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar,
                                                          infiltration=infiltration,
                                                          ground=ground, shading=shading,
                                                          return_air=return_air,
-                                                         roof_solar=roof_solar, sky=sky))
+                                                         roof_solar=roof_solar, sky=sky,
+                                                         interior_radiation=interior_radiation))
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,

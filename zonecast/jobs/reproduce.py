@@ -354,12 +354,13 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         window: str = "weekend", sensitivity: bool = True,
         infiltration: str = "idf", weekend_gains: bool | str = False,
         ground: str = "idf", shading: str = "idf", return_air: str = "idf",
-        roof_solar: str = "horizontal", sky: str = "none") -> Results:
+        roof_solar: str = "horizontal", sky: str = "none",
+        interior_radiation: str = "none") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
-    ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``:
-    :class:`~zonecast.estimator.rc.network.ModelOptions`;
+    ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
+    ``interior_radiation``: :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
     the forecast study's split (never its validation weeks)."""
     out.mkdir(parents=True, exist_ok=True)
@@ -374,7 +375,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     pipe = Pipeline.from_site(campaign / "site.yaml",
                               options=ModelOptions(infiltration=infiltration, ground=ground,
                                                    shading=shading, return_air=return_air,
-                                                   roof_solar=roof_solar, sky=sky))
+                                                   roof_solar=roof_solar, sky=sky,
+                                                   interior_radiation=interior_radiation))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()

@@ -193,7 +193,7 @@ class Pipeline:
                  sigma_e: float = 0.3, window: str = "weekend",
                  weekend_gains: bool | str = False,
                  gains_weeks: Sequence[int] | None = None,
-                 agree_rtol: float = 1e-3) -> IdentificationResult:
+                 agree_rtol: float = 1e-3, films: str | None = None) -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -204,6 +204,11 @@ class Pipeline:
         a mapping of priors, or False for the paper's least squares; ``sigma_e`` [K]
         the MAP residual scale. ``window``: fit whole weekends (the paper) or the site's
         declared ``experiments`` with a lead-in (:func:`~.identify.identification_spans`).
+
+        ``films``: the inside films' priors and starting values: ``"combined"`` (the
+        handbook's convection + radiation films), ``"convective"``
+        (:data:`~.priors.CONVECTIVE_FILMS`, convection alone); default ``"convective"``
+        for a structure with interior long-wave exchange, else ``"combined"``.
 
         ``agree_rtol``: the starts stop once two reach the same cost within it
         (:func:`~.identify.identify`; 0 runs all ``n_starts``).
@@ -225,6 +230,10 @@ class Pipeline:
             raise PipelineError(f"weekend_gains={weekend_gains!r}: use 'none', 'known' or "
                                 "'scaled'")
         weekend_gains = modes[weekend_gains]
+        if films is None:
+            films = "convective" if self.options.interior_radiation == "star" else "combined"
+        if films not in ("combined", "convective"):
+            raise PipelineError(f"films={films!r}: use 'combined' or 'convective'")
         sats = [str(s.date()) for s in excitation_saturdays(data)]
         train = list(train) if train else sats[1:3]
         validation = list(validation) if validation is not None else sats[:1]
@@ -232,7 +241,7 @@ class Pipeline:
             raise PipelineError("no excitation weekend found: give the training Saturdays "
                                 "(the site's experiments list marks excitation periods)")
         start = ParameterSet(list(self.site.zones))
-        convective = self.options.interior_radiation == "star"
+        convective = films == "convective"
         if convective:  # films as convection alone: start where their priors are
             start = start.copy({k: v[0] for k, v in CONVECTIVE_FILMS.items()})
         if priors is True:

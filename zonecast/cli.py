@@ -196,6 +196,10 @@ InteriorRadiation = Annotated[str, typer.Option(
     help="long-wave exchange between a room's inside faces: 'none' (the paper: combined "
          "films to the air) or 'star' (a star network; the films are convection alone; "
          "docs/model.md \"Interior long-wave exchange\")")]
+Films = Annotated[str | None, typer.Option(
+    help="priors and starting values of the inside films: 'combined' (the handbook's "
+         "convection + radiation films) or 'convective' (convection alone); default "
+         "'convective' with --interior-radiation star, else 'combined'")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -279,6 +283,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  roof_solar: RoofSolar = "horizontal",
                  sky: Sky = "none",
                  interior_radiation: InteriorRadiation = "none",
+                 films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'none' (the default, the paper's f_IG = 0 at weekends); 'known': "
                           "identify again with the weekly gains profile of the weeks without "
@@ -298,7 +303,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  infiltration=infiltration, weekend_gains=weekend_gains,
                                  ground=ground, shading=shading, return_air=return_air,
                                  roof_solar=roof_solar, sky=sky,
-                                 interior_radiation=interior_radiation,
+                                 interior_radiation=interior_radiation, films=films,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -379,6 +384,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   roof_solar: RoofSolar = "horizontal",
                   sky: Sky = "none",
                   interior_radiation: InteriorRadiation = "none",
+                  films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'none' (the default), 'known' (identify again with the weekly "
                            "gains profile of the training weeks as known f_IG) or 'scaled' "
@@ -396,7 +402,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 weekend_gains=weekend_gains, ground=ground,
                                 shading=shading, return_air=return_air,
                                 roof_solar=roof_solar, sky=sky,
-                                interior_radiation=interior_radiation)
+                                interior_radiation=interior_radiation, films=films)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

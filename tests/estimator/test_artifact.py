@@ -165,6 +165,8 @@ def test_pipeline_rejects_an_unknown_weekend_gains_mode(vb):
     pipe = Pipeline.from_site(vb / "site.yaml")
     with pytest.raises(PipelineError, match="use 'none', 'known' or 'scaled'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), weekend_gains="sometimes")
+    with pytest.raises(PipelineError, match="films='radiant': use 'combined' or 'convective'"):
+        pipe.identify(pipe.data(pipe.telemetry(vb)), films="radiant")
 
 
 def test_structure_files_without_the_horizontal_column_still_load(vb, bundle, tmp_path):

@@ -75,13 +75,13 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   infiltration: str = "idf", weekend_gains: bool | str = False,
                   ground: str = "idf", shading: str = "idf", return_air: str = "idf",
                   roof_solar: str = "horizontal", sky: str = "none",
-                  interior_radiation: str = "none",
+                  interior_radiation: str = "none", films: str | None = None,
                   progress: Progress = _quiet) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``: as :class:`~zonecast.estimator.rc.network.ModelOptions`;
-    ``weekend_gains``: as
+    ``weekend_gains``, ``films``: as
     :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
     pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar,
                                                          infiltration=infiltration,
@@ -92,7 +92,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,
-                        progress=lambda m: progress(f"identification: {m}"))
+                        films=films, progress=lambda m: progress(f"identification: {m}"))
     if profile_weeks:
         pipe.weekly_profile(d, progress=lambda m: progress(f"weekly internal-gains profile: {m}"))
     out.parent.mkdir(parents=True, exist_ok=True)

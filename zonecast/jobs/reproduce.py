@@ -355,12 +355,13 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         infiltration: str = "idf", weekend_gains: bool | str = False,
         ground: str = "idf", shading: str = "idf", return_air: str = "idf",
         roof_solar: str = "horizontal", sky: str = "none",
-        interior_radiation: str = "none") -> Results:
+        interior_radiation: str = "none", films: str | None = None) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``: :class:`~zonecast.estimator.rc.network.ModelOptions`;
+    ``films``: as :meth:`Pipeline.identify`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
     the forecast study's split (never its validation weeks)."""
     out.mkdir(parents=True, exist_ok=True)
@@ -383,7 +384,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     progress("identification")
     ident = pipe.identify(data, n_starts=starts, seed=seed, priors=priors, sigma_e=sigma_e,
                           window=window, progress=lambda s: progress(f"identification: {s}"),
-                          weekend_gains=weekend_gains,
+                          weekend_gains=weekend_gains, films=films,
                           gains_weeks=(week_split(data, seed)["train"]
                                        if weekend_gains not in (False, None, "none") else None))
     timings["identification"] = time.perf_counter() - t

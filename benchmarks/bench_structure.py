@@ -1,0 +1,163 @@
+"""Model structures against EnergyPlus with known gains and no fitting (issue 13, item 5).
+
+Identification bends parameters to absorb what a structure lacks, so a structure's
+Table 2 after fitting says little about its physics. This benchmark takes the fit out:
+for each virtual building of a family (its ``truth.csv`` holds the internal gains
+EnergyPlus simulated) and each structure variant, the model gets the parameters the
+building's description and the handbooks give (the priors' means:
+:func:`~zonecast.estimator.priors.building_priors`, window U and SHGC from the IDF), no
+background gain (c_IG = 0) and the true internal gains as f_IG (people + lights +
+equipment heat of each zone [W] / its floor area); per whole week x(0) comes from the
+Kalman filter over the first day (with those gains), then the model runs open loop for six
+days with the recorded airflows, weather and discharge air. Per building: the RMS [K] of
+the open-loop zone temperatures against the measured ones, per zone and mean; per variant:
+the median and worst over the buildings.
+
+Variants are ``structure:films``: ``none`` or ``star`` (``ModelOptions.interior_radiation``)
+and ``combined`` (the handbook's convection + radiation films) or ``convective``
+(:data:`~zonecast.estimator.priors.CONVECTIVE_FILMS`) or three numbers ``iw/floor/ceil``
+[W/(m2 K)], e.g. ``none:1.4/1.4/0.9``.
+
+    python benchmarks/bench_structure.py --family DIR [--only NAME ...] \\
+        [--variants none:combined none:convective star:convective] [--out FILE.json]
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads only contend
+
+import argparse
+import json
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from zonecast.estimator.forecast import whole_weeks, zone_floor_area
+from zonecast.estimator.identify import kalman_state
+from zonecast.estimator.pipeline import Pipeline
+from zonecast.estimator.priors import building_priors
+from zonecast.estimator.rc.network import ModelOptions
+from zonecast.estimator.rc.parameters import ParameterSet
+
+#: the truth's parts that the model's f_IG stands for
+GAIN_PARTS = ("people", "lights", "equipment")
+FILMS = ("gamma_IW", "gamma_floor", "gamma_ceil")
+
+
+def parse_variant(text: str) -> tuple[str, dict[str, float] | str]:
+    """``"none:combined"`` -> ("none", "combined"); ``"star:1.4/1.4/0.9"`` -> ("star", {...})."""
+    try:
+        structure, films = text.split(":")
+    except ValueError:
+        raise SystemExit(f"variant {text!r}: write structure:films, e.g. none:combined") from None
+    if structure not in ("none", "star"):
+        raise SystemExit(f"variant {text!r}: structure must be 'none' or 'star'")
+    if films in ("combined", "convective"):
+        return structure, films
+    try:
+        values = [float(v) for v in films.split("/")]
+    except ValueError:
+        values = []
+    if len(values) != 3 or min(values) <= 0:
+        raise SystemExit(f"variant {text!r}: films must be 'combined', 'convective' or three "
+                         "positive numbers iw/floor/ceil")
+    return structure, dict(zip(FILMS, values))
+
+
+def true_gains(campaign: Path, data, model) -> np.ndarray:
+    """f_IG [W/m2] per row and zone: the truth's people + lights + equipment heat / floor."""
+    truth = pd.read_csv(campaign / "truth.csv", index_col=0)
+    truth.index = pd.to_datetime(truth.index, utc=True)
+    truth = truth.reindex(data.times)
+    area = zone_floor_area(model)
+    out = np.zeros((len(data.times), len(data.zones)))
+    for j, z in enumerate(data.zones):
+        cols = [f"{p}:zone:{z}" for p in GAIN_PARTS if f"{p}:zone:{z}" in truth]
+        if not cols:
+            raise SystemExit(f"{campaign}: truth.csv has no gains of zone {z!r}")
+        out[:, j] = np.nan_to_num(truth[cols].to_numpy(float)).sum(axis=1) / area[j]
+    return out
+
+
+def open_loop(campaign: Path, structure: str, films) -> dict:
+    """Open-loop RMS per zone and mean of one building with one variant."""
+    pipe = Pipeline.from_site(campaign / "site.yaml",
+                              options=ModelOptions(interior_radiation=structure))
+    data = pipe.data(campaign / "telemetry.csv")
+    start = ParameterSet(list(pipe.site.zones))
+    priors = building_priors(start, pipe._building_or_none(),
+                             convective=films == "convective")
+    values = {name: p.mean for name, p in priors.items()}
+    if isinstance(films, dict):
+        values.update(films)
+    values.update({f"c_IG[{z}]": 0.0 for z in pipe.site.zones})
+    model = pipe.model(start.copy(values))
+    f_ig = true_gains(campaign, data, model)
+    day = 96
+    sq, n = np.zeros(len(data.zones)), np.zeros(len(data.zones))
+    for week in whole_weeks(data):
+        a, b = week["rows"]
+        x0 = kalman_state(model, data, a, a + day, f_ig=f_ig)
+        s = slice(a + day, b)
+        y = model.simulate(x0, data.u[s], data.v[s], f_ig[s], reheat=data.reheat[s]).y
+        meas = data.y[a + day + 1:b]  # the week's own rows (row b may open the next segment)
+        err = y[1:1 + len(meas)] - meas
+        ok = np.isfinite(err)
+        sq += (np.where(ok, err, 0.0) ** 2).sum(axis=0)
+        n += ok.sum(axis=0)
+    rms = np.sqrt(sq / np.maximum(n, 1))
+    return {"zones": dict(zip(data.zones, rms.round(4).tolist())),
+            "mean": float(rms.mean()), "films": {k: values[k] for k in FILMS}}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--family", type=Path, required=True, help="folder with index.json")
+    ap.add_argument("--only", nargs="*", default=None, help="member names (default all)")
+    ap.add_argument("--variants", nargs="+",
+                    default=["none:combined", "none:convective", "star:convective"])
+    ap.add_argument("--out", type=Path, default=None, help="JSON file of the results")
+    args = ap.parse_args()
+    variants = [(v, *parse_variant(v)) for v in args.variants]
+    doc = json.loads((args.family / "index.json").read_text())
+    members = doc["members"] if isinstance(doc, dict) else doc
+    if args.only:
+        unknown = sorted(set(args.only) - {m["name"] for m in members})
+        if unknown:
+            raise SystemExit(f"not in the family: {unknown}")
+        members = [m for m in members if m["name"] in args.only]
+    members = [m for m in members if (args.family / m["name"] / "truth.csv").is_file()]
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; {len(members)} buildings, "
+          f"variants {[v for v, *_ in variants]}", flush=True)
+    rows = []
+    for m in members:
+        row = {"name": m["name"], "role": m.get("role", "train")}
+        for label, structure, films in variants:
+            t = time.perf_counter()
+            res = open_loop(args.family / m["name"], structure, films)
+            row[label] = res
+            print(f"{m['name']:22s} {label:22s} open-loop RMS {res['mean']:.3f} K "
+                  f"({time.perf_counter() - t:.1f} s)", flush=True)
+        rows.append(row)
+    print()
+    print("| building | role | " + " | ".join(v for v, *_ in variants) + " |")
+    print("|---|---|" + "---|" * len(variants))
+    for r in rows:
+        print(f"| {r['name']} | {r['role']} | "
+              + " | ".join(f"{r[v]['mean']:.3f}" for v, *_ in variants) + " |")
+    for role in sorted({r["role"] for r in rows}):
+        sel = [r for r in rows if r["role"] == role]
+        print(f"| **median {role}** ({len(sel)}) | | "
+              + " | ".join(f"{statistics.median(r[v]['mean'] for r in sel):.3f} / worst "
+                           f"{max(r[v]['mean'] for r in sel):.3f}" for v, *_ in variants) + " |")
+    if args.out:
+        args.out.write_text(json.dumps({"variants": args.variants, "rows": rows}, indent=1))
+
+
+if __name__ == "__main__":
+    main()

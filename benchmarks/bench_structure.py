@@ -18,8 +18,11 @@ and ``combined`` (the handbook's convection + radiation films) or ``convective``
 (:data:`~zonecast.estimator.priors.CONVECTIVE_FILMS`) or three numbers ``iw/floor/ceil``
 [W/(m2 K)], e.g. ``none:1.4/1.4/0.9``.
 
-    python benchmarks/bench_structure.py --family DIR [--only NAME ...] \\
+    python benchmarks/bench_structure.py --family DIR [--only NAME ...] [--extra CAMPAIGN ...]
         [--variants none:combined none:convective star:convective] [--out FILE.json]
+
+``--extra`` adds campaign folders of buildings the testbed did not generate (``zonecast
+testbed foreign``, which also writes ``truth.csv``), role ``third_party``.
 """
 
 from __future__ import annotations
@@ -117,21 +120,31 @@ def open_loop(campaign: Path, structure: str, films) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--family", type=Path, required=True, help="folder with index.json")
+    ap.add_argument("--family", type=Path, default=None, help="folder with index.json")
+    ap.add_argument("--extra", type=Path, nargs="*", default=[],
+                    help="campaign folders of third-party buildings")
     ap.add_argument("--only", nargs="*", default=None, help="member names (default all)")
     ap.add_argument("--variants", nargs="+",
                     default=["none:combined", "none:convective", "star:convective"])
     ap.add_argument("--out", type=Path, default=None, help="JSON file of the results")
     args = ap.parse_args()
     variants = [(v, *parse_variant(v)) for v in args.variants]
-    doc = json.loads((args.family / "index.json").read_text())
-    members = doc["members"] if isinstance(doc, dict) else doc
-    if args.only:
-        unknown = sorted(set(args.only) - {m["name"] for m in members})
-        if unknown:
-            raise SystemExit(f"not in the family: {unknown}")
-        members = [m for m in members if m["name"] in args.only]
-    members = [m for m in members if (args.family / m["name"] / "truth.csv").is_file()]
+    members = []
+    if args.family is not None:
+        doc = json.loads((args.family / "index.json").read_text())
+        members = [{**m, "campaign": args.family / m["name"]}
+                   for m in (doc["members"] if isinstance(doc, dict) else doc)]
+        if args.only:
+            unknown = sorted(set(args.only) - {m["name"] for m in members})
+            if unknown:
+                raise SystemExit(f"not in the family: {unknown}")
+            members = [m for m in members if m["name"] in args.only]
+    members += [{"name": p.name, "role": "third_party", "campaign": p} for p in args.extra]
+    if not members:
+        raise SystemExit("give --family or --extra")
+    missing = [m["name"] for m in members if not (m["campaign"] / "truth.csv").is_file()]
+    if missing:
+        raise SystemExit(f"no truth.csv (the true gains) for {missing}")
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; {len(members)} buildings, "
           f"variants {[v for v, *_ in variants]}", flush=True)
     rows = []
@@ -139,7 +152,7 @@ def main() -> None:
         row = {"name": m["name"], "role": m.get("role", "train")}
         for label, structure, films in variants:
             t = time.perf_counter()
-            res = open_loop(args.family / m["name"], structure, films)
+            res = open_loop(m["campaign"], structure, films)
             row[label] = res
             print(f"{m['name']:22s} {label:22s} open-loop RMS {res['mean']:.3f} K "
                   f"({time.perf_counter() - t:.1f} s)", flush=True)

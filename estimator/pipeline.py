@@ -58,6 +58,25 @@ def _quiet(_: str) -> None:
     return None
 
 
+#: weekend daytime rise of an unoccupied office's internal gains [W/m2]: ASHRAE 90.1's
+#: office schedules run lights at 0.1-0.3 and equipment at 0.3 of design on weekend days
+#: against 0.05 and 0.2 at night, about 2-3 W/m2 on 10 W/m2 of lighting and 10-15 of
+#: equipment (docs/identification.md "Weekend daytime gains")
+WEEKEND_DAY_GAIN = 2.5
+#: local hours [start, end) of the weekend daytime rise
+WEEKEND_DAY_HOURS = (8, 18)
+
+
+def weekend_daytime_shape(data: ModelData) -> np.ndarray:
+    """(N, n_zones) [W/m2]: :data:`WEEKEND_DAY_GAIN` on Saturday and Sunday rows whose local
+    hour is in :data:`WEEKEND_DAY_HOURS`, else 0 (a shape for ``identify(gain_shape=...)``)."""
+    local = data.local_times()
+    on = ((local.day_of_week >= 5) & (local.hour >= WEEKEND_DAY_HOURS[0])
+          & (local.hour < WEEKEND_DAY_HOURS[1]))
+    return np.repeat(np.where(np.asarray(on), WEEKEND_DAY_GAIN, 0.0)[:, None],
+                     len(data.zones), axis=1)
+
+
 class Pipeline:
     """One building's way from its description to forecasts.
 
@@ -191,7 +210,7 @@ class Pipeline:
                  validation: Sequence[str] | None = None, *, n_starts: int = 1, seed: int = 0,
                  progress: Progress = _quiet, priors: bool | Mapping[str, Prior] = True,
                  sigma_e: float = 0.3, window: str = "weekend",
-                 weekend_gains: bool | str = False,
+                 weekend_gains: bool | str = "daytime",
                  gains_weeks: Sequence[int] | None = None,
                  agree_rtol: float = 1e-3, films: str | None = None) -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
@@ -213,7 +232,9 @@ class Pipeline:
         ``agree_rtol``: the starts stop once two reach the same cost within it
         (:func:`~.identify.identify`; 0 runs all ``n_starts``).
 
-        ``weekend_gains``: a building occupied at weekends has internal gains on the
+        ``weekend_gains`` (default ``"daytime"`` since 2026-11-25, chosen on the family's
+        training members: docs/identification.md "Weekend daytime gains"; ``"none"`` or
+        False: the paper's fit): a building occupied at weekends has internal gains on the
         identification weekends that the paper's fit (f_IG = 0) leaves to the parameters.
         With it the fit runs twice: the paper's, then the weekly internal-gains profile of
         the whole weeks ``gains_weeks`` (indices into :func:`~.forecast.whole_weeks`;
@@ -222,13 +243,17 @@ class Pipeline:
         (docs/identification.md). ``"scaled"``: the same, but the profile is a per-zone
         shape whose scale is fitted with the parameters (:func:`~.identify.identify`
         ``gain_shape``), so a weekend without people can say so; True or ``"known"``:
-        the profile as it is.
+        the profile as it is. ``"daytime"``: one fit in which each zone's weekend gains
+        rise by s_z x :data:`WEEKEND_DAY_GAIN` between 08 and 18 h local time on Saturdays
+        and Sundays (:func:`weekend_daytime_shape`), s_z fitted with the parameters (prior
+        1 +- 1, bounds 0-5): the weekend daytime lighting and equipment of an
+        "unoccupied" office, whatever the weekday profile says.
         """
         modes = {False: None, "none": None, True: "known", "known": "known",
-                 "scaled": "scaled"}
+                 "scaled": "scaled", "daytime": "daytime"}
         if weekend_gains not in modes:
-            raise PipelineError(f"weekend_gains={weekend_gains!r}: use 'none', 'known' or "
-                                "'scaled'")
+            raise PipelineError(f"weekend_gains={weekend_gains!r}: use 'none', 'known', "
+                                "'scaled' or 'daytime'")
         weekend_gains = modes[weekend_gains]
         if films is None:
             films = "convective" if self.options.interior_radiation == "star" else "combined"
@@ -249,8 +274,10 @@ class Pipeline:
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
                        seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,
                        window=window, agree_rtol=agree_rtol,
-                       start=start.values if convective else None)
-        if weekend_gains:
+                       start=start.values if convective else None,
+                       gain_shape=(weekend_daytime_shape(data)
+                                   if weekend_gains == "daytime" else None))
+        if weekend_gains in ("known", "scaled"):
             self.params = res.model.params
             progress("weekly internal-gains profile for the weekends' gains")
             # never the identification weekends themselves: their excitation misfit would

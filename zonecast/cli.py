@@ -285,11 +285,13 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  interior_radiation: InteriorRadiation = "none",
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
-                     help="'none' (the default, the paper's f_IG = 0 at weekends); 'known': "
+                     help="'daytime' (the default since 2026-11-25): a weekend 08-18 h rise of "
+                          "each zone's gains fitted with the parameters; 'none': the paper's "
+                          "f_IG = 0 at weekends; 'known': "
                           "identify again with the weekly gains profile of the weeks without "
                           "experiments as known f_IG; 'scaled': the profile as a per-zone "
                           "shape whose scale is fitted with the parameters (buildings occupied "
-                          "at weekends; docs/identification.md)")] = "none",
+                          "at weekends; docs/identification.md)")] = "daytime",
                  seed: Seed = 0) -> None:
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the
@@ -386,9 +388,11 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   interior_radiation: InteriorRadiation = "none",
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
-                      help="'none' (the default), 'known' (identify again with the weekly "
-                           "gains profile of the training weeks as known f_IG) or 'scaled' "
-                           "(the profile's per-zone scale fitted with the parameters)")] = "none"
+                      help="'daytime' (the default since 2026-11-25: a weekend 08-18 h "
+                           "rise per zone fitted with the parameters), 'none' (the paper), "
+                           "'known' (identify again with the weekly gains profile of the "
+                           "training weeks as known f_IG) or 'scaled' (the profile's per-zone "
+                           "scale fitted with the parameters)")] = "daytime"
                   ) -> None:
     """The paper's tables and figures on the virtual building: campaign, identification,
     internal gains, forecasts; writes results.json, figures and report.md."""

@@ -163,10 +163,27 @@ def test_structure_file_errors_say_what_to_fix(vb, tmp_path):
 
 def test_pipeline_rejects_an_unknown_weekend_gains_mode(vb):
     pipe = Pipeline.from_site(vb / "site.yaml")
-    with pytest.raises(PipelineError, match="use 'none', 'known' or 'scaled'"):
+    with pytest.raises(PipelineError, match="use 'none', 'known', 'scaled' or 'daytime'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), weekend_gains="sometimes")
     with pytest.raises(PipelineError, match="films='radiant': use 'combined' or 'convective'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), films="radiant")
+
+
+def test_weekend_daytime_shape_marks_weekend_days_between_8_and_18_local(vb):
+    from zonecast.estimator.pipeline import WEEKEND_DAY_GAIN, weekend_daytime_shape
+
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    data = pipe.data(pipe.telemetry(vb))
+    shape = weekend_daytime_shape(data)
+    local = data.local_times()
+    assert shape.shape == (len(data.times), len(data.zones))
+    on = shape[:, 0] > 0
+    assert np.all(shape[on] == WEEKEND_DAY_GAIN) and np.all(shape[~on] == 0)
+    assert set(local[on].day_of_week) == {5, 6}
+    assert local[on].hour.min() == 8 and local[on].hour.max() == 17
+    # every weekend row in those hours is marked (4 rows an hour, 10 hours a day)
+    weekend_days = len({d for d, w in zip(local.date, local.day_of_week) if w >= 5})
+    assert on.sum() <= weekend_days * 40 and on.sum() >= (weekend_days - 2) * 40
 
 
 def test_structure_files_without_the_horizontal_column_still_load(vb, bundle, tmp_path):

@@ -72,7 +72,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   validate: list[str] | None = None, starts: int = 1,
                   profile_weeks: bool = True, window_solar: str = "surfaces", seed: int = 0,
                   priors: bool = True, sigma_e: float = 0.3, window: str = "weekend",
-                  infiltration: str = "idf", weekend_gains: bool | str = False,
+                  infiltration: str = "idf", weekend_gains: bool | str = "daytime",
                   ground: str = "idf", shading: str = "idf", return_air: str = "idf",
                   roof_solar: str = "horizontal", sky: str = "none",
                   interior_radiation: str = "none", films: str | None = None,

@@ -352,7 +352,7 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
 def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         progress=lambda s: None, *, priors: bool = True, sigma_e: float = 0.3,
         window: str = "weekend", sensitivity: bool = True,
-        infiltration: str = "idf", weekend_gains: bool | str = False,
+        infiltration: str = "idf", weekend_gains: bool | str = "daytime",
         ground: str = "idf", shading: str = "idf", return_air: str = "idf",
         roof_solar: str = "horizontal", sky: str = "none",
         interior_radiation: str = "none", films: str | None = None) -> Results:

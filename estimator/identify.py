@@ -592,7 +592,8 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         :meth:`~zonecast.estimator.pipeline.Pipeline.identify` with
         ``weekend_gains=True`` for buildings occupied at weekends).
     start : ndarray, optional
-        The one starting point (instead of ``n_starts`` drawn ones).
+        The first starting point (instead of the start values); with ``n_starts`` > 1 the
+        drawn ones follow it.
     agree_rtol : float
         Relative cost difference [-] under which two starts count as the same optimum;
         0 runs every start.
@@ -671,8 +672,9 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     starts_report = []
     progress("x(0) of the training weekends")
     # round 1, every start: x_KF(0) of the start model
-    thetas = ([np.asarray(start, float)] if start is not None
-              else _starts(model.params, n_starts, rng))
+    thetas = _starts(model.params, n_starts, rng)
+    if start is not None:  # the given point first, the drawn ones after it
+        thetas = [np.asarray(start, float)] + thetas[1:]
     if gain_shape is not None:
         thetas = [t if len(t) == len(lo) else np.r_[t, np.full(len(lo) - len(t), shape_prior[0])]
                   for t in thetas]

@@ -252,6 +252,15 @@ def test_known_weekend_gains_enter_the_fit(five_zone):
     assert told.params[i] == pytest.approx(true[i], rel=0.15)
 
 
+def test_a_given_start_comes_first_and_drawn_starts_follow(truth_and_data):
+    model, _, data = truth_and_data
+    x = model.params.start_params * 1.1
+    res = identify(model, data, train=["2015-04-18"], n_starts=2, max_nfev=2, agree_rtol=0,
+                   start=x)
+    assert len(res.starts) == 2 and res.starts[0]["start"] == pytest.approx(list(x))
+    assert res.starts[1]["start"] != pytest.approx(list(x))
+
+
 def test_starts_stop_once_two_agree(truth_and_data):
     """Two starts that reach the same cost end the multi-start (the third is skipped) with
     the optimum every start finds; ``agree_rtol=0`` runs every start."""

@@ -182,9 +182,11 @@ def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
 
 
 def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequence,
-                        window: str = "weekend") -> list[dict]:
+                        window: str = "weekend", f_ig: np.ndarray | None = None) -> list[dict]:
     """The identification's simulations (f_IG = 0, x(0) = x_KF(0) of ``model``) of the
-    weekends starting on ``saturdays``, beside the measurements, for plots.
+    weekends starting on ``saturdays``, beside the measurements, for plots. ``f_ig``
+    ((N, n_zones) [W/m2] over all rows of ``data``): gains the fit knew (e.g. the fitted
+    weekend daytime rise), in the x(0) filter and the simulation, as in Table 2.
 
     Returns one dict per weekend: ``saturday`` (date string), ``times`` (DatetimeIndex of the
     simulated rows), ``simulated`` and ``measured`` ((N, n_zones) [degC]); the rows and the
@@ -192,9 +194,10 @@ def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequen
     """
     out = []
     local = data.local_times()
+    gains = np.zeros((len(data.times), model.n_zones)) if f_ig is None else np.asarray(f_ig)
     for a, b in identification_spans(data, saturdays, window):
-        x0 = kalman_state(model, data, a - X0_WINDOW, a)
-        y = model.simulate(x0, data.u[a:b], data.v[a:b], np.zeros((b - a, model.n_zones)),
+        x0 = kalman_state(model, data, a - X0_WINDOW, a, f_ig=gains)
+        y = model.simulate(x0, data.u[a:b], data.v[a:b], gains[a:b],
                            reheat=data.reheat[a:b]).y
         rows = measured_rows(data, a, b)
         meas = data.y[rows]

@@ -248,6 +248,12 @@ def test_known_weekend_gains_enter_the_fit(five_zone):
                     start=blind.params)
     assert len(told.starts) == 1 and told.starts[0]["start"] == list(blind.params)
     assert told.train_rms["mean"] < 0.08 < blind.train_rms["mean"]
+    # the plotted simulations with those gains are the ones Table 2 scores
+    from zonecast.estimator.evaluate import rms_by_zone
+    from zonecast.estimator.identify import weekend_simulations
+    sim = weekend_simulations(told.model, data, ["2015-04-18"], f_ig=f_ig)[0]
+    assert rms_by_zone(sim["simulated"], sim["measured"], data.zones)["mean"] == \
+        pytest.approx(told.train_rms["mean"], rel=1e-9)
     i = names.index("gamma_IW")
     assert told.params[i] == pytest.approx(true[i], rel=0.15)
 

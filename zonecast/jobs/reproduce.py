@@ -24,7 +24,12 @@ from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
 from zonecast.estimator.forecast import issue_rows, week_split
 from zonecast.estimator.identify import weekend_simulations
-from zonecast.estimator.pipeline import Pipeline
+from zonecast.estimator.pipeline import (
+    WEEKEND_DAY_GAIN,
+    WEEKEND_DAY_HOURS,
+    Pipeline,
+    weekend_daytime_shape,
+)
 from zonecast.estimator.rc.network import ModelOptions
 from zonecast.estimator.streaming import has_discharge
 from zonecast.estimator.study import forecast_study
@@ -117,17 +122,29 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                      + ("; ".join(f"{a}/{b} {r:+.2f}" for a, b, r in ident["strongly_correlated"])
                         or "none") + ".")
     spans = (results.identification or {}).get("spans") or []
-    lines += ["", "## Table 2: identification RMS [°C] (weekend data, f_IG = 0)", ""]
+    mode = (results.identification or {}).get("weekend_gains")
+    lines += ["", "## Table 2: identification RMS [°C] (weekend data, "
+              + ("f_IG = 0)" if mode in (None, False, "none") else "weekend gains in the fit)"),
+              ""]
     if spans:
         lines += ["Hours fitted (training) and scored (validation), local time, window "
                   f"`{results.identification.get('window', 'weekend')}`: "
                   + "; ".join(f"{s['role']} {s['start'][:16]} to {s['end'][:16]}"
                               for s in spans) + ".", ""]
-    mode = (results.identification or {}).get("weekend_gains")
     if mode in (True, "known"):
         lines += [("Fitted with the weekly internal-gains profile of the training weeks without "
                    "experiments as known f_IG (`--weekend-gains known`), so Table 2 is the model "
                    "with that profile, not the paper's f_IG = 0."), ""]
+    elif mode == "daytime":
+        scale = (results.identification or {}).get("gain_scale") or {}
+        lines += [("Fitted with a weekend daytime rise of the internal gains, s_z × "
+                   f"{WEEKEND_DAY_GAIN} W/m² between {WEEKEND_DAY_HOURS[0]:02d} and "
+                   f"{WEEKEND_DAY_HOURS[1]:02d} h local on Saturdays and Sundays, its per-zone "
+                   "scale fitted with the parameters (`--weekend-gains daytime`, the default; "
+                   "`none` gives the paper's f_IG = 0), so Table 2 and Fig. 1 are the model with "
+                   "those gains. Scales: "
+                   + ", ".join(f"{z} {v['value']:.2f} ± {v['se']:.2f}"
+                               for z, v in scale.items()) + "."), ""]
     elif mode == "scaled":
         scale = (results.identification or {}).get("gain_scale") or {}
         lines += [("Fitted with the weekly internal-gains profile of the training weeks without "
@@ -198,9 +215,19 @@ def plot_horizon(horizon: dict[str, dict[str, list[float]]], zones: list[str], p
     fig.savefig(path, dpi=110)
 
 
-def plot_weekends(sims: list[dict], roles: dict[str, str], zones: list[str], path: Path) -> None:
-    """Fig. 1: the identification's simulations (f_IG = 0) against the measured zone
-    temperatures on each excitation weekend, one row per zone, one column per weekend."""
+def _daytime_gains(mode, ident, data) -> np.ndarray | None:
+    """The fitted weekend daytime rise s_z x shape [W/m2] of a ``daytime`` fit, else None."""
+    scale = ident.gain_scale if mode == "daytime" else None
+    if not scale:
+        return None
+    return weekend_daytime_shape(data) * np.array([scale[z]["value"] for z in data.zones])
+
+
+def plot_weekends(sims: list[dict], roles: dict[str, str], zones: list[str], path: Path,
+                  gains: str = "f_IG = 0") -> None:
+    """Fig. 1: the identification's simulations (``gains``: f_IG = 0, or the fitted weekend
+    daytime rise) against the measured zone temperatures on each excitation weekend, one
+    row per zone, one column per weekend."""
     fig = Figure(figsize=(4.2 * len(sims), 1.5 * len(zones)))
     axes = fig.subplots(len(zones), len(sims), sharex='col', squeeze=False)
     for c, w in enumerate(sims):
@@ -218,7 +245,7 @@ def plot_weekends(sims: list[dict], roles: dict[str, str], zones: list[str], pat
         axes[0, c].set_title(f"{roles.get(w['saturday'], '')} weekend {w['saturday']}",
                              fontsize=9)
         axes[-1, c].set_xlabel("hours from Saturday 00:00 local")
-    fig.suptitle("Fig. 1: identification weekends, model with f_IG = 0 (red) and measured (dots)")
+    fig.suptitle(f"Fig. 1: identification weekends, model with {gains} (red) and measured (dots)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
@@ -444,10 +471,13 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     (out / "results.json").write_text(res.model_dump_json(indent=2))
     figures = []
     sims = weekend_simulations(fitted, data, ident.train_weekends + ident.validation_weekends,
-                               window=ident.window)
+                               window=ident.window,
+                               f_ig=_daytime_gains(weekend_gains, ident, data))
     roles = {**{d: "training" for d in ident.train_weekends},
              **{d: "validation" for d in ident.validation_weekends}}
-    plot_weekends(sims, roles, list(site.zones), out / "fig1_identification.png")
+    plot_weekends(sims, roles, list(site.zones), out / "fig1_identification.png",
+                  gains=("the fitted weekend daytime gains" if weekend_gains == "daytime"
+                         else "f_IG = 0"))
     figures.append("fig1_identification.png")
     plot_gains(figs["fig2"], list(site.zones), out / "fig2_internal_gains.png")
     figures.append("fig2_internal_gains.png")

@@ -143,16 +143,14 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                    "scale fitted with the parameters (`--weekend-gains daytime`, the default; "
                    "`none` gives the paper's f_IG = 0), so Table 2 and Fig. 1 are the model with "
                    "those gains. Scales: "
-                   + ", ".join(f"{z} {v['value']:.2f} ± {v['se']:.2f}"
-                               for z, v in scale.items()) + "."), ""]
+                   + _scales(scale) + "."), ""]
     elif mode == "scaled":
         scale = (results.identification or {}).get("gain_scale") or {}
         lines += [("Fitted with the weekly internal-gains profile of the training weeks without "
                    "experiments as a per-zone shape whose scale was fitted with the parameters "
                    "(`--weekend-gains scaled`), so Table 2 is the model with those gains, not the "
                    "paper's f_IG = 0. Scales: "
-                   + ", ".join(f"{z} {v['value']:.2f} ± {v['se']:.2f}"
-                               for z, v in scale.items()) + "."), ""]
+                   + _scales(scale) + "."), ""]
     lines += _table(results.table2, zones, PAPER["table2"])
     if results.table2_window_solar_air:
         lines += ["", (f"Model options: {json.dumps(results.model_options)}. Sensitivity, the same "
@@ -213,6 +211,11 @@ def plot_horizon(horizon: dict[str, dict[str, list[float]]], zones: list[str], p
     np.atleast_1d(axes)[0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+
+
+def _scales(scale: dict) -> str:
+    """The fitted gains scales of a report line: "N 0.12 ± 0.03, ..."."""
+    return ", ".join(f"{z} {v['value']:.2f} ± {v['se']:.2f}" for z, v in scale.items())
 
 
 def _daytime_gains(mode, ident, data) -> np.ndarray | None:

@@ -13,10 +13,11 @@ days with the recorded airflows, weather and discharge air. Per building: the RM
 the open-loop zone temperatures against the measured ones, per zone and mean; per variant:
 the median and worst over the buildings.
 
-Variants are ``structure:films``: ``none`` or ``star`` (``ModelOptions.interior_radiation``)
-and ``combined`` (the handbook's convection + radiation films) or ``convective``
-(:data:`~zonecast.estimator.priors.CONVECTIVE_FILMS`) or three numbers ``iw/floor/ceil``
-[W/(m2 K)], e.g. ``none:1.4/1.4/0.9``.
+Variants are ``structure:films[:gains]``: ``none`` or ``star``
+(``ModelOptions.interior_radiation``) and ``combined`` (the handbook's convection + radiation
+films) or ``convective`` (:data:`~zonecast.estimator.priors.CONVECTIVE_FILMS`) or three
+numbers ``iw/floor/ceil`` [W/(m2 K)], e.g. ``none:1.4/1.4/0.9``; then optionally ``air``
+(the default) or ``idf`` (``ModelOptions.internal_gains``: the IDF's radiant split).
 
     python benchmarks/bench_structure.py --family DIR [--only NAME ...] [--extra CAMPAIGN ...]
         [--variants none:combined none:convective star:convective] [--out FILE.json]
@@ -52,16 +53,20 @@ GAIN_PARTS = ("people", "lights", "equipment")
 FILMS = ("gamma_IW", "gamma_floor", "gamma_ceil")
 
 
-def parse_variant(text: str) -> tuple[str, dict[str, float] | str]:
-    """``"none:combined"`` -> ("none", "combined"); ``"star:1.4/1.4/0.9"`` -> ("star", {...})."""
-    try:
-        structure, films = text.split(":")
-    except ValueError:
-        raise SystemExit(f"variant {text!r}: write structure:films, e.g. none:combined") from None
+def parse_variant(text: str) -> tuple[str, dict[str, float] | str, str]:
+    """``"none:combined"`` -> ("none", "combined", "air"); ``"star:1.4/1.4/0.9:idf"`` ->
+    ("star", {...}, "idf")."""
+    parts = text.split(":")
+    if len(parts) not in (2, 3):
+        raise SystemExit(f"variant {text!r}: write structure:films[:gains], e.g. none:combined")
+    structure, films = parts[:2]
+    gains = parts[2] if len(parts) == 3 else "air"
     if structure not in ("none", "star"):
         raise SystemExit(f"variant {text!r}: structure must be 'none' or 'star'")
+    if gains not in ("air", "idf"):
+        raise SystemExit(f"variant {text!r}: gains must be 'air' or 'idf'")
     if films in ("combined", "convective"):
-        return structure, films
+        return structure, films, gains
     try:
         values = [float(v) for v in films.split("/")]
     except ValueError:
@@ -69,7 +74,7 @@ def parse_variant(text: str) -> tuple[str, dict[str, float] | str]:
     if len(values) != 3 or min(values) <= 0:
         raise SystemExit(f"variant {text!r}: films must be 'combined', 'convective' or three "
                          "positive numbers iw/floor/ceil")
-    return structure, dict(zip(FILMS, values))
+    return structure, dict(zip(FILMS, values)), gains
 
 
 def true_gains(campaign: Path, data, model) -> np.ndarray:
@@ -87,10 +92,11 @@ def true_gains(campaign: Path, data, model) -> np.ndarray:
     return out
 
 
-def open_loop(campaign: Path, structure: str, films) -> dict:
+def open_loop(campaign: Path, structure: str, films, gains: str = "air") -> dict:
     """Open-loop RMS per zone and mean of one building with one variant."""
     pipe = Pipeline.from_site(campaign / "site.yaml",
-                              options=ModelOptions(interior_radiation=structure))
+                              options=ModelOptions(interior_radiation=structure,
+                                                   internal_gains=gains))
     data = pipe.data(campaign / "telemetry.csv")
     start = ParameterSet(list(pipe.site.zones))
     priors = building_priors(start, pipe._building_or_none(),
@@ -150,9 +156,9 @@ def main() -> None:
     rows = []
     for m in members:
         row = {"name": m["name"], "role": m.get("role", "train")}
-        for label, structure, films in variants:
+        for label, structure, films, gains in variants:
             t = time.perf_counter()
-            res = open_loop(m["campaign"], structure, films)
+            res = open_loop(m["campaign"], structure, films, gains)
             row[label] = res
             print(f"{m['name']:22s} {label:22s} open-loop RMS {res['mean']:.3f} K "
                   f"({time.perf_counter() - t:.1f} s)", flush=True)

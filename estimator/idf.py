@@ -38,6 +38,7 @@ __all__ = [
     "EnergyPlusNotFoundError",
     "IdfConversionError",
     "Infiltration",
+    "InternalGain",
     "InternalMass",
     "Layer",
     "Surface",
@@ -602,6 +603,41 @@ class Infiltration:
     schedule: str = ""
 
 
+#: heat of one person [W] when the activity schedule has no constant value (EnergyPlus's
+#: seated office work, 1.2 met on 1.8 m2) and its sensible share when the People object
+#: says ``autocalculate`` (about EnergyPlus's autocalculated value near 23 degC)
+PERSON_HEAT = 120.0
+PERSON_SENSIBLE = 0.6
+
+
+@dataclass(frozen=True)
+class InternalGain:
+    """An internal heat gain object (People, Lights, ElectricEquipment, GasEquipment,
+    OtherEquipment) of one zone: its design sensible heat and how EnergyPlus splits it.
+
+    Attributes
+    ----------
+    name, zone, kind : str
+        ``kind`` is the object type.
+    power : float
+        Design sensible heat into the zone and its return air [W] (people: number x
+        activity x sensible share; equipment: less its latent and lost shares).
+    radiant : float
+        Share [-] of ``power`` given off as long-wave and visible radiation to the zone's
+        surfaces (People: fraction radiant; Lights: fraction radiant + fraction visible;
+        equipment: fraction radiant over the sensible share).
+    return_air : float
+        Share [-] of ``power`` into the zone's return air (Lights' return air fraction).
+    """
+
+    name: str
+    zone: str
+    kind: str
+    power: float
+    radiant: float
+    return_air: float = 0.0
+
+
 @dataclass(frozen=True)
 class InternalMass:
     """An InternalMass object (furniture, partitions) inside one zone.
@@ -662,6 +698,19 @@ class Building:
     #: zone -> the return plenum its return air flows into (AirLoopHVAC:ReturnPlenum with
     #: the zones' ZoneHVAC:EquipmentConnections return nodes)
     return_plenum: dict[str, str] = field(default_factory=dict)
+    #: internal heat gain objects (People, Lights, equipment) by name
+    internal_gains: dict[str, InternalGain] = field(default_factory=dict)
+
+    def gain_split(self, zone: str) -> tuple[float, float, float]:
+        """(convective, radiant, return-air) shares [-] of ``zone``'s design internal heat,
+        weighted by each object's design power; (1, 0, 0) for a zone without objects."""
+        objs = [g for g in self.internal_gains.values() if g.zone == zone and g.power > 0]
+        total = sum(g.power for g in objs)
+        if total <= 0:
+            return (1.0, 0.0, 0.0)
+        rad = sum(g.power * g.radiant for g in objs) / total
+        ret = sum(g.power * g.return_air for g in objs) / total
+        return (max(1.0 - rad - ret, 0.0), rad, ret)
 
     def zone(self, name: str) -> Zone:
         """Zone by case-insensitive name."""
@@ -1039,12 +1088,111 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
     ground = _ground_temperature(data, surfaces, notes)
     shading = _shading(data, geo, zones_raw, base, windows, notes)
     plenums = _return_plenums(data, zkey, notes)
+    gains = _internal_gains(data, zkey, zones, notes)
     return Building(
         name=bname, version=version_text, north_axis=north, zones=zones, surfaces=surfaces,
         windows=windows, constructions=constructions, internal_masses=masses,
         unsupported=unsupported, notes=notes, infiltration=infiltration, schedules=schedules,
         ground_temperature=ground, shading=shading, return_plenum=plenums,
+        internal_gains=gains,
     )
+
+
+#: epJSON field names of the design level per calculation method, by gain object type
+_GAIN_LEVELS = {
+    "Lights": {"lightinglevel": ("lighting_level", "zone"),
+               "watts/area": ("watts_per_floor_area", "area"),
+               "watts/person": ("watts_per_person", "person")},
+    "ElectricEquipment": {"equipmentlevel": ("design_level", "zone"),
+                          "watts/area": ("watts_per_floor_area", "area"),
+                          "watts/person": ("watts_per_person", "person")},
+}
+_GAIN_LEVELS["GasEquipment"] = _GAIN_LEVELS["OtherEquipment"] = {
+    "equipmentlevel": ("design_level", "zone"),
+    "power/area": ("power_per_floor_area", "area"),
+    "watts/area": ("power_per_floor_area", "area"),
+    "power/person": ("power_per_person", "person"),
+    "watts/person": ("power_per_person", "person")}
+
+
+def _gain_zones(data: Mapping[str, Any], zkey: Mapping[str, str], name: str) -> list[str]:
+    """The zones an internal gain object's zone field names: a zone or a ZoneList's zones."""
+    low = name.strip().lower()
+    if low in zkey:
+        return [zkey[low]]
+    for key, f in data.get("ZoneList", {}).items():
+        if key.lower() == low:
+            return [zkey[str(z.get("zone_name", "")).lower()] for z in f.get("zones", [])
+                    if str(z.get("zone_name", "")).lower() in zkey]
+    return []
+
+
+def _people_count(f: Mapping[str, Any], floor_area: float) -> float:
+    """Design number of people of a People object in a zone of ``floor_area`` [m2]."""
+    method = str(f.get("number_of_people_calculation_method", "People")).lower()
+    if method == "people/area":
+        return _num(f.get("people_per_floor_area"), 0.0) * floor_area
+    if method == "area/person":
+        per = _num(f.get("floor_area_per_person"), 0.0)
+        return floor_area / per if per > 0 else 0.0
+    return _num(f.get("number_of_people"), 0.0)
+
+
+def _internal_gains(data: Mapping[str, Any], zkey: Mapping[str, str],
+                    zones: Mapping[str, Zone], notes: list[str]) -> dict[str, InternalGain]:
+    """People, Lights and equipment objects as :class:`InternalGain` (design sensible heat
+    and its radiant / return-air shares); a ZoneList object gives one gain per zone."""
+    def zones_of(f: Mapping[str, Any]) -> list[str]:
+        return _gain_zones(data, zkey, str(f.get("zone_or_zonelist_or_space_or_spacelist_name")
+                                           or f.get("zone_or_zonelist_name") or ""))
+
+    people: dict[str, float] = {}
+    for f in data.get("People", {}).values():
+        for z in zones_of(f):
+            people[z] = people.get(z, 0.0) + _people_count(f, zones[z].floor_area)
+    out: dict[str, InternalGain] = {}
+    for name, f in data.get("People", {}).items():
+        zs = zones_of(f)
+        if not zs:
+            notes.append(f"People {name}: zone not found; its heat split not used")
+            continue
+        act = _constant_schedule(data, str(f.get("activity_level_schedule_name", ""))) \
+            if f.get("activity_level_schedule_name") else None
+        act = act if act and act > 0 else PERSON_HEAT
+        sens = f.get("sensible_heat_fraction")
+        sens = _num(sens, PERSON_SENSIBLE) if not isinstance(sens, str) else PERSON_SENSIBLE
+        for z in zs:
+            n = _people_count(f, zones[z].floor_area)
+            key = name if len(zs) == 1 else f"{name}:{z}"
+            out[key] = InternalGain(key, z, "People", n * act * sens,
+                                    min(max(_num(f.get("fraction_radiant"), 0.3), 0.0), 1.0))
+    for kind, levels in _GAIN_LEVELS.items():
+        for name, f in data.get(kind, {}).items():
+            zs = zones_of(f)
+            method = str(f.get("design_level_calculation_method",
+                               "LightingLevel" if kind == "Lights" else "EquipmentLevel")).lower()
+            if not zs or method not in levels:
+                notes.append(f"{kind} {name}: zone or design level method not read; its heat "
+                             "split not used")
+                continue
+            field_name, per = levels[method]
+            level = _num(f.get(field_name), 0.0)
+            rad = _num(f.get("fraction_radiant"), 0.0)
+            if kind == "Lights":
+                keep, ret = 1.0, _num(f.get("return_air_fraction"), 0.0)
+                rad += _num(f.get("fraction_visible"), 0.0)
+            else:
+                keep, ret = 1.0 - _num(f.get("fraction_latent"), 0.0) \
+                    - _num(f.get("fraction_lost"), 0.0), 0.0
+            if keep <= 0:
+                continue
+            for z in zs:
+                power = level * {"zone": 1.0, "area": zones[z].floor_area,
+                                 "person": people.get(z, 0.0)}[per] * keep
+                key = name if len(zs) == 1 else f"{name}:{z}"
+                out[key] = InternalGain(key, z, kind, power, min(max(rad / keep, 0.0), 1.0),
+                                        min(max(ret / keep, 0.0), 1.0))
+    return out
 
 
 def _return_plenums(data: Mapping[str, Any], zkey: Mapping[str, str],

@@ -196,6 +196,11 @@ InteriorRadiation = Annotated[str, typer.Option(
     help="long-wave exchange between a room's inside faces: 'none' (the paper: combined "
          "films to the air) or 'star' (a star network; the films are convection alone; "
          "docs/model.md \"Interior long-wave exchange\")")]
+InternalGains = Annotated[str, typer.Option(
+    help="where the internal gains' heat goes: 'air' (the paper: all on the room air) or "
+         "'idf' (split as the IDF's People, Lights and equipment: convective on the air, "
+         "radiant on the inside faces, return-air share in the plenum; docs/model.md "
+         "\"Internal gains\")")]
 Films = Annotated[str | None, typer.Option(
     help="priors and starting values of the inside films: 'combined' (the handbook's "
          "convection + radiation films) or 'convective' (convection alone); default "
@@ -283,6 +288,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  roof_solar: RoofSolar = "horizontal",
                  sky: Sky = "none",
                  interior_radiation: InteriorRadiation = "none",
+                 internal_gains: InternalGains = "air",
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'daytime' (the default since 2026-11-25): a weekend 08-18 h rise of "
@@ -306,6 +312,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  ground=ground, shading=shading, return_air=return_air,
                                  roof_solar=roof_solar, sky=sky,
                                  interior_radiation=interior_radiation, films=films,
+                                 internal_gains=internal_gains,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -386,6 +393,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   roof_solar: RoofSolar = "horizontal",
                   sky: Sky = "none",
                   interior_radiation: InteriorRadiation = "none",
+                  internal_gains: InternalGains = "air",
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'daytime' (the default since 2026-11-25: a weekend 08-18 h "
@@ -406,7 +414,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 weekend_gains=weekend_gains, ground=ground,
                                 shading=shading, return_air=return_air,
                                 roof_solar=roof_solar, sky=sky,
-                                interior_radiation=interior_radiation, films=films)
+                                interior_radiation=interior_radiation, films=films,
+                                internal_gains=internal_gains)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

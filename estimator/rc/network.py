@@ -71,6 +71,12 @@ SKY_RADIATION = 4.2
 #: radiative share of a combined inside film (ISO 6946 h_r0 = 5.7 for eps = 1); with
 #: ``interior_radiation="star"`` (docs/model.md "Interior long-wave exchange")
 INTERIOR_RADIATION = 5.1
+#: heat capacity of a window's glass [J/(m2 K)] (one 6 mm pane: 2500 kg/m3 x 840 J/(kg K));
+#: its node with ``interior_radiation="star"``
+GLASS_CAPACITY = 12600.0
+#: U-factor [W/(m2 K)] of windows whose IDF gives none (layered glazing) when no window of
+#: the building has one: double glazing in an aluminium frame (the U_win prior's mean)
+WINDOW_U_DEFAULT = 2.8
 #: Specific heat capacity of air c_p [J/(kg K)].
 CP_AIR = 1005.0
 #: Air density for room air capacity [kg/m3].
@@ -98,7 +104,8 @@ class StateLabel:
         ``"room_air"`` (a room in a model zone), ``"unmeasured_air"`` (a room in
         no model zone, e.g. a plenum), or the element kind ``"wall"``,
         ``"floor"``, ``"ceiling"``, ``"roof"``, ``"floor_ceiling"``,
-        ``"internal_mass"``.
+        ``"internal_mass"``, or ``"window"`` (a window's glass, with
+        ``interior_radiation="star"``).
     room : str
         Room (EnergyPlus zone) the state belongs to; for elements the room on the
         element's inside face.
@@ -197,8 +204,18 @@ class ModelOptions:
         gamma_floor and gamma_ceil are convection only and the room air answers its own
         heat (reheat, convective gains) as fast as its own capacity lets it, while the
         surfaces share the sun and radiant heat among themselves (EnergyPlus's inside heat
-        balance; the star network of ISO 13790 / ISO 52016-1). Windows take no part (U_win
-        stays a conductance to the air).
+        balance; the star network of ISO 13790 / ISO 52016-1). Each exterior window's glass
+        is a node of the network too (:data:`GLASS_CAPACITY`): convection gamma_IW to the
+        air, long-wave with the room's faces, and U_win :func:`glass_factor` to the outdoor
+        air (the rated U-factor's inside film is the model's own here); before 2026-11-25
+        windows took no part (U_win a conductance to the air).
+    internal_gains : {"air", "idf"}
+        Where a room's internal heat a_floor (c_IG + f_IG) goes (paper eq:q_ig): all on the
+        room air (the paper), or split as the IDF's People, Lights and equipment objects
+        split theirs (:meth:`~zonecast.estimator.idf.Building.gain_split`, weighted by
+        design power): the convective share on the air, the radiant share (long-wave and
+        visible) on the room's inside faces by area, the lights' return-air share on the
+        air of the room's return plenum. No parameter; the heat put in is the same.
     """
 
     roof_solar: str = "horizontal"
@@ -213,8 +230,11 @@ class ModelOptions:
     return_air: str = "idf"
     sky: str = "none"
     interior_radiation: str = "none"
+    internal_gains: str = "air"
 
     def __post_init__(self):
+        if self.internal_gains not in ("air", "idf"):
+            raise ModelDefinitionError("internal_gains must be 'air' or 'idf'")
         if self.interior_radiation not in ("none", "star"):
             raise ModelDefinitionError("interior_radiation must be 'none' or 'star'")
         if self.sky not in ("none", "clear", "iso"):
@@ -563,6 +583,21 @@ def _add_element(
     return nodes
 
 
+def glass_factor(u_value: float) -> float:
+    """Ratio [-] of a window's glass-to-outdoor conductance to its U-factor.
+
+    A window's U-factor (rated, with standard films) is air to air; with its glass as a
+    node (``interior_radiation="star"``) the inside film is the model's own (convection to
+    the air, long-wave to the other faces), so the node's conductance to the outdoor air is
+    1 / (1/U - 1/h_i) with EnergyPlus's inside film of the simple glazing model,
+    h_i = 0.359073 ln U + 6.949915 for U < 5.85 W/(m2 K), else 1.788041 U - 2.209041
+    (EnergyPlus Engineering Reference, "Simple Window Model"); U_win scales it.
+    """
+    u = float(min(max(u_value, 0.1), 7.0))
+    h_i = 0.359073 * np.log(u) + 6.949915 if u < 5.85 else 1.788041 * u - 2.209041
+    return 1.0 / (1.0 - u / h_i)
+
+
 def interior_radiation_links(faces: Sequence[tuple[int, float]],
                              h_r: float = INTERIOR_RADIATION) -> list[tuple[int, int, float]]:
     """Face-to-face conductances [W/K] of a room's star network with its node eliminated.
@@ -610,6 +645,27 @@ def _solar_targets(opts: ModelOptions, floors: list, others: list,
     else:
         targets = []
     return targets or [(air, 1.0)]
+
+
+def _gain_targets(building: Building, room: str, room_state: Mapping[str, int],
+                  floors: list, others: list, glass: float) -> list[tuple[int, float]]:
+    """(state, share) pairs of a room's internal heat (shares sum to 1): the IDF's
+    convective share on the room air, its radiant share on the room's inside faces by area
+    (the windows' share, which has no node, on the air), its return-air share on the air
+    of the room's return plenum (the room air without one); :meth:`Building.gain_split`."""
+    conv, rad, ret = building.gain_split(room)
+    air = room_state[room]
+    plenum = room_state.get(building.return_plenum.get(room, ""), air)
+    faces = list(floors) + list(others)
+    total = sum(a for _, a in faces) + glass
+    out = [(air, conv + (rad * glass / total if total > 0 else rad)), (plenum, ret)]
+    if total > 0:
+        out += [(node, rad * a / total) for node, a in faces]
+    merged: dict[int, float] = {}
+    for node, share in out:
+        if share > 0:
+            merged[node] = merged.get(node, 0.0) + share
+    return list(merged.items())
 
 
 def build_structure(
@@ -779,19 +835,28 @@ def build_structure(
         asm.link(nodes[0], room_state[m.zone], m.area, IW)
         other_faces.setdefault(m.zone, []).extend([(nodes[0], m.area), (nodes[-1], m.area)])
 
-    if opts.interior_radiation == "star":
-        n_links = _interior_radiation(asm, floor_faces, other_faces)
-        notes.append(f"interior long-wave exchange: {n_links} face-to-face links "
-                     f"({INTERIOR_RADIATION} W/m2K star network)")
-
     window_area: dict[str, np.ndarray] = {}
+    glass_faces: dict[str, list[tuple[int, float]]] = {}
+    rated = [(w.u_value, w.area) for w in building.windows.values() if w.u_value]
+    u_nominal = (sum(u * a for u, a in rated) / sum(a for _, a in rated)) if rated \
+        else WINDOW_U_DEFAULT
     shaded: list[tuple[str, int, float, np.ndarray, list[np.ndarray]]] = []
     for name in sorted(building.windows):
         w = building.windows[name]
         parent = surfaces[w.surface]
         r = room_state[w.zone]
         if parent.boundary == "Outdoors":
-            asm.to_temperature(r, 0, w.area, UWIN)  # paper eq:q_bh, window transmission
+            if opts.interior_radiation == "star":
+                # the glass as a node: convection to the air (gamma_IW), long-wave with the
+                # room's faces (the star), U_win scaled to glass + outside film to outdoors
+                node = asm.add_state(StateLabel("window", w.zone, name, 0),
+                                     GLASS_CAPACITY * w.area)
+                asm.link(node, r, w.area, IW)
+                asm.to_temperature(node, 0, w.area * glass_factor(w.u_value or u_nominal),
+                                   UWIN)
+                glass_faces.setdefault(w.zone, []).append((node, w.area))
+            else:
+                asm.to_temperature(r, 0, w.area, UWIN)  # paper eq:q_bh, window transmission
             targets = _solar_targets(opts, floor_faces.get(w.zone, []),
                                      other_faces.get(w.zone, []), r)
             cols = facade_of(parent.tilt, parent.azimuth, opts.roof_solar, rotation)
@@ -817,6 +882,12 @@ def build_structure(
         else:
             notes.append(f"window {name} on a {parent.boundary} surface: ignored")
     shading = _window_shading(shaded, window_area, notes)
+    if opts.interior_radiation == "star":
+        for room, faces in glass_faces.items():
+            other_faces.setdefault(room, []).extend(faces)  # after the solar targets
+        n_links = _interior_radiation(asm, floor_faces, other_faces)
+        notes.append(f"interior long-wave exchange: {n_links} face-to-face links "
+                     f"({INTERIOR_RADIATION} W/m2K star network; windows' glass as nodes)")
     if opts.infiltration == "idf":
         for name in sorted(building.infiltration):
             inf = building.infiltration[name]
@@ -852,12 +923,29 @@ def build_structure(
     zone_names = list(zone_rooms)
     b_ig = np.zeros((n, len(zone_names)))
     c_mat = np.zeros((len(zone_names), n))
+    glass: dict[str, float] = {}  # window area without a node (its radiant share: the air)
+    for w in building.windows.values():
+        if opts.interior_radiation != "star" or surfaces[w.surface].boundary != "Outdoors":
+            glass[w.zone] = glass.get(w.zone, 0.0) + w.area
+    n_split = 0
     for zi, z in enumerate(zone_names):
         vols = np.array([building.zones[r].volume for r in zone_rooms[z]])
         for r, vol in zip(zone_rooms[z], vols):
             i = room_state[r]
-            b_ig[i, zi] = building.zones[r].floor_area / cap[i]  # paper eq:q_ig
+            heat = building.zones[r].floor_area  # paper eq:q_ig: a_floor (c_IG + f_IG)
+            if opts.internal_gains == "idf":
+                targets = _gain_targets(building, r, room_state, floor_faces.get(r, []),
+                                        other_faces.get(r, []), glass.get(r, 0.0))
+                n_split += len(targets) > 1
+            else:
+                targets = [(i, 1.0)]
+            for node, share in targets:
+                b_ig[node, zi] += heat * share / cap[node]
             c_mat[zi, i] = vol / vols.sum()  # volume-weighted mean of the zone's rooms
+    if opts.internal_gains == "idf":
+        notes.append(f"internal gains of {n_split} rooms split as the IDF's People, Lights and "
+                     "equipment: convective on the air, radiant on the inside faces, "
+                     "return-air share in the return plenum")
     return RCStructure(
         labels=asm.labels,
         rooms=rooms,

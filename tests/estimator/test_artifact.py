@@ -38,6 +38,10 @@ def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
                                             model_options={"interior_radiation": "star"}))
     assert star.model.structure.options.interior_radiation == "star"
     assert air.model.structure.options.interior_radiation == "none"  # a file not naming it
+    split = load_model_file(write_model_file(tmp_path / "g.json", vb / "site.yaml",
+                                             model_options={"internal_gains": "idf"}))
+    assert split.model.structure.options.internal_gains == "idf"
+    assert air.model.structure.options.internal_gains == "air"  # a file not naming it
     legacy = json.loads((tmp_path / "a.json").read_text())
     del legacy["model_options"]
     (tmp_path / "legacy.json").write_text(json.dumps(legacy))

@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
@@ -636,35 +637,62 @@ def test_interior_radiation_mesh_passes_the_stars_heat(faces):
 
 
 def test_interior_radiation_star_links_a_rooms_faces(five_zone):
-    """``interior_radiation="star"``: each room's inside faces are linked pairwise by
-    parameter-free conductances (A0), A stays Metzler and stable with the same equilibrium,
-    and the option is validated."""
-    from zonecast.estimator.rc.network import INTERIOR_RADIATION
+    """``interior_radiation="star"``: each room's inside faces and windows' glass are linked
+    pairwise by parameter-free conductances (A0), each window's glass is a node between the
+    air (gamma_IW) and the outdoor air (U_win x glass factor), A stays Metzler and stable
+    with the same equilibrium, and the option is validated."""
+    from zonecast.estimator.rc.network import (
+        GLASS_CAPACITY,
+        INTERIOR_RADIATION,
+        UWIN,
+        WINDOW_U_DEFAULT,
+        glass_factor,
+    )
 
     plain = build_structure(five_zone, FIVE_ZONES, FIVE_BOXES, NO_LEAK)
     star = build_structure(five_zone, FIVE_ZONES, FIVE_BOXES,
                            ModelOptions(infiltration="none", ground="adiabatic",
                                         shading="none", return_air="none",
                                         interior_radiation="star"))
-    assert star.n == plain.n and star.labels == plain.labels
-    extra = ((star.A0 - plain.A0).toarray() * star.capacity[:, None])  # [W/K]
+    windows = [w for w in sorted(five_zone.windows)
+               if five_zone.surfaces[five_zone.windows[w].surface].boundary == "Outdoors"]
+    n = plain.n
+    assert star.n == n + len(windows) and star.labels[:n] == plain.labels
+    assert [lab.element for lab in star.labels[n:]] == windows
+    assert {lab.kind for lab in star.labels[n:]} == {"window"}
+    for k, name in enumerate(windows):
+        w = five_zone.windows[name]
+        assert star.capacity[n + k] == pytest.approx(GLASS_CAPACITY * w.area)
+        assert star.Bv_p[UWIN][n + k, 0] * star.capacity[n + k] == \
+            pytest.approx(w.area * glass_factor(w.u_value or WINDOW_U_DEFAULT))
+    # the window's U leaves the room air: U_win acts on the glass nodes only
+    assert star.Bv_p[UWIN][:n].nnz == 0 and plain.Bv_p[UWIN].nnz > 0
+    pad = sp.block_diag([plain.A0, sp.csr_matrix((len(windows), len(windows)))]).tocsr()
+    extra = ((star.A0 - pad).toarray() * star.capacity[:, None])  # [W/K]
     np.fill_diagonal(extra, 0.0)
     assert np.all(extra >= -1e-9) and np.allclose(extra, extra.T)
     air = set(plain.air_states())
     linked = np.flatnonzero(extra.any(axis=1))
-    assert linked.size and not air & set(linked)  # faces only, never the room air
-    # the conductance out of one room's faces is h_r (sum A - A_i) A_i / sum A each: below
-    # h_r A_i, so the links of each face sum to less than h_r times the largest face area
-    assert extra.sum() > 0 and any("interior long-wave" in n for n in star.notes)
+    assert linked.size and not air & set(linked)  # faces and glass, never the room air
+    assert set(range(n, star.n)) <= set(linked)  # every window exchanges long-wave
+    assert extra.sum() > 0 and any("interior long-wave" in m for m in star.notes)
     theta = ParameterSet(list(FIVE_ZONES)).physical
     for s in (plain, star):
         a = s.A(theta).toarray()
         off = a - np.diag(np.diag(a))
         assert np.all(off >= -1e-12)
         assert np.max(np.linalg.eigvals(a).real) < 0
+        # outdoor and supply air at 17 degC, no sun, no airflow: every state at 17 degC
+        v = np.zeros(s.Bv0.shape[1])
+        v[:2] = 17.0
+        x = np.linalg.solve(a, -(s.Bv(theta) @ v))
+        np.testing.assert_allclose(x, 17.0, atol=1e-9)
     # equal temperatures everywhere: the links carry nothing (rows of the extra sum to 0)
-    d = (star.A0 - plain.A0).toarray()
+    d = (star.A0 - pad).toarray()
     np.testing.assert_allclose(d.sum(axis=1), 0.0, atol=1e-12)
     assert INTERIOR_RADIATION == pytest.approx(4 * 0.9 * 5.670e-8 * 293.15 ** 3, rel=0.01)
+    # the rated U-factor with EnergyPlus's inside film of its simple glazing model
+    assert 1 / (1 / (4.9 * glass_factor(4.9)) + 1 / (0.359073 * np.log(4.9) + 6.949915)) == \
+        pytest.approx(4.9)
     with pytest.raises(ModelDefinitionError, match="interior_radiation must be 'none' or 'star'"):
         ModelOptions(interior_radiation="yes")

@@ -76,11 +76,12 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   ground: str = "idf", shading: str = "idf", return_air: str = "idf",
                   roof_solar: str = "horizontal", sky: str = "none",
                   interior_radiation: str = "none", films: str | None = None,
-                  progress: Progress = _quiet) -> IdentifyOutcome:
+                  internal_gains: str = "air", progress: Progress = _quiet) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
-    ``interior_radiation``: as :class:`~zonecast.estimator.rc.network.ModelOptions`;
+    ``interior_radiation``, ``internal_gains``: as
+    :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``: as
     :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
     pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar,
@@ -88,7 +89,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                                                          ground=ground, shading=shading,
                                                          return_air=return_air,
                                                          roof_solar=roof_solar, sky=sky,
-                                                         interior_radiation=interior_radiation))
+                                                         interior_radiation=interior_radiation,
+                                                         internal_gains=internal_gains))
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,

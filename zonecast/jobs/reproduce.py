@@ -385,12 +385,14 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         infiltration: str = "idf", weekend_gains: bool | str = "daytime",
         ground: str = "idf", shading: str = "idf", return_air: str = "idf",
         roof_solar: str = "horizontal", sky: str = "none",
-        interior_radiation: str = "none", films: str | None = None) -> Results:
+        interior_radiation: str = "none", films: str | None = None,
+        internal_gains: str = "air") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
-    ``interior_radiation``: :class:`~zonecast.estimator.rc.network.ModelOptions`;
+    ``interior_radiation``, ``internal_gains``:
+    :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``films``: as :meth:`Pipeline.identify`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
     the forecast study's split (never its validation weeks)."""
@@ -407,7 +409,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                               options=ModelOptions(infiltration=infiltration, ground=ground,
                                                    shading=shading, return_air=return_air,
                                                    roof_solar=roof_solar, sky=sky,
-                                                   interior_radiation=interior_radiation))
+                                                   interior_radiation=interior_radiation,
+                                                   internal_gains=internal_gains))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()

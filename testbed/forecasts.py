@@ -52,7 +52,9 @@ def _ar1(rng: np.random.Generator, n: int, rho: float) -> np.ndarray:
 
 
 def weather_forecasts(site: Site, frame: pd.DataFrame, *, seed: int = 0, every: str = "6h",
-                      hours: int = 36, min_hours: int = 24) -> list[dict]:
+                      hours: int = 36, min_hours: int = 24,
+                      temperature_sigma: tuple[float, float] = (0.3, 2.0),
+                      irradiance_sigma: tuple[float, float] = (0.10, 0.35)) -> list[dict]:
     """Synthetic forecasts over the span of ``frame`` (SI telemetry indexed by UTC time).
 
     Parameters
@@ -68,6 +70,10 @@ def weather_forecasts(site: Site, frame: pd.DataFrame, *, seed: int = 0, every: 
         Hours ahead of each forecast [h].
     min_hours : int
         Shortest forecast issued [h].
+    temperature_sigma, irradiance_sigma : (float, float)
+        Error standard deviations at lead 0 and 24 h (linear in between): temperature [K],
+        irradiance factor [-]; the defaults are :data:`ERROR_MODEL`'s, (0, 0) gives the
+        weather itself (the same random draws, so one part can be switched off alone).
 
     Returns
     -------
@@ -104,8 +110,10 @@ def weather_forecasts(site: Site, frame: pd.DataFrame, *, seed: int = 0, every: 
         truth = hourly.loc[hours_idx[:n]].to_numpy(dtype=float)
         rng = np.random.default_rng([seed, 31, int(s.value // 10**9)])
         lead = np.arange(n, dtype=float)
-        sig_t = 0.3 + 1.7 * lead / 24.0
-        sig_i = 0.10 + 0.25 * lead / 24.0
+        t0, t24 = temperature_sigma
+        i0, i24 = irradiance_sigma
+        sig_t = t0 + (t24 - t0) * lead / 24.0
+        sig_i = i0 + (i24 - i0) * lead / 24.0
         temp_f = truth[:, 0] + sig_t * _ar1(rng, n, 0.9)
         factor = np.maximum(0.0, 1.0 + sig_i * _ar1(rng, n, 0.8))
         ghi = np.minimum(truth[:, 1] * factor, 1300.0)
@@ -128,6 +136,10 @@ def write_weather_forecasts(campaign: Path, *, seed: int = 0, out: Path | None =
     frame = load_telemetry(campaign / "telemetry.csv", site).frame
     bodies = weather_forecasts(site, frame, seed=seed, **kwargs)
     path = Path(out) if out is not None else campaign / "weather_forecasts.json"
-    path.write_text(json.dumps({"seed": seed, "error_model": ERROR_MODEL,
-                                "forecasts": bodies}))
+    model = dict(ERROR_MODEL)
+    for key, name in (("temperature_sigma", "temperature_sigma_k"),
+                      ("irradiance_sigma", "irradiance_sigma")):
+        if key in kwargs:
+            model[name] = [float(v) for v in kwargs[key]]
+    path.write_text(json.dumps({"seed": seed, "error_model": model, "forecasts": bodies}))
     return path

@@ -96,3 +96,14 @@ def test_diagnose_fails_with_a_clear_message_on_a_missing_model(tmp_path):
                               str(tmp_path), "--out", str(tmp_path / "d")])
     assert res.exit_code == 2
     assert "none.json" in res.output
+
+
+def test_identify_passes_the_internal_gains_option_to_the_model(tmp_path):
+    """--internal-gains reaches ModelOptions: a wrong value fails with its message."""
+    from pathlib import Path
+
+    site = Path(__file__).resolve().parents[1] / "configs" / "sites" / "nrel" / "5ZoneAirCooled.site.yaml"
+    res = runner.invoke(app, ["identify", "--site", str(site), "--data", str(tmp_path),
+                              "--out", str(tmp_path / "m.json"), "--internal-gains", "walls"])
+    assert res.exit_code == 2
+    assert "internal_gains must be 'air' or 'idf'" in res.output

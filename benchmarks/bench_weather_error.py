@@ -11,7 +11,10 @@ validation midnights, with four error models built from the same random draws:
 - ``temperature only`` and ``irradiance only``: one part of the error switched off;
 
 and prints each one's RMS per zone, its ratio to the known-inputs forecast (issue 15's must:
-<= 1.10) and the served 90 % interval coverage.
+<= 1.10) and the served 90 % interval coverage. Then, with the error-free weather forecasts,
+which learned HVAC input costs most: the measured inputs with one group (airflows,
+supply-air temperature, the boxes' discharge-air rise, all three) replaced by the service's
+own input forecast at each issue (:meth:`OnlineEstimator.forecast_inputs`).
 
     python benchmarks/bench_weather_error.py --campaign CAMPAIGN --report REPORT
 
@@ -29,8 +32,13 @@ import platform
 import time
 from pathlib import Path
 
+import numpy as np
+from zonecast.estimator.artifact import load_model_file
+from zonecast.estimator.constants import HORIZON
+from zonecast.estimator.forecast import issue_rows, week_split
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.site import load_site
+from zonecast.estimator.streaming import OnlineEstimator, has_discharge, model_rows, telemetry_frame
 from zonecast.estimator.telemetry import load_telemetry
 from zonecast.estimator.weather_forecast import parse_weather_forecast
 from zonecast.testbed.forecasts import ERROR_MODEL, weather_forecasts
@@ -42,6 +50,55 @@ DESIGNED_I = tuple(ERROR_MODEL["irradiance_sigma"])
 CASES = {"as designed": (DESIGNED_T, DESIGNED_I), "no error": ((0.0, 0.0), (0.0, 0.0)),
          "temperature only": (DESIGNED_T, (0.0, 0.0)),
          "irradiance only": ((0.0, 0.0), DESIGNED_I)}
+
+
+def hvac_attribution(model: Path, campaign: Path, data, weather) -> dict:
+    """RMS per zone [K] of the forecasts at the validation midnights with the measured
+    inputs (``known``) and with one group of HVAC inputs from the service's own forecast."""
+    bundle = load_model_file(model)
+    split = week_split(data, 0)
+    issues = {data.times[r].tz_convert("UTC"): (r, split["weeks"][i]["rows"][1])
+              for i in split["validation"] for r in issue_rows(data, split["weeks"][i]["rows"])}
+    nb, rise = data.u.shape[1], has_discharge(bundle)
+    groups = {"airflows": list(range(nb)), "supply-air temperature": [nb + 1]}
+    if rise:
+        groups["discharge-air rise"] = list(range(nb + 7, 2 * nb + 7))
+    groups["all three"] = sorted(c for cols in groups.values() for c in cols)
+    frame = telemetry_frame(campaign / "telemetry.csv", bundle)
+    rows = model_rows(bundle, frame[frame.notna().any(axis=1)])
+    est = OnlineEstimator(bundle)
+    wfs, j = sorted(weather, key=lambda w: w.issued), 0
+    preds: dict[str, list] = {g: [] for g in ["known", *groups]}
+    meas = []
+    for k, t in enumerate(rows.times):
+        if t > max(issues):
+            break
+        while j < len(wfs) and wfs[j].issued <= t:
+            est.set_weather_forecast(wfs[j])
+            j += 1
+        est.advance(t, rows.u[k], rows.v[k], rows.y[k], rows.reheat[k])
+        if t not in issues or not est.started:
+            continue
+        r, stop = issues[t]
+        known = np.hstack([data.u[r:r + HORIZON], data.v[r:r + HORIZON]]
+                          + ([data.reheat[r:r + HORIZON]] if rise else []))
+        if len(known) < HORIZON or not np.isfinite(known).all():
+            continue
+        learned = est.forecast_inputs()
+        y = np.full((HORIZON, len(data.zones)), np.nan)
+        n = min(HORIZON, stop - r - 1)
+        y[:n] = data.y[r + 1:r + 1 + n]
+        meas.append(y)
+        preds["known"].append(est.forecast(known).mean)
+        for g, cols in groups.items():
+            mix = known.copy()
+            mix[:, cols] = learned[:, cols]
+            preds[g].append(est.forecast(mix).mean)
+    out = {}
+    for g, p in preds.items():
+        rms = np.sqrt(np.nanmean((np.array(p) - np.array(meas)) ** 2, axis=(0, 1)))
+        out[g] = {**dict(zip(data.zones, rms.tolist())), "mean": float(rms.mean())}
+    return out
 
 
 def main() -> None:
@@ -84,6 +141,18 @@ def main() -> None:
               f"{cov.get('all', float('nan')):.3f} ({min(zc):.3f}-{max(zc):.3f}) |")
     print("| known inputs (measured weather and HVAC) | "
           + " | ".join(f"{known[z]:.3f}" for z in zones) + f" | {known['mean']:.3f} | 1 | |")
+    t = time.perf_counter()
+    perfect = [parse_weather_forecast(b) for b in weather_forecasts(
+        site, frame, seed=args.seed, temperature_sigma=(0.0, 0.0), irradiance_sigma=(0.0, 0.0))]
+    attr = hvac_attribution(model, args.campaign, data, perfect)
+    print(f"\nmeasured inputs with one learned HVAC group, error-free weather forecasts "
+          f"({time.perf_counter() - t:.0f} s):\n")
+    print("| inputs | " + " | ".join(zones) + " | mean |")
+    print("|---|" + "---|" * (len(zones) + 1))
+    for g, rms in attr.items():
+        label = "measured" if g == "known" else f"measured, learned {g}"
+        print(f"| {label} | " + " | ".join(f"{rms[z]:.3f}" for z in zones)
+              + f" | **{rms['mean']:.3f}** |")
 
 
 if __name__ == "__main__":

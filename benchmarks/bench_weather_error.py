@@ -35,7 +35,6 @@ from pathlib import Path
 import numpy as np
 from zonecast.estimator.artifact import load_model_file
 from zonecast.estimator.constants import HORIZON
-from zonecast.estimator.forecast import issue_rows, week_split
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.site import load_site
 from zonecast.estimator.streaming import OnlineEstimator, has_discharge, model_rows, telemetry_frame
@@ -43,7 +42,7 @@ from zonecast.estimator.telemetry import load_telemetry
 from zonecast.estimator.weather_forecast import parse_weather_forecast
 from zonecast.testbed.forecasts import ERROR_MODEL, weather_forecasts
 
-from zonecast.jobs.reproduce import service_check
+from zonecast.jobs.reproduce import measured_inputs, service_check, validation_issues
 
 DESIGNED_T = tuple(ERROR_MODEL["temperature_sigma_k"])
 DESIGNED_I = tuple(ERROR_MODEL["irradiance_sigma"])
@@ -56,9 +55,8 @@ def hvac_attribution(model: Path, campaign: Path, data, weather) -> dict:
     """RMS per zone [K] of the forecasts at the validation midnights with the measured
     inputs (``known``) and with one group of HVAC inputs from the service's own forecast."""
     bundle = load_model_file(model)
-    split = week_split(data, 0)
-    issues = {data.times[r].tz_convert("UTC"): (r, split["weeks"][i]["rows"][1])
-              for i in split["validation"] for r in issue_rows(data, split["weeks"][i]["rows"])}
+    issues = {data.times[r].tz_convert("UTC"): (r, stop)
+              for r, stop in validation_issues(data, 0)}
     nb, rise = data.u.shape[1], has_discharge(bundle)
     groups = {"airflows": list(range(nb)), "supply-air temperature": [nb + 1]}
     if rise:
@@ -80,8 +78,7 @@ def hvac_attribution(model: Path, campaign: Path, data, weather) -> dict:
         if t not in issues or not est.started:
             continue
         r, stop = issues[t]
-        known = np.hstack([data.u[r:r + HORIZON], data.v[r:r + HORIZON]]
-                          + ([data.reheat[r:r + HORIZON]] if rise else []))
+        known = measured_inputs(data, r, r + HORIZON, rise)
         if len(known) < HORIZON or not np.isfinite(known).all():
             continue
         learned = est.forecast_inputs()

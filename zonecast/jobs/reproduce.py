@@ -300,6 +300,21 @@ def _weather_forecasts(campaign: Path, seed: int) -> list:
     return [parse_weather_forecast(b) for b in json.loads(path.read_text())["forecasts"]]
 
 
+def validation_issues(data: ModelData, seed: int) -> list[tuple[int, int]]:
+    """(issue row, last row of its week) of the day-ahead forecasts at the validation
+    midnights of the forecast study's split (Table 3's issues)."""
+    split = week_split(data, seed)
+    return [(r, split["weeks"][i]["rows"][1]) for i in split["validation"]
+            for r in issue_rows(data, split["weeks"][i]["rows"])]
+
+
+def measured_inputs(data: ModelData, a: int, b: int, discharge: bool) -> np.ndarray:
+    """Rows [a, b) of the served forecast's inputs as measured: u, v and, for a site with
+    discharge-air points, each box's discharge-air rise."""
+    parts = [data.u[a:b], data.v[a:b]] + ([data.reheat[a:b]] if discharge else [])
+    return np.hstack(parts)
+
+
 def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
                   weather: list | None = None) -> dict:
     """The service's day-ahead forecast (:class:`~zonecast.estimator.streaming.OnlineEstimator`:
@@ -322,9 +337,7 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
 
     RMS per zone, per horizon, and coverage of the served 90 % intervals (``lower``,
     ``upper``: calibrated on the building's own recent errors) per zone and overall."""
-    split = week_split(data, seed)
-    issues = [(r, split["weeks"][i]["rows"][1]) for i in split["validation"]
-              for r in issue_rows(data, split["weeks"][i]["rows"])]
+    issues = validation_issues(data, seed)
     t0 = time.perf_counter()
     times = [data.times[r] for r, _ in issues]
     nb = data.u.shape[1]
@@ -333,8 +346,7 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
     rh = has_discharge(served.bundle)
 
     def inputs_at(a: int, b: int) -> np.ndarray:
-        parts = [data.u[a:b], data.v[a:b]] + ([data.reheat[a:b]] if rh else [])
-        return np.hstack(parts)
+        return measured_inputs(data, a, b, rh)
 
     measured, persisted = {}, {}
     for r, _ in issues:

@@ -83,6 +83,7 @@ from zonecast.estimator.dataset import (
     with_scheduled,
     zone_weights,
 )
+from zonecast.estimator.effects import box_zone_matrix
 from zonecast.estimator.forecast import Forecast
 from zonecast.estimator.gains import (
     DayAheadGains,
@@ -122,6 +123,10 @@ HOLD_SETPOINTS = True
 #: time a room needs to follow a set-point step [h]: the band keeps the previous set
 #: point this long after a step (chosen on the family's training members, docs/forecasts.md)
 HOLD_RECOVERY_H = 0.25
+#: forecast the reheat of boxes with a discharge-air point as their thermostat does: the
+#: rise that holds the zone at the heating set point, none above it (docs/forecasts.md
+#: "Reheat as the thermostat's answer"); the default of :attr:`OnlineEstimator.reheat_control`
+REHEAT_CONTROL = False
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
            "StepReport", "checkpoint_header", "has_discharge", "model_rows", "offline_forecasts",
@@ -469,33 +474,80 @@ class OnlineEstimator:
         f_ig = self.dayahead_gains()
         if inputs is None:
             ins = self.forecast_inputs()
+            served = True
         else:
+            served = False
             ins = np.asarray(inputs, dtype=float)
             if ins.shape != (HORIZON, self._nin) or not np.isfinite(ins).all():
                 raise ValueError(f"inputs must be finite with shape ({HORIZON}, {self._nin}): "
                                  "u per box, then Ta, Ts, solE, solS, solW, solN per interval"
                                  + (", then the discharge-air rise per box" if self._rh else ""))
-        mean = self._run_forecast(ins, f_ig)
+        mean = self._run_forecast(ins, f_ig, control=served)
         std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
         times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
         return Forecast(t, times, mean, std, f_ig, self.bundle.zones, self.bundle.version,
                         halfwidth=self.calibrator.halfwidth(t.value // STEP.value, std))
 
-    def _run_forecast(self, ins: np.ndarray, f_ig: np.ndarray) -> np.ndarray:
+    def _run_forecast(self, ins: np.ndarray, f_ig: np.ndarray, *,
+                      control: bool = False) -> np.ndarray:
         """Zone temperatures (HORIZON, n_zones) [degC] from the current state with the
-        inputs ``ins`` and gains ``f_ig`` over the horizon."""
+        inputs ``ins`` and gains ``f_ig`` over the horizon. ``control`` (the served
+        forecast, when :attr:`reheat_control` is on and the site has a thermostat): the
+        reheat of the boxes with a discharge-air point is the thermostat's
+        (:meth:`_controlled_run`), not the rise in ``ins``."""
         m = self.bundle.model
         nb = m.n_boxes
         u, v = ins[:, :nb], ins[:, nb:nb + NV]
         forcing = v @ m.Bv.T + (f_ig + m.params.c_ig) @ m.B_ig.T
-        if self._rh:  # the boxes' discharge-air rise (docs/model.md "Discharge air")
-            forcing = forcing + m.reheat_forcing(u, ins[:, nb + NV:])
-        xs = self._ladder.for_airflows(u).run(self._x, u, forcing, v[:, 1])
+        stepper = self._ladder.for_airflows(u)
+        band = (self._setpoint_band() if self.hold_setpoints and self._band is not None
+                else None)
+        if (control and self.reheat_control and band is not None and self._rh
+                and self._coil.any()):
+            xs = self._controlled_run(stepper, u, forcing, v[:, 1], ins[:, nb + NV:], band[0])
+        else:
+            if self._rh:  # the boxes' discharge-air rise (docs/model.md "Discharge air")
+                forcing = forcing + m.reheat_forcing(u, ins[:, nb + NV:])
+            xs = stepper.run(self._x, u, forcing, v[:, 1])
         mean = xs[1:] @ m.C.T
-        if self.hold_setpoints and self._band is not None:
-            lo, hi = self._setpoint_band()
+        if band is not None:
+            lo, hi = band
             mean = np.minimum(np.maximum(mean, lo[:, None]), hi[:, None])
         return mean
+
+    def _controlled_run(self, stepper, u: np.ndarray, forcing: np.ndarray, ts: np.ndarray,
+                        rise: np.ndarray, heat: np.ndarray) -> np.ndarray:
+        """States (HORIZON + 1, n) [degC] of a forecast in which the boxes with a
+        discharge-air point reheat as a thermostat does (docs/forecasts.md "Reheat as the
+        thermostat's answer"): at each step the zones are first stepped without those
+        boxes' rise; a zone that ends the step below its heating set point ``heat``
+        (HORIZON,) [degC] gets the common rise r_z >= 0 of its coil boxes that brings it
+        to the set point at the step's end (the zones needing heat solved together with
+        the one-step responses C Gamma(u) of a unit rise); zones at or above it get none.
+        A box without airflow cannot reheat. Other inputs' rise (scheduled inputs, boxes
+        without a point) is kept from ``rise``."""
+        m = self.bundle.model
+        coil = self._coil
+        base = np.where(coil[None, :], 0.0, rise)
+        forcing = forcing + m.reheat_forcing(u, base)
+        bz = self._coil_zone  # (n_boxes, n_zones) coil boxes of each zone
+        xs = np.empty((len(u) + 1, m.n))
+        xs[0] = x = self._x
+        for h in range(len(u)):
+            x = stepper.step(x, u[h], forcing[h], ts[h])
+            if np.isfinite(heat[h]):
+                need = heat[h] - m.C @ x
+                can = (u[h] * coil) @ bz > 0
+                sel = np.flatnonzero((need > 1e-6) & can)
+                if len(sel):
+                    R = m.reheat_forcing(np.broadcast_to(u[h], (len(sel), len(u[h]))),
+                                         bz[:, sel].T)  # (k, n): unit rise per zone
+                    resp = stepper.columns(u[h], R.T)  # (n, k)
+                    G = m.C[sel] @ resp
+                    r = np.maximum(np.linalg.lstsq(G, need[sel], rcond=None)[0], 0.0)
+                    x = x + resp @ r
+            xs[h + 1] = x
+        return xs
 
     def _setpoint_band(self) -> tuple[np.ndarray, np.ndarray]:
         """(HORIZON,) heating and cooling set points over the forecast intervals [degC]
@@ -555,6 +607,12 @@ class OnlineEstimator:
         # point it crossed (docs/forecasts.md "Set points")
         self._band = site.thermostat
         self.hold_setpoints = HOLD_SETPOINTS
+        # the boxes whose reheat the thermostat model sets: those with a discharge-air
+        # point (they have a coil and measure what it does)
+        self.reheat_control = REHEAT_CONTROL
+        self._coil = np.array([b in site.boxes and site.boxes[b].discharge_temperature
+                               is not None for b in self.bundle.model.structure.boxes])
+        self._coil_zone = box_zone_matrix(self.bundle.model) * self._coil[:, None]
         self._band_at: int | None = None
         self._band_cache: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -576,7 +634,8 @@ class OnlineEstimator:
         if operating and self.started and self.time == t and self.calibrator.due(k):
             ins = self.forecast_inputs()
             if np.isfinite(ins).all():
-                self.calibrator.add_forecast(k, self._run_forecast(ins, self.dayahead_gains()))
+                self.calibrator.add_forecast(k, self._run_forecast(ins, self.dayahead_gains(),
+                                                                   control=True))
 
     def set_weather_forecast(self, wf: WeatherForecast | None) -> None:
         """Use ``wf`` for forecasts issued at or after ``wf.issued`` (until it is older

@@ -1,0 +1,90 @@
+"""The served forecast's reheat as the thermostat's answer (OnlineEstimator.reheat_control):
+the boxes with a discharge-air point reheat just enough to hold their zone at the heating
+set point, none above it; inputs given by the caller (known-input evaluations) keep their
+measured rise."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+
+@pytest.fixture(scope="module")
+def est(bundle, telemetry):
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    frame = telemetry.set_index(pd.to_datetime(telemetry["time"], format="ISO8601", utc=True))
+    frame = frame.drop(columns="time").astype(float)[list(bundle.site.point_units())]
+    tt, u, v, y = rows_from_frame(bundle, frame.iloc[:2 * 96 + 30])
+    e = OnlineEstimator(bundle)
+    for k in range(len(tt)):
+        e.advance(tt[k], u[k], v[k], y[k])
+    return e
+
+
+def _parts(est):
+    from zonecast.estimator.streaming import NV
+
+    m = est.bundle.model
+    nb = m.n_boxes
+    ins = est.persistence_inputs()
+    f_ig = est.dayahead_gains()
+    u, v = ins[:, :nb], ins[:, nb:nb + NV]
+    forcing = v @ m.Bv.T + (f_ig + m.params.c_ig) @ m.B_ig.T
+    return m, nb, ins, u, v, forcing, est._ladder.for_airflows(u)
+
+
+def test_controlled_run_holds_the_heating_setpoint_with_the_least_reheat(est):
+    m, nb, ins, u, v, forcing, stepper = _parts(est)
+    assert est._coil.all()  # the virtual building reports every box's discharge air
+    rise = ins[:, -nb:]
+    # no set point anywhere: the coil boxes' rise is dropped, nothing else changes
+    off = np.full(len(u), -np.inf)
+    free = stepper.run(est._x, u, forcing + m.reheat_forcing(u, np.zeros_like(rise)), v[:, 1])
+    np.testing.assert_array_equal(est._controlled_run(stepper, u, forcing, v[:, 1], rise, off),
+                                  free)
+    # a set point above the free forecast in some zones and steps
+    T_free = free[1:] @ m.C.T
+    sp = np.full(len(u), float(np.percentile(T_free, 60)))
+    xs = est._controlled_run(stepper, u, forcing, v[:, 1], rise, sp)
+    T = xs[1:] @ m.C.T
+    can = (u * est._coil) @ est._coil_zone > 0  # (H, zones) zone has a running coil box
+    assert can.any()
+    assert (T[can] >= sp[0] - 1e-6).all()  # held wherever a coil box runs
+    heated = can & (T_free < sp[0] - 0.05)
+    assert heated.sum() > 10
+    # the least reheat: a zone that was heated at a step ends it at the set point (not
+    # above), unless another zone's heat carried it there
+    at_sp = np.isclose(T[heated], sp[0], atol=1e-6)
+    assert at_sp.mean() > 0.9
+    # heat only raises temperatures: never below the forecast without reheat
+    assert (T >= T_free - 1e-9).all()
+
+
+def test_served_forecast_uses_the_controller_and_known_inputs_do_not(est):
+    from zonecast.estimator import streaming
+
+    assert est.reheat_control == streaming.REHEAT_CONTROL
+    before = est.reheat_control
+    try:
+        est.reheat_control = False
+        served_off = est.forecast().mean
+        ins = est.forecast_inputs()
+        known_off = est.forecast(ins).mean
+        est.reheat_control = True
+        served_on = est.forecast().mean
+        known_on = est.forecast(ins).mean
+    finally:
+        est.reheat_control = before
+    np.testing.assert_array_equal(known_on, known_off)  # given inputs keep their rise
+    # the served forecast is the controlled run, clipped to the band
+    m, nb, nv = est.bundle.model, est.bundle.model.n_boxes, streaming.NV
+    u = ins[:, :nb]
+    forcing = ins[:, nb:nb + nv] @ m.Bv.T + (est.dayahead_gains() + m.params.c_ig) @ m.B_ig.T
+    lo, hi = est._setpoint_band()
+    xs = est._controlled_run(est._ladder.for_airflows(u), u, forcing, ins[:, nb + 1],
+                             ins[:, -nb:], lo)
+    np.testing.assert_allclose(served_on, np.clip(xs[1:] @ m.C.T, lo[:, None], hi[:, None]),
+                               rtol=0, atol=1e-12)
+    assert not np.array_equal(served_on, served_off)

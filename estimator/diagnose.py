@@ -42,6 +42,7 @@ import scipy.sparse as sp
 from scipy import optimize, stats
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.effects import (
+    GAINS_PROFILE,
     SCHEDULE,
     SPECS,
     box_zone_matrix,
@@ -279,6 +280,12 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
     # rows before a week's first issue: the measurement of that row, else the training mean
     temps = np.where(np.isfinite(temps), temps, data.y)
     temps = np.where(np.isfinite(temps), temps, np.nanmean(data.y[train_rows], axis=0)[None, :])
+    # the base's internal gains (W/m2) for the gains-shaped variant, offered against a
+    # reference period's profile only: a profile refitted here absorbs its time-of-week
+    # pattern, and against constant gains it would be a constant heat, which mimics a
+    # sensor offset
+    gains = (model.params.c_ig[None, :] + _profile_at(base.profile, data.times)
+             if base.gains == "reference" and not net else None)
     out = {}
     for e in effects:
         spec = SPECS[e]
@@ -287,8 +294,10 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
         for var in spec.variants:
             if var == SCHEDULE and heating_setpoint is None:
                 continue
+            if var == GAINS_PROFILE and gains is None:
+                continue
             if spec.kind == "heat":
-                q = heat_regressor(e, var, model, data, temps, heating_setpoint)
+                q = heat_regressor(e, var, model, data, temps, heating_setpoint, gains)
                 if net:
                     q = q - time_of_week_mean(q, data, train_rows)
                 out[(e, var)] = _heat_response(model, data, base, q, stepper)

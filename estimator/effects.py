@@ -18,6 +18,11 @@ name                      parameter   extra term in zone z
                                       furniture before it reaches the air); τ in
                                       :data:`SOLAR_LAGS`
 ``occupancy_gains``       W/m2        heat q = θ · a_floor,z · 1[workday, 08:00–18:00 local]
+                                      (variant None), or, variant ``"profile"`` (with a
+                                      reference period's gains), q = θ · a_floor,z · g_z(k) /
+                                      mean(g_z): the zone's own internal gains g = c_IG +
+                                      f_IG,profile scaled (more or fewer people, lights,
+                                      equipment than in the reference period)
 ``supply_offset``         K           heat q = θ · c_p · Σ_{boxes of z} u_j (supply air at the
                                       boxes θ warmer than the AHU sensor reads); one θ for
                                       all zones: the site has one supply temperature point
@@ -49,6 +54,7 @@ from zonecast.estimator.rc.network import CP_AIR as C_P
 
 __all__ = [
     "EFFECTS",
+    "GAINS_PROFILE",
     "REHEAT_SETPOINTS",
     "SCHEDULE",
     "SOLAR_LAGS",
@@ -69,6 +75,8 @@ REHEAT_SETPOINTS = (19.0, 20.0, 21.0, 22.0)
 SCHEDULE = "schedule"
 #: lags of transmitted solar reaching the air [h] (0: at once)
 SOLAR_LAGS = (0.0, 2.0, 6.0)
+#: occupancy-gains variant shaped as the zone's internal-gains profile (needs a reference)
+GAINS_PROFILE = "profile"
 #: a box counts as at its minimum when its airflow is within this factor of its 1st percentile
 MIN_FLOW_FACTOR = 1.05
 
@@ -106,8 +114,9 @@ SPECS: dict[str, EffectSpec] = {s.name: s for s in (
                "outdoor air leaking in, proportional to outdoor minus zone temperature"),
     EffectSpec("window_solar", "heat", "-", 0, SOLAR_LAGS,
                "transmitted window solar reaching the air through floor/furniture storage"),
-    EffectSpec("occupancy_gains", "heat", "W/m2", 0, (None,),
-               "a gain on workdays 08:00-18:00 local (office occupancy)"),
+    EffectSpec("occupancy_gains", "heat", "W/m2", 0, (None, GAINS_PROFILE),
+               "a gain on workdays 08:00-18:00 local (office occupancy), or the zone's "
+               "internal gains scaled (variant 'profile')"),
     EffectSpec("supply_offset", "heat", "K", 0, (None,),
                "supply air at the boxes warmer or colder than the AHU sensor reads",
                scope="system"),
@@ -203,14 +212,18 @@ def _workday_hours(data: ModelData) -> np.ndarray:
 
 
 def heat_regressor(name: str, variant, model: BilinearModel, data: ModelData,
-                   temps: np.ndarray, heating_setpoint: np.ndarray | None = None) -> np.ndarray:
+                   temps: np.ndarray, heating_setpoint: np.ndarray | None = None,
+                   gains: np.ndarray | None = None) -> np.ndarray:
     """(N, n_zones) extra heat into each zone per unit parameter [W per unit].
 
     ``temps`` (N, n_zones) are the zone temperatures the regressor uses [degC]: the base
     model's own prediction (see the module docstring), never measurements after an issue
     time. Rows where ``temps`` is NaN give NaN. ``heating_setpoint`` (N,) [degC]: the
     site's scheduled heating set point, needed by the reheat variant ``"schedule"``
-    (:meth:`~.site.Thermostat.heating_setpoint`).
+    (:meth:`~.site.Thermostat.heating_setpoint`). ``gains`` (N, n_zones) [W/m2]: the
+    internal gains c_IG + f_IG the base model uses, needed by the occupancy-gains variant
+    ``"profile"`` (its shape, scaled to a mean of one over the rows; a zone whose mean is
+    not positive gets no term).
     """
     spec = SPECS.get(name)
     if spec is None or spec.kind != "heat":
@@ -240,6 +253,16 @@ def heat_regressor(name: str, variant, model: BilinearModel, data: ModelData,
         step = (data.times[1] - data.times[0]).total_seconds()
         return first_order_lag(q, float(variant), step, data.segments)
     if name == "occupancy_gains":
+        if variant == GAINS_PROFILE:
+            if gains is None:
+                raise ValueError("the occupancy-gains variant 'profile' needs the base "
+                                 "model's internal gains (a reference period's profile)")
+            g = np.asarray(gains, float)
+            if g.shape != (N, nz):
+                raise ValueError(f"gains must have shape {(N, nz)}, got {g.shape}")
+            mean = np.nanmean(g, axis=0)
+            shape = np.where(mean > 0, g / np.where(mean > 0, mean, 1.0), 0.0)
+            return np.nan_to_num(shape) * zone_floor_area(model)[None, :]
         return _workday_hours(data)[:, None] * zone_floor_area(model)[None, :]
     if name == "supply_offset":
         return C_P * (data.u @ bz)

@@ -296,6 +296,33 @@ def test_reference_profile_keeps_a_sensor_offset_visible(model, inputs):
     assert top.parameters[list(ZONES)[ZONE]] == pytest.approx(0.5, rel=0.1)
 
 
+def test_zone_gains_scaled_are_found_as_the_gains_shaped_variant(model, inputs):
+    """A zone's internal gains (c_IG + f_IG) scaled by 1.5 against a clean reference period:
+    the occupancy-gains variant shaped as the reference's own gains profile explains it,
+    ahead of a sensor offset and of the workday box, with about the mean extra gain."""
+    from zonecast.estimator.diagnose import load_reference
+    from zonecast.estimator.effects import GAINS_PROFILE
+    times, u, v, f = inputs
+    y = _simulate(model, times, u, v, f)
+    ref = load_reference(diagnose(model, _data(times, u, v, y), seed=0).to_dict(),
+                         list(ZONES), TZ)
+    c = model.params.c_ig
+    f2 = f.copy()
+    f2[:, ZONE] = 1.5 * (c[ZONE] + f[:, ZONE]) - c[ZONE]
+    y2 = _simulate(model, times, u, v, f2)
+    res = diagnose(model, _data(times, u, v, y2), seed=0, reference=ref)
+    top = res.ranked[0]
+    assert (top.effect, top.variant) == ("occupancy_gains", GAINS_PROFILE), \
+        [(c.effect, c.variant, c.zones, round(c.score, 3)) for c in res.ranked]
+    assert top.confident and list(ZONES)[ZONE] in top.zones
+    extra = 0.5 * np.mean(c[ZONE] + f[:, ZONE])  # W/m2 on average
+    assert top.parameters[list(ZONES)[ZONE]] == pytest.approx(extra, rel=0.25)
+    # without the base's gains (a profile refitted on the data) the variant is not offered
+    with pytest.raises(ValueError, match="needs the base model's internal gains"):
+        heat_regressor("occupancy_gains", GAINS_PROFILE, model, _data(times, u, v, y2),
+                       np.zeros((len(u), 5)))
+
+
 def test_bad_references_and_schedule_without_setpoints_are_rejected(model, inputs):
     from zonecast.estimator.diagnose import DiagnosisError, load_reference
     times, u, v, _f = inputs

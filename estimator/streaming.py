@@ -83,7 +83,6 @@ from zonecast.estimator.dataset import (
     with_scheduled,
     zone_weights,
 )
-from zonecast.estimator.effects import box_zone_matrix
 from zonecast.estimator.forecast import Forecast
 from zonecast.estimator.gains import (
     DayAheadGains,
@@ -518,34 +517,31 @@ class OnlineEstimator:
     def _controlled_run(self, stepper, u: np.ndarray, forcing: np.ndarray, ts: np.ndarray,
                         rise: np.ndarray, heat: np.ndarray) -> np.ndarray:
         """States (HORIZON + 1, n) [degC] of a forecast in which the boxes with a
-        discharge-air point reheat as a thermostat does (docs/forecasts.md "Reheat as the
-        thermostat's answer"): at each step the zones are first stepped without those
-        boxes' rise; a zone that ends the step below its heating set point ``heat``
-        (HORIZON,) [degC] gets the common rise r_z >= 0 of its coil boxes that brings it
-        to the set point at the step's end (the zones needing heat solved together with
-        the one-step responses C Gamma(u) of a unit rise); zones at or above it get none.
-        A box without airflow cannot reheat. Other inputs' rise (scheduled inputs, boxes
-        without a point) is kept from ``rise``."""
+        discharge-air point reheat as their rooms' thermostats do (docs/forecasts.md
+        "Reheat as the thermostat's answer"): at each step the model is first stepped
+        without those boxes' rise; a room that ends the step with its air below the
+        heating set point ``heat`` (HORIZON,) [degC] gets the common rise r >= 0 of its
+        coil boxes that brings its air to the set point at the step's end (the rooms
+        needing heat solved together from the one-step responses Gamma(u) of a unit
+        rise); rooms at or above it get none. A box without airflow cannot reheat. Other
+        inputs' rise (scheduled inputs, boxes without a point) is kept from ``rise``."""
         m = self.bundle.model
         coil = self._coil
-        base = np.where(coil[None, :], 0.0, rise)
-        forcing = forcing + m.reheat_forcing(u, base)
-        bz = self._coil_zone  # (n_boxes, n_zones) coil boxes of each zone
+        forcing = forcing + m.reheat_forcing(u, np.where(coil[None, :], 0.0, rise))
+        rooms, rb = self._coil_rooms, self._coil_room_box  # air states, (n_boxes, rooms)
         xs = np.empty((len(u) + 1, m.n))
         xs[0] = x = self._x
         for h in range(len(u)):
             x = stepper.step(x, u[h], forcing[h], ts[h])
             if np.isfinite(heat[h]):
-                need = heat[h] - m.C @ x
-                can = (u[h] * coil) @ bz > 0
-                sel = np.flatnonzero((need > 1e-6) & can)
+                need = heat[h] - x[rooms]
+                sel = np.flatnonzero((need > 1e-6) & ((u[h] * coil) @ rb > 0))
                 if len(sel):
                     R = m.reheat_forcing(np.broadcast_to(u[h], (len(sel), len(u[h]))),
-                                         bz[:, sel].T)  # (k, n): unit rise per zone
+                                         rb[:, sel].T)  # (k, n): unit rise per room
                     resp = stepper.columns(u[h], R.T)  # (n, k)
-                    G = m.C[sel] @ resp
-                    r = np.maximum(np.linalg.lstsq(G, need[sel], rcond=None)[0], 0.0)
-                    x = x + resp @ r
+                    r = np.linalg.lstsq(resp[rooms[sel]], need[sel], rcond=None)[0]
+                    x = x + resp @ np.maximum(r, 0.0)
             xs[h + 1] = x
         return xs
 
@@ -612,7 +608,12 @@ class OnlineEstimator:
         self.reheat_control = REHEAT_CONTROL
         self._coil = np.array([b in site.boxes and site.boxes[b].discharge_temperature
                                is not None for b in self.bundle.model.structure.boxes])
-        self._coil_zone = box_zone_matrix(self.bundle.model) * self._coil[:, None]
+        # each such room's air state and its coil boxes (n_boxes, rooms): every room has
+        # its own thermostat
+        rob = np.asarray(self.bundle.model.structure.room_of_box)
+        self._coil_rooms = np.unique(rob[self._coil])
+        self._coil_room_box = ((rob[:, None] == self._coil_rooms[None, :])
+                               & self._coil[:, None]).astype(float)
         self._band_at: int | None = None
         self._band_cache: tuple[np.ndarray, np.ndarray] | None = None
 

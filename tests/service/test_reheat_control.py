@@ -1,5 +1,5 @@
 """The served forecast's reheat as the thermostat's answer (OnlineEstimator.reheat_control):
-the boxes with a discharge-air point reheat just enough to hold their zone at the heating
+the boxes with a discharge-air point reheat just enough to hold their room at the heating
 set point, none above it; inputs given by the caller (known-input evaluations) keep their
 measured rise."""
 
@@ -44,22 +44,23 @@ def test_controlled_run_holds_the_heating_setpoint_with_the_least_reheat(est):
     free = stepper.run(est._x, u, forcing + m.reheat_forcing(u, np.zeros_like(rise)), v[:, 1])
     np.testing.assert_array_equal(est._controlled_run(stepper, u, forcing, v[:, 1], rise, off),
                                   free)
-    # a set point above the free forecast in some zones and steps
-    T_free = free[1:] @ m.C.T
+    # a set point above the free forecast in some rooms and steps
+    rooms = est._coil_rooms
+    assert len(rooms) >= m.n_zones  # the virtual building: one or more rooms per zone
+    T_free = free[1:, rooms]
     sp = np.full(len(u), float(np.percentile(T_free, 60)))
     xs = est._controlled_run(stepper, u, forcing, v[:, 1], rise, sp)
-    T = xs[1:] @ m.C.T
-    can = (u * est._coil) @ est._coil_zone > 0  # (H, zones) zone has a running coil box
+    T = xs[1:, rooms]
+    can = (u * est._coil) @ est._coil_room_box > 0  # (H, rooms) a coil box runs
     assert can.any()
-    assert (T[can] >= sp[0] - 1e-6).all()  # held wherever a coil box runs
+    assert (T[can] >= sp[0] - 1e-6).all()  # every room's air held wherever it can be
     heated = can & (T_free < sp[0] - 0.05)
     assert heated.sum() > 10
-    # the least reheat: a zone that was heated at a step ends it at the set point (not
-    # above), unless another zone's heat carried it there
-    at_sp = np.isclose(T[heated], sp[0], atol=1e-6)
-    assert at_sp.mean() > 0.9
+    # the least reheat: a heated room ends the step at the set point (not above), unless
+    # a neighbour's heat carried it there
+    assert np.isclose(T[heated], sp[0], atol=1e-6).mean() > 0.9
     # heat only raises temperatures: never below the forecast without reheat
-    assert (T >= T_free - 1e-9).all()
+    assert (xs >= free - 1e-9).all()
 
 
 def test_served_forecast_uses_the_controller_and_known_inputs_do_not(est):

@@ -14,7 +14,9 @@ and prints each one's RMS per zone, its ratio to the known-inputs forecast (issu
 <= 1.10) and the served 90 % interval coverage. Then, with the error-free weather forecasts,
 which learned HVAC input costs most: the measured inputs with one group (airflows,
 supply-air temperature, the boxes' discharge-air rise, all three) replaced by the service's
-own input forecast at each issue (:meth:`OnlineEstimator.forecast_inputs`).
+own input forecast at each issue (:meth:`OnlineEstimator.forecast_inputs`), and the
+measured inputs with the boxes' reheat from the forecast's thermostat model
+(``OnlineEstimator.forecast(thermostat_reheat=True)``).
 
     python benchmarks/bench_weather_error.py --campaign CAMPAIGN --report REPORT
 
@@ -46,6 +48,7 @@ from zonecast.jobs.reproduce import measured_inputs, service_check, validation_i
 
 DESIGNED_T = tuple(ERROR_MODEL["temperature_sigma_k"])
 DESIGNED_I = tuple(ERROR_MODEL["irradiance_sigma"])
+THERMOSTAT = "thermostat's reheat"
 CASES = {"as designed": (DESIGNED_T, DESIGNED_I), "no error": ((0.0, 0.0), (0.0, 0.0)),
          "temperature only": (DESIGNED_T, (0.0, 0.0)),
          "irradiance only": ((0.0, 0.0), DESIGNED_I)}
@@ -66,7 +69,9 @@ def hvac_attribution(model: Path, campaign: Path, data, weather) -> dict:
     rows = model_rows(bundle, frame[frame.notna().any(axis=1)])
     est = OnlineEstimator(bundle)
     wfs, j = sorted(weather, key=lambda w: w.issued), 0
-    preds: dict[str, list] = {g: [] for g in ["known", *groups]}
+    # the boxes' reheat from the forecast's thermostat model instead of the measured rise
+    extra = [THERMOSTAT] if rise and bundle.site.thermostat is not None else []
+    preds: dict[str, list] = {g: [] for g in ["known", *groups, *extra]}
     meas = []
     for k, t in enumerate(rows.times):
         if t > max(issues):
@@ -91,6 +96,8 @@ def hvac_attribution(model: Path, campaign: Path, data, weather) -> dict:
             mix = known.copy()
             mix[:, cols] = learned[:, cols]
             preds[g].append(est.forecast(mix).mean)
+        if extra:
+            preds[extra[0]].append(est.forecast(known, thermostat_reheat=True).mean)
     out = {}
     for g, p in preds.items():
         rms = np.sqrt(np.nanmean((np.array(p) - np.array(meas)) ** 2, axis=(0, 1)))
@@ -147,7 +154,8 @@ def main() -> None:
     print("| inputs | " + " | ".join(zones) + " | mean |")
     print("|---|" + "---|" * (len(zones) + 1))
     for g, rms in attr.items():
-        label = "measured" if g == "known" else f"measured, learned {g}"
+        label = ("measured" if g == "known" else f"measured, {g}" if g == THERMOSTAT
+                 else f"measured, learned {g}")
         print(f"| {label} | " + " | ".join(f"{rms[z]:.3f}" for z in zones)
               + f" | **{rms['mean']:.3f}** |")
 

@@ -455,7 +455,8 @@ class OnlineEstimator:
         return hit
 
     # --- forecast ---------------------------------------------------------------------
-    def forecast(self, inputs: np.ndarray | None = None) -> Forecast:
+    def forecast(self, inputs: np.ndarray | None = None, *,
+                 thermostat_reheat: bool | None = None) -> Forecast:
         """Day-ahead forecast from the current state (see the module docstring).
 
         Parameters
@@ -466,6 +467,11 @@ class OnlineEstimator:
             box's discharge-air rise [K]) when a site has forecasts of them (or, for an
             evaluation, the measured ones); default: :meth:`forecast_inputs` (weather
             forecast or its fallback, learned HVAC inputs).
+        thermostat_reheat : bool, optional
+            Whether the boxes with a discharge-air point reheat as their thermostats do
+            (:meth:`_controlled_run`) instead of by the rise in the inputs; default: in the
+            served forecast (``inputs`` None) when :attr:`reheat_control` is on, never for
+            given inputs. True needs a thermostat and such boxes, else it changes nothing.
         """
         if not self.started:
             raise ValueError("no forecast yet: the filter has not received a measurement")
@@ -473,15 +479,15 @@ class OnlineEstimator:
         f_ig = self.dayahead_gains()
         if inputs is None:
             ins = self.forecast_inputs()
-            served = True
+            control = self.reheat_control if thermostat_reheat is None else thermostat_reheat
         else:
-            served = False
+            control = bool(thermostat_reheat)
             ins = np.asarray(inputs, dtype=float)
             if ins.shape != (HORIZON, self._nin) or not np.isfinite(ins).all():
                 raise ValueError(f"inputs must be finite with shape ({HORIZON}, {self._nin}): "
                                  "u per box, then Ta, Ts, solE, solS, solW, solN per interval"
                                  + (", then the discharge-air rise per box" if self._rh else ""))
-        mean = self._run_forecast(ins, f_ig, control=served)
+        mean = self._run_forecast(ins, f_ig, control=control)
         std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
         times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
         return Forecast(t, times, mean, std, f_ig, self.bundle.zones, self.bundle.version,
@@ -490,10 +496,9 @@ class OnlineEstimator:
     def _run_forecast(self, ins: np.ndarray, f_ig: np.ndarray, *,
                       control: bool = False) -> np.ndarray:
         """Zone temperatures (HORIZON, n_zones) [degC] from the current state with the
-        inputs ``ins`` and gains ``f_ig`` over the horizon. ``control`` (the served
-        forecast, when :attr:`reheat_control` is on and the site has a thermostat): the
-        reheat of the boxes with a discharge-air point is the thermostat's
-        (:meth:`_controlled_run`), not the rise in ``ins``."""
+        inputs ``ins`` and gains ``f_ig`` over the horizon. ``control`` (and the site has a
+        thermostat and boxes with a discharge-air point): the reheat of those boxes is
+        their thermostats' (:meth:`_controlled_run`), not the rise in ``ins``."""
         m = self.bundle.model
         nb = m.n_boxes
         u, v = ins[:, :nb], ins[:, nb:nb + NV]
@@ -501,8 +506,7 @@ class OnlineEstimator:
         stepper = self._ladder.for_airflows(u)
         band = (self._setpoint_band() if self.hold_setpoints and self._band is not None
                 else None)
-        if (control and self.reheat_control and band is not None and self._rh
-                and self._coil.any()):
+        if control and band is not None and self._rh and self._coil.any():
             xs = self._controlled_run(stepper, u, forcing, v[:, 1], ins[:, nb + NV:], band[0])
         else:
             if self._rh:  # the boxes' discharge-air rise (docs/model.md "Discharge air")
@@ -635,8 +639,8 @@ class OnlineEstimator:
         if operating and self.started and self.time == t and self.calibrator.due(k):
             ins = self.forecast_inputs()
             if np.isfinite(ins).all():
-                self.calibrator.add_forecast(k, self._run_forecast(ins, self.dayahead_gains(),
-                                                                   control=True))
+                self.calibrator.add_forecast(k, self._run_forecast(
+                    ins, self.dayahead_gains(), control=self.reheat_control))
 
     def set_weather_forecast(self, wf: WeatherForecast | None) -> None:
         """Use ``wf`` for forecasts issued at or after ``wf.issued`` (until it is older

@@ -76,9 +76,13 @@ def test_served_forecast_uses_the_controller_and_known_inputs_do_not(est):
         est.reheat_control = True
         served_on = est.forecast().mean
         known_on = est.forecast(ins).mean
+        asked = est.forecast(ins, thermostat_reheat=True).mean
     finally:
         est.reheat_control = before
     np.testing.assert_array_equal(known_on, known_off)  # given inputs keep their rise
+    # ... unless asked: the same controlled forecast as served from the same inputs
+    np.testing.assert_array_equal(asked, served_on)
+    np.testing.assert_array_equal(est.forecast(thermostat_reheat=False).mean, served_off)
     # the served forecast is the controlled run, clipped to the band
     m, nb, nv = est.bundle.model, est.bundle.model.n_boxes, streaming.NV
     u = ins[:, :nb]

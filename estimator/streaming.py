@@ -125,7 +125,7 @@ HOLD_RECOVERY_H = 0.25
 #: forecast the reheat of boxes with a discharge-air point as their thermostat does: the
 #: rise that holds the zone at the heating set point, none above it (docs/forecasts.md
 #: "Reheat as the thermostat's answer"); the default of :attr:`OnlineEstimator.reheat_control`
-REHEAT_CONTROL = False
+REHEAT_CONTROL = True
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
            "StepReport", "checkpoint_header", "has_discharge", "model_rows", "offline_forecasts",

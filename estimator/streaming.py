@@ -43,7 +43,9 @@ earlier reference. Where the site declares a thermostat, the forecast zone tempe
 are held in its band (:meth:`Thermostat.band <zonecast.estimator.site.Thermostat.band>`:
 a temperature above the cooling or below the heating set point is the set point, which
 the boxes hold while they have the capacity), the band keeping the previous set point for
-:data:`HOLD_RECOVERY_H` after each set-point step. ``std`` is the model's: ``sqrt(v_h)``,
+:data:`HOLD_RECOVERY_H` after each set-point step; the boxes with a discharge-air point then
+reheat inside the forecast as their rooms' thermostats do (:data:`REHEAT_CONTROL`), rather
+than by their learned rise. ``std`` is the model's: ``sqrt(v_h)``,
 with ``v_h`` the variance of ``C x`` after h steps of the nominal model from the
 steady-state posterior covariance (state uncertainty; measurement noise not added; the
 same table gives the state's standard deviation after steps without measurements); the
@@ -122,9 +124,10 @@ HOLD_SETPOINTS = True
 #: time a room needs to follow a set-point step [h]: the band keeps the previous set
 #: point this long after a step (chosen on the family's training members, docs/forecasts.md)
 HOLD_RECOVERY_H = 0.25
-#: forecast the reheat of boxes with a discharge-air point as their thermostat does: the
-#: rise that holds the zone at the heating set point, none above it (docs/forecasts.md
-#: "Reheat as the thermostat's answer"); the default of :attr:`OnlineEstimator.reheat_control`
+#: forecast the reheat of boxes with a discharge-air point as their thermostats do: the
+#: rise that holds each room's air at the heating set point, none above it (chosen on the
+#: family's training members, docs/forecasts.md "Reheat as the thermostat's answer"); the
+#: default of :attr:`OnlineEstimator.reheat_control`
 REHEAT_CONTROL = True
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",

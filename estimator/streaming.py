@@ -544,13 +544,27 @@ class OnlineEstimator:
                 need = heat[h] - x[rooms]
                 sel = np.flatnonzero((need > 1e-6) & ((u[h] * coil) @ rb > 0))
                 if len(sel):
-                    R = m.reheat_forcing(np.broadcast_to(u[h], (len(sel), len(u[h]))),
-                                         rb[:, sel].T)  # (k, n): unit rise per room
-                    resp = stepper.columns(u[h], R.T)  # (n, k)
+                    resp = self._reheat_response(stepper, u[h])[:, sel]  # (n, k)
                     r = np.linalg.lstsq(resp[rooms[sel]], need[sel], rcond=None)[0]
                     x = x + resp @ np.maximum(r, 0.0)
             xs[h + 1] = x
         return xs
+
+    def _reheat_response(self, stepper, u: np.ndarray) -> np.ndarray:
+        """(n, rooms) one-step response Gamma(u) R of the state to a unit rise of each
+        coil room's boxes at airflows ``u``, cached by the exact airflow vector and the
+        stepper (a pure function of both: boxes at their minimum airflow repeat it)."""
+        key = u.tobytes()
+        hit = self._rresp_cache.get(key)
+        if hit is None or hit[0] is not stepper:
+            rb = self._coil_room_box
+            R = self.bundle.model.reheat_forcing(np.broadcast_to(u, (rb.shape[1], len(u))),
+                                                 rb.T)  # (rooms, n): unit rise per room
+            hit = (stepper, stepper.columns(u, R.T))
+            if len(self._rresp_cache) >= 256:
+                self._rresp_cache.pop(next(iter(self._rresp_cache)))
+            self._rresp_cache[key] = hit
+        return hit[1]
 
     def _setpoint_band(self) -> tuple[np.ndarray, np.ndarray]:
         """(HORIZON,) heating and cooling set points over the forecast intervals [degC]
@@ -621,6 +635,7 @@ class OnlineEstimator:
         self._coil_rooms = np.unique(rob[self._coil])
         self._coil_room_box = ((rob[:, None] == self._coil_rooms[None, :])
                                & self._coil[:, None]).astype(float)
+        self._rresp_cache: dict[bytes, tuple] = {}
         self._band_at: int | None = None
         self._band_cache: tuple[np.ndarray, np.ndarray] | None = None
 

@@ -1,0 +1,116 @@
+"""The served forecast with and without the thermostat's reheat (issue 15).
+
+For each member: the served forecasts (``Pipeline.forecast`` of the member's ``zonecast
+reproduce`` model, the testbed's weather forecasts as designed, seed 0) at the 18
+validation midnights, once with the boxes' learned discharge-air rise
+(``streaming.REHEAT_CONTROL`` off) and once with the rooms' thermostats' reheat (on);
+prints the RMS per zone, the ratio to the known-input forecast of the member's report and
+the calibrated 90 % coverage. docs/forecasts.md "Reheat as the thermostat's answer".
+
+    python benchmarks/bench_reheat_control.py --reports DIR --family DIR [--extra CAMPAIGN ...]
+                                              [--only NAME ...]
+
+``--reports`` is a ``bench_family.py --out`` folder (``<name>/model.json``,
+``<name>/results.json``); campaigns are ``--family/<name>`` or the ``--extra`` folders.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads only contend
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+from zonecast.estimator import streaming
+from zonecast.estimator.constants import HORIZON
+from zonecast.estimator.evaluate import rms_by_zone
+from zonecast.estimator.pipeline import Pipeline
+from zonecast.estimator.site import load_site
+from zonecast.estimator.telemetry import load_telemetry
+from zonecast.estimator.weather_forecast import parse_weather_forecast
+from zonecast.testbed.forecasts import weather_forecasts
+
+from zonecast.jobs.reproduce import _interval_coverage, validation_issues
+
+
+def served(campaign: Path, model: Path, control: bool) -> tuple[dict, dict, float]:
+    """RMS per zone, coverage and seconds of the served forecasts with the controller
+    ``control`` on or off."""
+    site = load_site(campaign / "site.yaml")
+    frame = load_telemetry(campaign / "telemetry.csv", site).frame
+    data = Pipeline.from_site(campaign / "site.yaml").data(campaign / "telemetry.csv")
+    weather = [parse_weather_forecast(b) for b in weather_forecasts(site, frame, seed=0)]
+    issues = validation_issues(data, 0)
+    nz = len(data.zones)
+    before = streaming.REHEAT_CONTROL
+    streaming.REHEAT_CONTROL = control  # read by each OnlineEstimator the pipeline makes
+    try:
+        t0 = time.perf_counter()
+        fcs = Pipeline.from_model_file(model).forecast(
+            campaign / "telemetry.csv", [data.times[r] for r, _ in issues], weather=weather)
+        seconds = time.perf_counter() - t0
+    finally:
+        streaming.REHEAT_CONTROL = before
+    pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
+    for k, (r, stop) in enumerate(issues):
+        fc = fcs[data.times[r]]
+        n = min(HORIZON, stop - r - 1)
+        pred[k], lo[k], hi[k] = fc.mean, fc.lower, fc.upper
+        meas[k, :n] = data.y[r + 1:r + 1 + n]
+    rms = rms_by_zone(pred.reshape(-1, nz), meas.reshape(-1, nz), data.zones)
+    return rms, _interval_coverage(lo, hi, meas, data.zones), seconds
+
+
+def _find(doc, key):
+    if isinstance(doc, dict):
+        if key in doc:
+            return doc[key]
+        for v in doc.values():
+            hit = _find(v, key)
+            if hit is not None:
+                return hit
+    return None
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--reports", type=Path, required=True)
+    ap.add_argument("--family", type=Path)
+    ap.add_argument("--extra", type=Path, nargs="*", default=[])
+    ap.add_argument("--only", nargs="*")
+    args = ap.parse_args()
+    campaigns = {p.name: p for p in args.extra}
+    if args.family is not None:
+        doc = json.loads((args.family / "index.json").read_text())
+        for m in doc["members"] if isinstance(doc, dict) else doc:
+            campaigns[m["name"]] = args.family / m["name"]
+    names = [n for n in (args.only or campaigns) if (args.reports / n / "model.json").is_file()]
+    if not names:
+        raise SystemExit(f"no member of {sorted(campaigns)} has a report in {args.reports}")
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores", flush=True)
+    print("| member | learned rise | thermostat's reheat | / known inputs | coverage (zones) "
+          "| seconds off / on |")
+    print("|---|---|---|---|---|---|")
+    for name in names:
+        model = args.reports / name / "model.json"
+        off, cov_off, s_off = served(campaigns[name], model, False)
+        on, cov_on, s_on = served(campaigns[name], model, True)
+        res = args.reports / name / "results.json"
+        known = _find(json.loads(res.read_text()), "service_known_inputs") if res.is_file() \
+            else None
+        ratio = (f"{off['mean'] / known['mean']:.3f} → {on['mean'] / known['mean']:.3f}"
+                 if known else "–")
+        zc = [cov_on[z] for z in cov_on if z != "all"]
+        print(f"| {name} | {off['mean']:.3f} | **{on['mean']:.3f}** | {ratio} | "
+              f"{cov_off['all']:.3f} → {cov_on['all']:.3f} ({min(zc):.3f}–{max(zc):.3f}) | "
+              f"{s_off:.0f} / {s_on:.0f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -129,6 +129,10 @@ HOLD_RECOVERY_H = 0.25
 #: family's training members, docs/forecasts.md "Reheat as the thermostat's answer"); the
 #: default of :attr:`OnlineEstimator.reheat_control`
 REHEAT_CONTROL = True
+#: the controlled step's reheat is solved to this shortfall [K], in at most REHEAT_ITER
+#: exact steps with the last responses before they are recomputed
+REHEAT_TOL = 1e-9
+REHEAT_ITER = 3
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
            "StepReport", "checkpoint_header", "has_discharge", "model_rows", "offline_forecasts",
@@ -238,6 +242,16 @@ def _steady_parts(bundle: ModelBundle, Q: np.ndarray, R: np.ndarray) -> _SteadyP
             _STEADY.pop(next(iter(_STEADY)))
         _STEADY[key] = hit
     return hit
+
+
+def _solve_square(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """x with a x = b for a small square ``a`` (least squares if it is singular)."""
+    if a.shape == (1, 1):
+        return b / a[0, 0] if a[0, 0] != 0 else np.zeros(1)
+    try:
+        return np.linalg.solve(a, b)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(a, b, rcond=None)[0]
 
 
 class OnlineEstimator:
@@ -536,35 +550,88 @@ class OnlineEstimator:
         coil = self._coil
         forcing = forcing + m.reheat_forcing(u, np.where(coil[None, :], 0.0, rise))
         rooms, rb = self._coil_rooms, self._coil_room_box  # air states, (n_boxes, rooms)
-        xs = np.empty((len(u) + 1, m.n))
+        # (H, rooms) where a room has a set point and a running coil box
+        can = ((u * coil) @ rb > 0) & np.isfinite(heat)[:, None]
+        H = len(u)
+        xs = np.empty((H + 1, m.n))
         xs[0] = x = self._x
-        for h in range(len(u)):
-            x = stepper.step(x, u[h], forcing[h], ts[h])
-            if np.isfinite(heat[h]):
-                need = heat[h] - x[rooms]
-                sel = np.flatnonzero((need > 1e-6) & ((u[h] * coil) @ rb > 0))
+        self._rresp[1][:] = False  # responses from this run only: the same inputs, the same run
+        h = 0
+        while h < H:
+            # free run-ahead (one compiled call, the same arithmetic as steps): until the
+            # first step that leaves a room below its set point the reheat is zero
+            ahead = stepper.run(x, u[h:], forcing[h:], ts[h:])
+            cold = ((heat[h:, None] - ahead[1:, rooms]) > 1e-6) & can[h:]
+            hit = np.flatnonzero(cold.any(axis=1))
+            if not len(hit):
+                xs[h + 1:] = ahead[1:]
+                break
+            j = h + int(hit[0])
+            xs[h + 1:j + 1] = ahead[1:j - h + 1]
+            x = ahead[j - h + 1]
+            # step by step while rooms need heat; back to a run-ahead after a step without
+            while True:
+                need = heat[j] - x[rooms]
+                sel = np.flatnonzero((need > 1e-6) & can[j])
                 if len(sel):
-                    resp = self._reheat_response(stepper, u[h])[:, sel]  # (n, k)
-                    r = np.linalg.lstsq(resp[rooms[sel]], need[sel], rcond=None)[0]
-                    x = x + resp @ np.maximum(r, 0.0)
-            xs[h + 1] = x
+                    x = self._reheat_step(stepper, xs[j], x, u[j], forcing[j], ts[j], sel,
+                                          need[sel])
+                xs[j + 1] = x
+                j += 1
+                if not len(sel) or j >= H:
+                    break
+                x = stepper.step(x, u[j], forcing[j], ts[j])
+            h = j
         return xs
 
-    def _reheat_response(self, stepper, u: np.ndarray) -> np.ndarray:
-        """(n, rooms) one-step response Gamma(u) R of the state to a unit rise of each
-        coil room's boxes at airflows ``u``, cached by the exact airflow vector and the
-        stepper (a pure function of both: boxes at their minimum airflow repeat it)."""
-        key = u.tobytes()
-        hit = self._rresp_cache.get(key)
-        if hit is None or hit[0] is not stepper:
-            rb = self._coil_room_box
-            R = self.bundle.model.reheat_forcing(np.broadcast_to(u, (rb.shape[1], len(u))),
-                                                 rb.T)  # (rooms, n): unit rise per room
-            hit = (stepper, stepper.columns(u, R.T))
-            if len(self._rresp_cache) >= 256:
-                self._rresp_cache.pop(next(iter(self._rresp_cache)))
-            self._rresp_cache[key] = hit
-        return hit[1]
+    def _reheat_step(self, stepper, x0: np.ndarray, free: np.ndarray, u: np.ndarray,
+                     forcing: np.ndarray, ts: float, sel: np.ndarray,
+                     need: np.ndarray) -> np.ndarray:
+        """x(k+1) [degC] of one controlled step from ``x0``: the coil rooms ``sel``
+        (indices into the coil rooms) get the rise r = max(M^-1 need, 0), M the
+        rooms' one-step air responses Gamma(u) R to a unit rise, ``free`` the step
+        without it and ``need`` [K] their shortfall below the set point.
+
+        M is not formed at every step (``ExactStepper.columns`` costs a step per room):
+        r is found by Newton steps with the responses last computed for these rooms in
+        this run (:attr:`_rresp`, at an earlier step's airflows; the step is linear in r,
+        so each iteration is one exact step) to :data:`REHEAT_TOL`; the responses are
+        recomputed at ``u`` when that has not converged in :data:`REHEAT_ITER` steps.
+        Every run starts without responses, so a forecast is a function of its state and
+        inputs alone (replay equals offline bit for bit)."""
+        rooms = self._coil_rooms[sel]
+        rb = self._coil_room_box[:, sel]
+        R = self.bundle.model.reheat_forcing(np.broadcast_to(u, (len(sel), len(u))),
+                                             rb.T)  # (k, n): unit rise per room
+        cols, known = self._rresp
+        if not known[sel].all():
+            self._reheat_responses(stepper, u, sel[~known[sel]])
+        r = np.zeros(len(sel))
+        got = np.zeros(len(sel))
+        for attempt in range(2):
+            M = cols[np.ix_(rooms, sel)]
+            for _ in range(REHEAT_ITER):
+                r = r + _solve_square(M, need - got)
+                x = stepper.step(x0, u, forcing + r @ R, ts)
+                got = x[rooms] - free[rooms]
+                if np.abs(need - got).max() <= REHEAT_TOL:
+                    break
+            else:
+                if attempt == 0:  # the old responses are too far off: recompute at u
+                    self._reheat_responses(stepper, u, sel)
+                    continue
+            break
+        if (r < 0).any():  # a neighbour's heat is enough: that room's coil stays off
+            x = stepper.step(x0, u, forcing + np.maximum(r, 0.0) @ R, ts)
+        return x
+
+    def _reheat_responses(self, stepper, u: np.ndarray, sel: np.ndarray) -> None:
+        """Store Gamma(u) R (n, k) of the coil rooms ``sel`` in :attr:`_rresp`."""
+        rb = self._coil_room_box[:, sel]
+        R = self.bundle.model.reheat_forcing(np.broadcast_to(u, (len(sel), len(u))), rb.T)
+        cols, known = self._rresp
+        cols[:, sel] = stepper.columns(u, R.T)
+        known[sel] = True
 
     def _setpoint_band(self) -> tuple[np.ndarray, np.ndarray]:
         """(HORIZON,) heating and cooling set points over the forecast intervals [degC]
@@ -635,7 +702,10 @@ class OnlineEstimator:
         self._coil_rooms = np.unique(rob[self._coil])
         self._coil_room_box = ((rob[:, None] == self._coil_rooms[None, :])
                                & self._coil[:, None]).astype(float)
-        self._rresp_cache: dict[bytes, tuple] = {}
+        # the coil rooms' one-step responses to a unit rise (n, rooms) last computed in
+        # the current controlled run, and which are set (:meth:`_reheat_step`)
+        self._rresp = (np.zeros((self.bundle.model.n, len(self._coil_rooms))),
+                       np.zeros(len(self._coil_rooms), dtype=bool))
         self._band_at: int | None = None
         self._band_cache: tuple[np.ndarray, np.ndarray] | None = None
 

@@ -93,3 +93,34 @@ def test_served_forecast_uses_the_controller_and_known_inputs_do_not(est):
     np.testing.assert_allclose(served_on, np.clip(xs[1:] @ m.C.T, lo[:, None], hi[:, None]),
                                rtol=0, atol=1e-12)
     assert not np.array_equal(served_on, served_off)
+
+
+def test_controlled_run_equals_exact_responses_and_depends_on_its_inputs_only(est):
+    """The Newton solve with the run's earlier responses gives the reheat of the exact
+    one-step responses at every step (to REHEAT_TOL), and the run is a function of the
+    state and inputs: a second run after another one is the same to the bit."""
+    m, nb, ins, u, v, forcing, stepper = _parts(est)
+    rise = ins[:, -nb:]
+    rooms, rb, coil = est._coil_rooms, est._coil_room_box, est._coil
+    free = stepper.run(est._x, u, forcing + m.reheat_forcing(u, np.zeros_like(rise)), v[:, 1])
+    sp = np.full(len(u), float(np.percentile(free[1:, rooms], 70)))
+    # reference: the exact responses at each step's airflows, solved directly
+    f = forcing + m.reheat_forcing(u, np.where(coil[None, :], 0.0, rise))
+    ref = np.empty_like(free)
+    ref[0] = x = est._x
+    heated = 0
+    for h in range(len(u)):
+        x = stepper.step(x, u[h], f[h], v[h, 1])
+        need = sp[h] - x[rooms]
+        sel = np.flatnonzero((need > 1e-6) & ((u[h] * coil) @ rb > 0))
+        if len(sel):
+            R = m.reheat_forcing(np.broadcast_to(u[h], (len(sel), nb)), rb[:, sel].T)
+            resp = stepper.columns(u[h], R.T)
+            x = x + resp @ np.maximum(np.linalg.solve(resp[rooms[sel]], need[sel]), 0.0)
+            heated += 1
+        ref[h + 1] = x
+    assert heated > 20
+    xs = est._controlled_run(stepper, u, forcing, v[:, 1], rise, sp)
+    np.testing.assert_allclose(xs, ref, rtol=0, atol=1e-7)
+    est._controlled_run(stepper, u, forcing, v[:, 1], rise, sp - 0.5)  # another run between
+    np.testing.assert_array_equal(est._controlled_run(stepper, u, forcing, v[:, 1], rise, sp), xs)

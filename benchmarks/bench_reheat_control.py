@@ -1,4 +1,4 @@
-"""The served forecast with and without the thermostat's reheat (issue 15).
+"""The served forecast with and without the thermostat's reheat, or its cooling (issue 15).
 
 For each member: the served forecasts (``Pipeline.forecast`` of the member's ``zonecast
 reproduce`` model, the testbed's weather forecasts as designed, seed 0) at the 18
@@ -8,7 +8,11 @@ prints the RMS per zone, the ratio to the known-input forecast of the member's r
 the calibrated 90 % coverage. docs/forecasts.md "Reheat as the thermostat's answer".
 
     python benchmarks/bench_reheat_control.py --reports DIR --family DIR [--extra CAMPAIGN ...]
-                                              [--only NAME ...]
+                                              [--only NAME ...] [--side reheat|cooling]
+
+``--side cooling``: both runs with the reheat controller, the second also with the
+cooling controller (``streaming.COOLING_CONTROL``; docs/forecasts.md "Cooling as the
+thermostat's answer").
 
 ``--reports`` is a ``bench_family.py --out`` folder (``<name>/model.json``,
 ``<name>/results.json``); campaigns are ``--family/<name>`` or the ``--extra`` folders.
@@ -39,24 +43,30 @@ from zonecast.testbed.forecasts import weather_forecasts
 from zonecast.jobs.reproduce import _interval_coverage, validation_issues
 
 
-def served(campaign: Path, model: Path, control: bool) -> tuple[dict, dict, float]:
+def served(campaign: Path, model: Path, control: bool,
+           side: str = "reheat") -> tuple[dict, dict, float]:
     """RMS per zone, coverage and seconds of the served forecasts with the controller
-    ``control`` on or off."""
+    ``control`` on or off: the reheat (``side`` "reheat") or, with the reheat on, the
+    cooling ("cooling")."""
     site = load_site(campaign / "site.yaml")
     frame = load_telemetry(campaign / "telemetry.csv", site).frame
     data = Pipeline.from_site(campaign / "site.yaml").data(campaign / "telemetry.csv")
     weather = [parse_weather_forecast(b) for b in weather_forecasts(site, frame, seed=0)]
     issues = validation_issues(data, 0)
     nz = len(data.zones)
-    before = streaming.REHEAT_CONTROL
-    streaming.REHEAT_CONTROL = control  # read by each OnlineEstimator the pipeline makes
+    before = streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL
+    # read by each OnlineEstimator the pipeline makes
+    if side == "reheat":
+        streaming.REHEAT_CONTROL = control
+    else:
+        streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL = True, control
     try:
         t0 = time.perf_counter()
         fcs = Pipeline.from_model_file(model).forecast(
             campaign / "telemetry.csv", [data.times[r] for r, _ in issues], weather=weather)
         seconds = time.perf_counter() - t0
     finally:
-        streaming.REHEAT_CONTROL = before
+        streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL = before
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
     for k, (r, stop) in enumerate(issues):
         fc = fcs[data.times[r]]
@@ -84,6 +94,9 @@ def main() -> None:
     ap.add_argument("--family", type=Path)
     ap.add_argument("--extra", type=Path, nargs="*", default=[])
     ap.add_argument("--only", nargs="*")
+    ap.add_argument("--side", choices=("reheat", "cooling"), default="reheat",
+                    help="the controller compared off and on: the reheat (the cooling off), "
+                         "or the cooling (the reheat on in both)")
     args = ap.parse_args()
     campaigns = {p.name: p for p in args.extra}
     if args.family is not None:
@@ -94,13 +107,15 @@ def main() -> None:
     if not names:
         raise SystemExit(f"no member of {sorted(campaigns)} has a report in {args.reports}")
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores", flush=True)
-    print("| member | learned rise | thermostat's reheat | / known inputs | coverage (zones) "
+    head = (("learned rise", "thermostat's reheat") if args.side == "reheat"
+            else ("reheat, cooling off", "reheat and cooling"))
+    print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| seconds off / on |")
     print("|---|---|---|---|---|---|")
     for name in names:
         model = args.reports / name / "model.json"
-        off, cov_off, s_off = served(campaigns[name], model, False)
-        on, cov_on, s_on = served(campaigns[name], model, True)
+        off, cov_off, s_off = served(campaigns[name], model, False, args.side)
+        on, cov_on, s_on = served(campaigns[name], model, True, args.side)
         res = args.reports / name / "results.json"
         known = _find(json.loads(res.read_text()), "service_known_inputs") if res.is_file() \
             else None

@@ -45,7 +45,8 @@ a temperature above the cooling or below the heating set point is the set point,
 the boxes hold while they have the capacity), the band keeping the previous set point for
 :data:`HOLD_RECOVERY_H` after each set-point step; the boxes with a discharge-air point then
 reheat inside the forecast as their rooms' thermostats do (:data:`REHEAT_CONTROL`), rather
-than by their learned rise. ``std`` is the model's: ``sqrt(v_h)``,
+than by their learned rise, and every box cools its room to the cooling set point
+(:data:`COOLING_CONTROL`). ``std`` is the model's: ``sqrt(v_h)``,
 with ``v_h`` the variance of ``C x`` after h steps of the nominal model from the
 steady-state posterior covariance (state uncertainty; measurement noise not added; the
 same table gives the state's standard deviation after steps without measurements); the
@@ -129,6 +130,12 @@ HOLD_RECOVERY_H = 0.25
 #: family's training members, docs/forecasts.md "Reheat as the thermostat's answer"); the
 #: default of :attr:`OnlineEstimator.reheat_control`
 REHEAT_CONTROL = True
+#: forecast the cooling of every VAV box as its room's thermostat does: the heat removal
+#: that holds each room's air at the cooling set point, none below it, wherever the
+#: reheat controller runs (chosen on the family's training members, docs/forecasts.md
+#: "Cooling as the thermostat's answer"); the default of
+#: :attr:`OnlineEstimator.cooling_control`
+COOLING_CONTROL = True
 #: the controlled step's reheat is solved to this shortfall [K], in at most REHEAT_ITER
 #: exact steps with the last responses before they are recomputed
 REHEAT_TOL = 1e-9
@@ -488,7 +495,9 @@ class OnlineEstimator:
             Whether the boxes with a discharge-air point reheat as their thermostats do
             (:meth:`_controlled_run`) instead of by the rise in the inputs; default: in the
             served forecast (``inputs`` None) when :attr:`reheat_control` is on, never for
-            given inputs. True needs a thermostat and such boxes, else it changes nothing.
+            given inputs. True needs a thermostat and such boxes, else it changes nothing;
+            with :attr:`cooling_control` the rooms are also cooled to the cooling set point
+            (:meth:`_controlled_run`).
         """
         if not self.started:
             raise ValueError("no forecast yet: the filter has not received a measurement")
@@ -523,8 +532,10 @@ class OnlineEstimator:
         stepper = self._ladder.for_airflows(u)
         band = (self._setpoint_band() if self.hold_setpoints and self._band is not None
                 else None)
-        if control and band is not None and self._rh and self._coil.any():
-            xs = self._controlled_run(stepper, u, forcing, v[:, 1], ins[:, nb + NV:], band[0])
+        cooling = control and self.cooling_control and self._cool.any()
+        if control and band is not None and (cooling or (self._rh and self._coil.any())):
+            xs = self._controlled_run(stepper, u, forcing, v[:, 1], ins[:, nb + NV:], band[0],
+                                      band[1] if cooling else None)
         else:
             if self._rh:  # the boxes' discharge-air rise (docs/model.md "Discharge air")
                 forcing = forcing + m.reheat_forcing(u, ins[:, nb + NV:])
@@ -536,7 +547,8 @@ class OnlineEstimator:
         return mean
 
     def _controlled_run(self, stepper, u: np.ndarray, forcing: np.ndarray, ts: np.ndarray,
-                        rise: np.ndarray, heat: np.ndarray) -> np.ndarray:
+                        rise: np.ndarray, heat: np.ndarray,
+                        cool: np.ndarray | None = None) -> np.ndarray:
         """States (HORIZON + 1, n) [degC] of a forecast in which the boxes with a
         discharge-air point reheat as their rooms' thermostats do (docs/forecasts.md
         "Reheat as the thermostat's answer"): at each step the model is first stepped
@@ -545,93 +557,123 @@ class OnlineEstimator:
         coil boxes that brings its air to the set point at the step's end (the rooms
         needing heat solved together from the one-step responses Gamma(u) of a unit
         rise); rooms at or above it get none. A box without airflow cannot reheat. Other
-        inputs' rise (scheduled inputs, boxes without a point) is kept from ``rise``."""
+        inputs' rise (scheduled inputs, boxes without a point) is kept from ``rise``.
+
+        With ``cool`` (HORIZON,) [degC], the cooling set point, a room whose air ends a
+        step above it is cooled by its running boxes (every VAV box of the site, coil or
+        not) to the set point: a common fall r <= 0 of their discharge air, the heat
+        c_p u r the extra airflow of a VAV box would remove (docs/forecasts.md "Cooling
+        as the thermostat's answer"); solved with the heated rooms."""
         m = self.bundle.model
         coil = self._coil
+        if rise.shape[1] != m.n_boxes:  # a site without discharge-air points
+            rise = np.zeros_like(u)
         forcing = forcing + m.reheat_forcing(u, np.where(coil[None, :], 0.0, rise))
-        rooms, rb = self._coil_rooms, self._coil_room_box  # air states, (n_boxes, rooms)
-        # (H, rooms) where a room has a set point and a running coil box
-        can = ((u * coil) @ rb > 0) & np.isfinite(heat)[:, None]
+        # per kind (heat, then cool): set points (H,), sign, and (H, rooms) where a room
+        # has a set point and a running box of that kind
+        kinds = [(0, heat, 1.0)] + ([(1, cool, -1.0)] if cool is not None else [])
+        can = [((u * self._ctl[k]["boxes"]) @ self._ctl[k]["rb"] > 0)
+               & np.isfinite(sp)[:, None] for k, sp, _ in kinds]
         H = len(u)
         xs = np.empty((H + 1, m.n))
         xs[0] = x = self._x
-        self._rresp[1][:] = False  # responses from this run only: the same inputs, the same run
+        for c in self._ctl:  # responses from this run only: the same inputs, the same run
+            c["known"][:] = False
+
+        def short(xr, j):
+            """Per kind (kind, rooms needing control at step j, signed need [K])."""
+            out = []
+            for (k, sp, sign), ok in zip(kinds, can):
+                need = sp[j] - xr[k]
+                sel = np.flatnonzero((sign * need > 1e-6) & ok[j])
+                if len(sel):
+                    out.append((k, sel, need[sel]))
+            return out
+
         h = 0
         while h < H:
             # free run-ahead (one compiled call, the same arithmetic as steps): until the
-            # first step that leaves a room below its set point the reheat is zero
+            # first step that leaves a room outside its set points nothing is controlled
             ahead = stepper.run(x, u[h:], forcing[h:], ts[h:])
-            cold = ((heat[h:, None] - ahead[1:, rooms]) > 1e-6) & can[h:]
-            hit = np.flatnonzero(cold.any(axis=1))
+            off = np.zeros(H - h, dtype=bool)
+            for (k, sp, sign), ok in zip(kinds, can):
+                rooms = self._ctl[k]["rooms"]
+                off |= ((sign * (sp[h:, None] - ahead[1:, rooms]) > 1e-6) & ok[h:]).any(axis=1)
+            hit = np.flatnonzero(off)
             if not len(hit):
                 xs[h + 1:] = ahead[1:]
                 break
             j = h + int(hit[0])
             xs[h + 1:j + 1] = ahead[1:j - h + 1]
             x = ahead[j - h + 1]
-            # step by step while rooms need heat; back to a run-ahead after a step without
+            # step by step while rooms need control; back to a run-ahead after a step without
             while True:
-                need = heat[j] - x[rooms]
-                sel = np.flatnonzero((need > 1e-6) & can[j])
-                if len(sel):
-                    x = self._reheat_step(stepper, xs[j], x, u[j], forcing[j], ts[j], sel,
-                                          need[sel])
+                sels = short([x[self._ctl[k]["rooms"]] for k, _, _ in kinds], j)
+                if sels:
+                    x = self._control_step(stepper, xs[j], x, u[j], forcing[j], ts[j], sels)
                 xs[j + 1] = x
                 j += 1
-                if not len(sel) or j >= H:
+                if not sels or j >= H:
                     break
                 x = stepper.step(x, u[j], forcing[j], ts[j])
             h = j
         return xs
 
-    def _reheat_step(self, stepper, x0: np.ndarray, free: np.ndarray, u: np.ndarray,
-                     forcing: np.ndarray, ts: float, sel: np.ndarray,
-                     need: np.ndarray) -> np.ndarray:
-        """x(k+1) [degC] of one controlled step from ``x0``: the coil rooms ``sel``
-        (indices into the coil rooms) get the rise r = max(M^-1 need, 0), M the
-        rooms' one-step air responses Gamma(u) R to a unit rise, ``free`` the step
-        without it and ``need`` [K] their shortfall below the set point.
+    def _control_step(self, stepper, x0: np.ndarray, free: np.ndarray, u: np.ndarray,
+                      forcing: np.ndarray, ts: float, sels: list) -> np.ndarray:
+        """x(k+1) [degC] of one controlled step from ``x0``. ``sels``: per kind (0 heat,
+        1 cool) the rooms needing control (indices into that kind's rooms) and their
+        signed need [K] (set point minus the air at the step's end without control,
+        ``free``). Their rises r solve M r = need, M the rooms' one-step air responses
+        Gamma(u) R to a unit rise; a heated room's r is then clipped at >= 0, a cooled
+        room's at <= 0 (a neighbour's heat or cooling was enough).
 
         M is not formed at every step (``ExactStepper.columns`` costs a step per room):
         r is found by Newton steps with the responses last computed for these rooms in
-        this run (:attr:`_rresp`, at an earlier step's airflows; the step is linear in r,
-        so each iteration is one exact step) to :data:`REHEAT_TOL`; the responses are
-        recomputed at ``u`` when that has not converged in :data:`REHEAT_ITER` steps.
-        Every run starts without responses, so a forecast is a function of its state and
-        inputs alone (replay equals offline bit for bit)."""
-        rooms = self._coil_rooms[sel]
-        rb = self._coil_room_box[:, sel]
-        R = self.bundle.model.reheat_forcing(np.broadcast_to(u, (len(sel), len(u))),
-                                             rb.T)  # (k, n): unit rise per room
-        cols, known = self._rresp
-        if not known[sel].all():
-            self._reheat_responses(stepper, u, sel[~known[sel]])
-        r = np.zeros(len(sel))
-        got = np.zeros(len(sel))
+        this run (at an earlier step's airflows; the step is linear in r, so each
+        iteration is one exact step) to :data:`REHEAT_TOL`; the responses are recomputed
+        at ``u`` when that has not converged in :data:`REHEAT_ITER` steps. Every run
+        starts without responses, so a forecast is a function of its state and inputs
+        alone (replay equals offline bit for bit)."""
+        m = self.bundle.model
+        for k, sel, _ in sels:
+            c = self._ctl[k]
+            if not c["known"][sel].all():
+                self._control_responses(stepper, u, k, sel[~c["known"][sel]])
+        R = np.vstack([m.reheat_forcing(np.broadcast_to(u, (len(sel), len(u))),
+                                        self._ctl[k]["rb"][:, sel].T)
+                       for k, sel, _ in sels])  # (n_sel, n): unit rise per room
+        rows = np.concatenate([self._ctl[k]["rooms"][sel] for k, sel, _ in sels])
+        need = np.concatenate([nd for _, _, nd in sels])
+        sign = np.concatenate([np.full(len(sel), 1.0 if k == 0 else -1.0)
+                               for k, sel, _ in sels])
+        r = np.zeros(len(need))
+        got = np.zeros(len(need))
         for attempt in range(2):
-            M = cols[np.ix_(rooms, sel)]
+            M = np.hstack([self._ctl[k]["cols"][:, sel] for k, sel, _ in sels])[rows]
             for _ in range(REHEAT_ITER):
                 r = r + _solve_square(M, need - got)
                 x = stepper.step(x0, u, forcing + r @ R, ts)
-                got = x[rooms] - free[rooms]
+                got = x[rows] - free[rows]
                 if np.abs(need - got).max() <= REHEAT_TOL:
                     break
             else:
                 if attempt == 0:  # the old responses are too far off: recompute at u
-                    self._reheat_responses(stepper, u, sel)
+                    for k, sel, _ in sels:
+                        self._control_responses(stepper, u, k, sel)
                     continue
             break
-        if (r < 0).any():  # a neighbour's heat is enough: that room's coil stays off
-            x = stepper.step(x0, u, forcing + np.maximum(r, 0.0) @ R, ts)
+        if (sign * r < 0).any():  # a neighbour's heat (or cooling) is enough
+            x = stepper.step(x0, u, forcing + (sign * np.maximum(sign * r, 0.0)) @ R, ts)
         return x
 
-    def _reheat_responses(self, stepper, u: np.ndarray, sel: np.ndarray) -> None:
-        """Store Gamma(u) R (n, k) of the coil rooms ``sel`` in :attr:`_rresp`."""
-        rb = self._coil_room_box[:, sel]
-        R = self.bundle.model.reheat_forcing(np.broadcast_to(u, (len(sel), len(u))), rb.T)
-        cols, known = self._rresp
-        cols[:, sel] = stepper.columns(u, R.T)
-        known[sel] = True
+    def _control_responses(self, stepper, u: np.ndarray, kind: int, sel: np.ndarray) -> None:
+        """Store Gamma(u) R (n, k) of the rooms ``sel`` of control ``kind``."""
+        c = self._ctl[kind]
+        R = self.bundle.model.reheat_forcing(np.broadcast_to(u, (len(sel), len(u))),
+                                             c["rb"][:, sel].T)
+        c["cols"][:, sel] = stepper.columns(u, R.T)
+        c["known"][sel] = True
 
     def _setpoint_band(self) -> tuple[np.ndarray, np.ndarray]:
         """(HORIZON,) heating and cooling set points over the forecast intervals [degC]
@@ -702,10 +744,19 @@ class OnlineEstimator:
         self._coil_rooms = np.unique(rob[self._coil])
         self._coil_room_box = ((rob[:, None] == self._coil_rooms[None, :])
                                & self._coil[:, None]).astype(float)
-        # the coil rooms' one-step responses to a unit rise (n, rooms) last computed in
-        # the current controlled run, and which are set (:meth:`_reheat_step`)
-        self._rresp = (np.zeros((self.bundle.model.n, len(self._coil_rooms))),
-                       np.zeros(len(self._coil_rooms), dtype=bool))
+        # the cooling side: every VAV box of the site
+        self.cooling_control = COOLING_CONTROL
+        self._cool = np.array([b in site.boxes for b in self.bundle.model.structure.boxes])
+        cool_rooms = np.unique(rob[self._cool])
+        # per kind (heat, cool): the rooms' air states, their boxes (n_boxes, rooms), and
+        # the one-step responses to a unit rise (n, rooms) last computed in the current
+        # controlled run, and which are set (:meth:`_control_step`)
+        self._ctl = [{"boxes": mask, "rooms": rooms,
+                      "rb": ((rob[:, None] == rooms[None, :]) & mask[:, None]).astype(float),
+                      "cols": np.zeros((self.bundle.model.n, len(rooms))),
+                      "known": np.zeros(len(rooms), dtype=bool)}
+                     for mask, rooms in ((self._coil, self._coil_rooms),
+                                         (self._cool, cool_rooms))]
         self._band_at: int | None = None
         self._band_cache: tuple[np.ndarray, np.ndarray] | None = None
 

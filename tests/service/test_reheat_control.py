@@ -124,3 +124,53 @@ def test_controlled_run_equals_exact_responses_and_depends_on_its_inputs_only(es
     np.testing.assert_allclose(xs, ref, rtol=0, atol=1e-7)
     est._controlled_run(stepper, u, forcing, v[:, 1], rise, sp - 0.5)  # another run between
     np.testing.assert_array_equal(est._controlled_run(stepper, u, forcing, v[:, 1], rise, sp), xs)
+
+
+def test_cooling_holds_the_cooling_setpoint_and_heat_and_cool_solve_together(est):
+    """With a cooling set point the rooms with a running box end every step at or below
+    it, at it where they would be above (the least cooling), never colder than without
+    cooling; without one (None) the run is the reheat-only run."""
+    m, nb, ins, u, v, forcing, stepper = _parts(est)
+    rise = ins[:, -nb:]
+    rooms = est._ctl[1]["rooms"]
+    heat = np.full(len(u), -np.inf)
+    free = est._controlled_run(stepper, u, forcing, v[:, 1], rise, heat)
+    np.testing.assert_array_equal(
+        est._controlled_run(stepper, u, forcing, v[:, 1], rise, heat, None), free)
+    T_free = free[1:, rooms]
+    cool = np.full(len(u), float(np.percentile(T_free, 40)))
+    xs = est._controlled_run(stepper, u, forcing, v[:, 1], rise, heat, cool)
+    T = xs[1:, rooms]
+    can = (u * est._cool) @ est._ctl[1]["rb"] > 0
+    assert can.any()
+    assert (T[can] <= cool[0] + 1e-6).all()
+    # the least cooling: a room that a step without control would leave above the set
+    # point ends it at the set point (unless a neighbour's cooling carried it below)
+    f = forcing + m.reheat_forcing(u, np.where(est._coil[None, :], 0.0, rise))
+    one = np.array([stepper.step(xs[j], u[j], f[j], v[j, 1])[rooms] for j in range(len(u))])
+    cooled = can & (one > cool[0] + 1e-6)
+    assert cooled.sum() > 10
+    assert np.isclose(T[cooled], cool[0], atol=1e-6).mean() > 0.9
+    assert (xs <= free + 1e-9).all()  # cooling only lowers temperatures
+    # both set points at once: a narrow band around the free forecast's middle
+    mid = float(np.median(T_free))
+    both = est._controlled_run(stepper, u, forcing, v[:, 1], rise,
+                               np.full(len(u), mid - 0.1), np.full(len(u), mid + 0.1))
+    Tb = both[1:, rooms]
+    ch = (u * est._coil) @ est._ctl[0]["rb"] > 0
+    assert (Tb[can] <= mid + 0.1 + 1e-6).all() and (Tb[ch] >= mid - 0.1 - 1e-6).all()
+
+
+def test_served_forecast_cools_only_when_asked(est):
+    before = est.cooling_control
+    try:
+        est.cooling_control = False
+        plain = est.forecast().mean
+        est.cooling_control = True
+        cooled = est.forecast().mean
+        known = est.forecast(est.forecast_inputs()).mean  # given inputs: no controller
+    finally:
+        est.cooling_control = before
+    assert (cooled <= plain + 1e-9).all()
+    est.cooling_control = before
+    np.testing.assert_array_equal(est.forecast(est.forecast_inputs()).mean, known)

@@ -577,8 +577,7 @@ class OnlineEstimator:
         H = len(u)
         xs = np.empty((H + 1, m.n))
         xs[0] = x = self._x
-        for c in self._ctl:  # responses from this run only: the same inputs, the same run
-            c["known"][:] = False
+        self._air_resp[1][:] = False  # responses from this run only: same inputs, same run
 
         def short(xr, j):
             """Per kind (kind, rooms needing control at step j, signed need [K])."""
@@ -635,45 +634,47 @@ class OnlineEstimator:
         at ``u`` when that has not converged in :data:`REHEAT_ITER` steps. Every run
         starts without responses, so a forecast is a function of its state and inputs
         alone (replay equals offline bit for bit)."""
-        m = self.bundle.model
-        for k, sel, _ in sels:
-            c = self._ctl[k]
-            if not c["known"][sel].all():
-                self._control_responses(stepper, u, k, sel[~c["known"][sel]])
-        R = np.vstack([m.reheat_forcing(np.broadcast_to(u, (len(sel), len(u))),
-                                        self._ctl[k]["rb"][:, sel].T)
-                       for k, sel, _ in sels])  # (n_sel, n): unit rise per room
+        # a rise r of room i's boxes forces only its air state: g_i r [K/s], with
+        # g_i = sum of -Bxu_b u_b over its boxes of that kind (model.reheat_forcing)
         rows = np.concatenate([self._ctl[k]["rooms"][sel] for k, sel, _ in sels])
+        g = np.concatenate([(-self._bxu * u) @ self._ctl[k]["rb"][:, sel]
+                            for k, sel, _ in sels])
         need = np.concatenate([nd for _, _, nd in sels])
         sign = np.concatenate([np.full(len(sel), 1.0 if k == 0 else -1.0)
                                for k, sel, _ in sels])
+        G, known = self._air_resp  # (n, rooms) columns of unit air forcing, where known
+        slots = self._air_slot[rows]
+        if not known[slots].all():
+            self._air_responses(stepper, u, rows[~known[slots]])
         r = np.zeros(len(need))
         got = np.zeros(len(need))
+        f = forcing.copy()
         for attempt in range(2):
-            M = np.hstack([self._ctl[k]["cols"][:, sel] for k, sel, _ in sels])[rows]
+            M = G[np.ix_(rows, slots)] * g[None, :]
             for _ in range(REHEAT_ITER):
                 r = r + _solve_square(M, need - got)
-                x = stepper.step(x0, u, forcing + r @ R, ts)
+                f[rows] = forcing[rows] + r * g
+                x = stepper.step(x0, u, f, ts)
                 got = x[rows] - free[rows]
                 if np.abs(need - got).max() <= REHEAT_TOL:
                     break
             else:
                 if attempt == 0:  # the old responses are too far off: recompute at u
-                    for k, sel, _ in sels:
-                        self._control_responses(stepper, u, k, sel)
+                    self._air_responses(stepper, u, rows)
                     continue
             break
         if (sign * r < 0).any():  # a neighbour's heat (or cooling) is enough
-            x = stepper.step(x0, u, forcing + (sign * np.maximum(sign * r, 0.0)) @ R, ts)
+            f[rows] = forcing[rows] + sign * np.maximum(sign * r, 0.0) * g
+            x = stepper.step(x0, u, f, ts)
         return x
 
-    def _control_responses(self, stepper, u: np.ndarray, kind: int, sel: np.ndarray) -> None:
-        """Store Gamma(u) R (n, k) of the rooms ``sel`` of control ``kind``."""
-        c = self._ctl[kind]
-        R = self.bundle.model.reheat_forcing(np.broadcast_to(u, (len(sel), len(u))),
-                                             c["rb"][:, sel].T)
-        c["cols"][:, sel] = stepper.columns(u, R.T)
-        c["known"][sel] = True
+    def _air_responses(self, stepper, u: np.ndarray, rows: np.ndarray) -> None:
+        """Store Gamma(u) e_i (n,) of unit forcing [K/s] at the air states ``rows``."""
+        G, known = self._air_resp
+        E = np.zeros((len(G), len(rows)))
+        E[rows, np.arange(len(rows))] = 1.0
+        G[:, self._air_slot[rows]] = stepper.columns(u, E)
+        known[self._air_slot[rows]] = True
 
     def _setpoint_band(self) -> tuple[np.ndarray, np.ndarray]:
         """(HORIZON,) heating and cooling set points over the forecast intervals [degC]
@@ -748,15 +749,20 @@ class OnlineEstimator:
         self.cooling_control = COOLING_CONTROL
         self._cool = np.array([b in site.boxes for b in self.bundle.model.structure.boxes])
         cool_rooms = np.unique(rob[self._cool])
-        # per kind (heat, cool): the rooms' air states, their boxes (n_boxes, rooms), and
-        # the one-step responses to a unit rise (n, rooms) last computed in the current
-        # controlled run, and which are set (:meth:`_control_step`)
+        # per kind (heat, cool): the rooms' air states and their boxes (n_boxes, rooms)
         self._ctl = [{"boxes": mask, "rooms": rooms,
-                      "rb": ((rob[:, None] == rooms[None, :]) & mask[:, None]).astype(float),
-                      "cols": np.zeros((self.bundle.model.n, len(rooms))),
-                      "known": np.zeros(len(rooms), dtype=bool)}
+                      "rb": ((rob[:, None] == rooms[None, :]) & mask[:, None]).astype(float)}
                      for mask, rooms in ((self._coil, self._coil_rooms),
                                          (self._cool, cool_rooms))]
+        self._bxu = np.asarray(self.bundle.model._bxu, dtype=float)
+        # one-step responses Gamma(u) e_i (n, rooms) to unit forcing of the controlled
+        # rooms' air states (slot per state) last computed in the current controlled run,
+        # and which are set (:meth:`_control_step`)
+        air = np.union1d(self._coil_rooms, cool_rooms)
+        self._air_slot = np.full(self.bundle.model.n, -1)
+        self._air_slot[air] = np.arange(len(air))
+        self._air_resp = (np.zeros((self.bundle.model.n, len(air))),
+                          np.zeros(len(air), dtype=bool))
         self._band_at: int | None = None
         self._band_cache: tuple[np.ndarray, np.ndarray] | None = None
 

@@ -108,6 +108,7 @@ class Runner:
         self.convert = RowConverter(bundle)
         self.points = self.convert.points
         self.est = OnlineEstimator(bundle, max_gap=pd.Timedelta(seconds=settings.max_gap))
+        self.est.reheat_control = settings.thermostat_forecast
         self.next_time: pd.Timestamp | None = None
         self.forecast: Forecast | None = None
         self.history: deque[Forecast] = deque(maxlen=1024)

@@ -208,6 +208,11 @@ class RunnerSettings(BaseModel):
     gap_tolerance: float = Field(0.0, ge=0, description="runs of 15-min steps without a "
                                  "reading of a point up to this long are not reported as gaps "
                                  "[s]; 0: every missing step is")
+    thermostat_forecast: bool = Field(True, description="forecast the boxes' reheat and "
+                                      "cooling as the rooms' thermostats would (docs/"
+                                      "forecasts.md); false: by the learned input forecasts "
+                                      "alone (about 2-4x less CPU per forecast, a less "
+                                      "accurate served forecast)")
 
 
 class ServiceSettings(BaseSettings):

@@ -96,3 +96,27 @@ def test_report_names_parameters_at_a_bound_and_identifiability(tmp_path):
         in text
     assert "Jacobian rank 11 of 2, condition number 3.2e+05" in text
     assert "gamma_EW/U_win -0.93" in text
+
+
+@pytest.mark.timeout(600)
+def test_reproduce_end_to_end_without_the_service_check(tmp_path):
+    """The whole job on the default campaign (real EnergyPlus, 11 weeks) with
+    ``service=False``: Tables 2 and 3 without the service rows, the report saying so, a
+    model file the service can load, and office6's Table 2 within its must (0.208 / 0.203;
+    about 75 s)."""
+    from zonecast.estimator.artifact import load_model_file
+
+    from zonecast.jobs import reproduce
+
+    res = reproduce.run(tmp_path / "report", seed=0, sensitivity=False, service=False)
+    assert not [k for k in res.table3 if k.startswith("service")]
+    assert {"fixed", "dayahead", "online_paper"} <= set(res.table3)
+    assert "service_check" not in res.timings_s
+    report = (tmp_path / "report" / "report.md").read_text()
+    assert "was left out (`zonecast reproduce --no-service`)" in report
+    again = Results.model_validate_json((tmp_path / "report" / "results.json").read_text())
+    assert again.table3 == res.table3
+    assert load_model_file(tmp_path / "report" / "model.json").model.params is not None
+    assert res.table2["training"]["mean"] <= 0.208
+    assert res.table2["validation"]["mean"] <= 0.203
+    assert res.table3["fixed"]["mean"] <= 0.318

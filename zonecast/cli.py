@@ -378,6 +378,11 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                       help="'weekend' or 'experiments' (as zonecast identify)")] = "weekend",
                   sensitivity: Annotated[bool, typer.Option(
                       help="also identify the paper's window-solar placement")] = True,
+                  service: Annotated[bool, typer.Option(
+                      help="also the service check: the served forecast with input and "
+                           "weather forecasts and calibrated intervals (Table 3's service "
+                           "rows; most of the time on buildings that reheat); "
+                           "--no-service leaves it out")] = True,
                   infiltration: Annotated[str, typer.Option(
                       help="'idf' (the default): the IDF's infiltration as a fixed "
                            "outdoor-air conductance, or 'none' (the paper)")] = "idf",
@@ -415,7 +420,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 shading=shading, return_air=return_air,
                                 roof_solar=roof_solar, sky=sky,
                                 interior_radiation=interior_radiation, films=films,
-                                internal_gains=internal_gains)
+                                internal_gains=internal_gains, service=service)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

@@ -160,6 +160,10 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                          for k, v in results.table2_window_solar_air.items()}, zones)
     lines += ["", "## Table 3: 24-hour prediction RMS [°C]", ""]
     lines += _table(results.table3, zones, PAPER["table3"])
+    if "service" not in results.table3:
+        lines += ["", ("The service check (the served forecast, its input forecasts and "
+                       "calibrated intervals) was left out (`zonecast reproduce "
+                       "--no-service`).")]
     attribution = getattr(results, "service_input_attribution", None)
     if attribution:
         lines += ["", ("Served forecast, which input's persistence costs most (known inputs "
@@ -398,10 +402,13 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         ground: str = "idf", shading: str = "idf", return_air: str = "idf",
         roof_solar: str = "horizontal", sky: str = "none",
         interior_radiation: str = "none", films: str | None = None,
-        internal_gains: str = "air") -> Results:
+        internal_gains: str = "air", service: bool = True) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
+    ``service``: also the service check (:func:`service_check`, Table 3's ``service*``
+    rows and the calibrated coverage; most of the job's time on buildings whose boxes
+    reheat); off, the report says it was left out;
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
@@ -455,17 +462,18 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         weekly_profile={"zones": zones, "values": [[prof[z][b] for z in zones]
                                                    for b in range(len(prof[zones[0]]))]},
         extra={"profile_weeks": study["split"]["train_starts"]})
-    t = time.perf_counter()
-    progress("service check: the online estimator's day-ahead forecasts")
-    weather = _weather_forecasts(campaign, seed)
-    svc = service_check(model_file, campaign / "telemetry.csv", data, seed,
-                        weather=weather)
-    study["table3"].update(svc["table3"])
-    study["horizon_rms"].update(svc["horizon_rms"])
-    study.setdefault("coverage_90", {}).update(
-        {f"{k}_calibrated": v for k, v in svc["coverage_90"].items()})
-    study["service_input_attribution"] = svc["attribution"]
-    timings["service_check"] = time.perf_counter() - t
+    if service:
+        t = time.perf_counter()
+        progress("service check: the online estimator's day-ahead forecasts")
+        weather = _weather_forecasts(campaign, seed)
+        svc = service_check(model_file, campaign / "telemetry.csv", data, seed,
+                            weather=weather)
+        study["table3"].update(svc["table3"])
+        study["horizon_rms"].update(svc["horizon_rms"])
+        study.setdefault("coverage_90", {}).update(
+            {f"{k}_calibrated": v for k, v in svc["coverage_90"].items()})
+        study["service_input_attribution"] = svc["attribution"]
+        timings["service_check"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     pinned = set(ident.at_bounds())
     res = Results(seed=seed,

@@ -182,11 +182,14 @@ def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
 
 
 def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequence,
-                        window: str = "weekend", f_ig: np.ndarray | None = None) -> list[dict]:
+                        window: str = "weekend", f_ig: np.ndarray | None = None,
+                        x0_gains: np.ndarray | None = None,
+                        x0_window: int = X0_WINDOW) -> list[dict]:
     """The identification's simulations (f_IG = 0, x(0) = x_KF(0) of ``model``) of the
     weekends starting on ``saturdays``, beside the measurements, for plots. ``f_ig``
     ((N, n_zones) [W/m2] over all rows of ``data``): gains the fit knew (e.g. the fitted
-    weekend daytime rise), in the x(0) filter and the simulation, as in Table 2.
+    weekend daytime rise), in the x(0) filter and the simulation, as in Table 2;
+    ``x0_gains``, ``x0_window``: the x(0) filter's, as :func:`identify`.
 
     Returns one dict per weekend: ``saturday`` (date string), ``times`` (DatetimeIndex of the
     simulated rows), ``simulated`` and ``measured`` ((N, n_zones) [degC]); the rows and the
@@ -196,7 +199,8 @@ def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequen
     local = data.local_times()
     gains = np.zeros((len(data.times), model.n_zones)) if f_ig is None else np.asarray(f_ig)
     for a, b in identification_spans(data, saturdays, window):
-        x0 = kalman_state(model, data, a - X0_WINDOW, a, f_ig=gains)
+        x0 = kalman_state(model, data, a - x0_window, a,
+                          f_ig=gains if x0_gains is None else gains + x0_gains)
         y = model.simulate(x0, data.u[a:b], data.v[a:b], gains[a:b],
                            reheat=data.reheat[a:b]).y
         rows = measured_rows(data, a, b)
@@ -244,6 +248,10 @@ class IdentificationResult:
         With a weekend gains shape (``identify(gain_shape=)``): zone -> {"value", "se"},
         the shape's fitted scale [-] (not a model parameter; rank and condition include
         it).
+    x0_window : int
+        Rows of the x(0) filter before each weekend.
+    x0_gains : bool
+        Whether the x(0) filter knew internal gains on those rows (``identify(x0_gains=)``).
     """
 
     param_names: list[str]
@@ -269,6 +277,8 @@ class IdentificationResult:
     window: str = "weekend"
     spans: list[dict] = field(default_factory=list)
     gain_scale: dict | None = None
+    x0_window: int = X0_WINDOW
+    x0_gains: bool = False
 
     @property
     def bse(self) -> np.ndarray:
@@ -351,7 +361,8 @@ class IdentificationResult:
                 {n: {"mean": p.mean, "sd": p.sd, "source": p.source}
                  for n, p in self.priors.items()},
                 "map_sigma_e": self.sigma_e, "window": self.window, "spans": self.spans,
-                "gain_scale": self.gain_scale}
+                "gain_scale": self.gain_scale, "x0_window": self.x0_window,
+                "x0_gains": self.x0_gains}
 
 
 class _Problem:
@@ -564,7 +575,9 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
              sigma_e: float = 0.3, window: str = "weekend", f_ig: np.ndarray | None = None,
              start: np.ndarray | None = None, agree_rtol: float = 1e-3,
              gain_shape: np.ndarray | None = None,
-             shape_prior: tuple[float, float] = (1.0, 1.0)) -> IdentificationResult:
+             shape_prior: tuple[float, float] = (1.0, 1.0),
+             x0_gains: np.ndarray | None = None,
+             x0_window: int | None = None) -> IdentificationResult:
     """Identify the parameters of ``model`` (paper section 4-A).
 
     Parameters
@@ -610,12 +623,24 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         Mean and standard deviation [-] of each scale's Gaussian prior in a MAP fit
         (1 ± 1: the shape is the expected gains, a weekend's own may be none or twice
         them); bounds [0, 5].
+    x0_gains : ndarray (N, n_zones), optional
+        Internal gains [W/m2] the x(0) filter knows on the rows before each weekend (e.g.
+        the weekly profile on the working days), added to the fit's own known gains in
+        the filter only: the simulated weekends keep theirs.
+    x0_window : int, optional
+        Rows of the x(0) filter before each weekend (default :data:`X0_WINDOW`, a day).
     """
     t0 = time.perf_counter()
     rng = np.random.default_rng([seed, 11])
     train_spans = identification_spans(data, train, window)
     val_spans = identification_spans(data, validation, window) if validation else []
-    x0_window = X0_WINDOW
+    x0_window = X0_WINDOW if x0_window is None else int(x0_window)
+    if x0_gains is not None:
+        x0_gains = np.nan_to_num(np.asarray(x0_gains, float))
+        if x0_gains.shape != (len(data.times), len(data.zones)):
+            raise IdentificationError(
+                f"x0_gains has shape {x0_gains.shape}; give one value per row and zone "
+                f"{(len(data.times), len(data.zones))}")
     for a, _ in train_spans + val_spans:
         if not any(s <= a - x0_window and a <= e for s, e in data.segments):
             raise IdentificationError(
@@ -651,6 +676,8 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     def x0s(m, spans, theta):
         # one Kalman filter per span, on two threads (the dense products release the GIL)
         g = known_gains(theta)
+        if x0_gains is not None:
+            g = x0_gains if g is None else g + x0_gains
         with ThreadPoolExecutor(max_workers=2) as pool:
             return list(pool.map(lambda sp: kalman_state(m, data, sp[0] - x0_window, sp[0],
                                                          f_ig=g), spans))
@@ -750,4 +777,4 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         bounds=[(float(lo_), float(hi_)) for lo_, hi_ in zip(lo, hi)], model=fitted, rank=rank,
         condition=condition, priors=dict(priors) if priors is not None else None,
         sigma_e=sigma_e if priors is not None else None, window=window, spans=used,
-        gain_scale=gain_scale)
+        gain_scale=gain_scale, x0_window=x0_window, x0_gains=x0_gains is not None)

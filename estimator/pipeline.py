@@ -113,6 +113,9 @@ class Pipeline:
         self.profile_weeks: list[str] = []
         #: filter noise of the streaming estimator (the model file's, else defaults)
         self.noise = NoiseSettings()
+        #: internal gains [W/m2] per row the last :meth:`identify`'s x(0) filter knew
+        #: (``x0_profile_days``), else None
+        self.x0_gains: np.ndarray | None = None
         self._bundle: ModelBundle | None = None
 
     # --- construction ------------------------------------------------------------------
@@ -212,7 +215,8 @@ class Pipeline:
                  sigma_e: float = 0.3, window: str = "weekend",
                  weekend_gains: bool | str = "daytime",
                  gains_weeks: Sequence[int] | None = None,
-                 agree_rtol: float = 1e-3, films: str | None = None) -> IdentificationResult:
+                 agree_rtol: float = 1e-3, films: str | None = None,
+                 x0_profile_days: int | None = None) -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -248,6 +252,14 @@ class Pipeline:
         and Sundays (:func:`weekend_daytime_shape`), s_z fitted with the parameters (prior
         1 +- 1, bounds 0-5): the weekend daytime lighting and equipment of an
         "unoccupied" office, whatever the weekday profile says.
+
+        ``x0_profile_days`` (an option, default off; docs/identification.md "The slow
+        states' x(0)"): after the fit, the weekly internal-gains profile of the whole
+        weeks ``gains_weeks`` without experiments (as for ``"known"``), then the fit again
+        from its parameters (one start) with the x(0) filter running that many days
+        before each weekend and knowing the profile's gains there (the simulated
+        weekends keep the mode's own gains); :attr:`x0_gains` keeps them for
+        :func:`~.identify.weekend_simulations`.
         """
         modes = {False: None, "none": None, True: "known", "known": "known",
                  "scaled": "scaled", "daytime": "daytime"}
@@ -293,6 +305,27 @@ class Pipeline:
                                seed=seed, progress=progress, priors=priors or None,
                                sigma_e=sigma_e, window=window, f_ig=known, gain_shape=shape,
                                start=res.model.params.values)
+        self.x0_gains = None
+        if x0_profile_days is not None:
+            if x0_profile_days < 1:
+                raise PipelineError(f"x0_profile_days={x0_profile_days}: give 1 or more days")
+            self.params = res.model.params
+            progress("weekly internal-gains profile for the x(0) filter")
+            pick = range(len(whole_weeks(data))) if gains_weeks is None else gains_weeks
+            quiet = [i for i in pick
+                     if not data.excitation[slice(*whole_weeks(data)[i]["rows"])].any()]
+            if not quiet:
+                raise PipelineError("x0_profile_days needs whole weeks without an experiment "
+                                    "for the internal-gains profile")
+            x0_gains = np.nan_to_num(self.weekly_profile(data, weeks=quiet)(data.times))
+            per_day = int(pd.Timedelta("1D") / (data.times[1] - data.times[0]))
+            res = identify(self.model(res.model.params), data, train, validation,
+                           seed=seed, progress=progress, priors=priors or None,
+                           sigma_e=sigma_e, window=window, start=res.model.params.values,
+                           gain_shape=(weekend_daytime_shape(data)
+                                       if weekend_gains == "daytime" else None),
+                           x0_gains=x0_gains, x0_window=x0_profile_days * per_day)
+            self.x0_gains = x0_gains
         self.identification = res
         self.params = res.model.params
         self._bundle = None

@@ -383,6 +383,10 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                            "weather forecasts and calibrated intervals (Table 3's service "
                            "rows; most of the time on buildings that reheat); "
                            "--no-service leaves it out")] = True,
+                  x0_profile_days: Annotated[int | None, typer.Option(
+                      min=1, help="an option, off by default: refit with the x(0) filter "
+                                  "running this many days before each weekend and knowing "
+                                  "the weekly internal-gains profile there")] = None,
                   infiltration: Annotated[str, typer.Option(
                       help="'idf' (the default): the IDF's infiltration as a fixed "
                            "outdoor-air conductance, or 'none' (the paper)")] = "idf",
@@ -420,7 +424,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 shading=shading, return_air=return_air,
                                 roof_solar=roof_solar, sky=sky,
                                 interior_radiation=interior_radiation, films=films,
-                                internal_gains=internal_gains, service=service)
+                                internal_gains=internal_gains, service=service,
+                                x0_profile_days=x0_profile_days)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

@@ -402,13 +402,15 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         ground: str = "idf", shading: str = "idf", return_air: str = "idf",
         roof_solar: str = "horizontal", sky: str = "none",
         interior_radiation: str = "none", films: str | None = None,
-        internal_gains: str = "air", service: bool = True) -> Results:
+        internal_gains: str = "air", service: bool = True,
+        x0_profile_days: int | None = None) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
     ``service``: also the service check (:func:`service_check`, Table 3's ``service*``
     rows and the calibrated coverage; most of the job's time on buildings whose boxes
-    reheat); off, the report says it was left out;
+    reheat); off, the report says it was left out; ``x0_profile_days``: as
+    :meth:`Pipeline.identify`;
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
@@ -438,7 +440,9 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                           window=window, progress=lambda s: progress(f"identification: {s}"),
                           weekend_gains=weekend_gains, films=films,
                           gains_weeks=(week_split(data, seed)["train"]
-                                       if weekend_gains not in (False, None, "none") else None))
+                                       if weekend_gains not in (False, None, "none")
+                                       or x0_profile_days else None),
+                          x0_profile_days=x0_profile_days)
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
     progress("identification with window solar on the room air (paper's placement)")
@@ -498,7 +502,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     figures = []
     sims = weekend_simulations(fitted, data, ident.train_weekends + ident.validation_weekends,
                                window=ident.window,
-                               f_ig=_daytime_gains(weekend_gains, ident, data))
+                               f_ig=_daytime_gains(weekend_gains, ident, data),
+                               x0_gains=pipe.x0_gains, x0_window=ident.x0_window)
     roles = {**{d: "training" for d in ident.train_weekends},
              **{d: "validation" for d in ident.validation_weekends}}
     plot_weekends(sims, roles, list(site.zones), out / "fig1_identification.png",

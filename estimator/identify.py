@@ -536,6 +536,18 @@ class _Problem:
             return np.column_stack(cols + [gains.result()])
 
 
+def _per_row_and_zone(arr, data: ModelData, name: str) -> np.ndarray | None:
+    """``arr`` as an (N, n_zones) float array with NaN as 0, or None; a clear error for
+    another shape."""
+    if arr is None:
+        return None
+    arr = np.nan_to_num(np.asarray(arr, float))
+    if arr.shape != (len(data.times), len(data.zones)):
+        raise IdentificationError(f"{name} has shape {arr.shape}; give one value per row and "
+                                  f"zone {(len(data.times), len(data.zones))}")
+    return arr
+
+
 def _starts(params: ParameterSet, n_starts: int, rng: np.random.Generator) -> list[np.ndarray]:
     lo, hi = np.array(params.bounds).T
     base = params.start_params
@@ -635,12 +647,7 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     train_spans = identification_spans(data, train, window)
     val_spans = identification_spans(data, validation, window) if validation else []
     x0_window = X0_WINDOW if x0_window is None else int(x0_window)
-    if x0_gains is not None:
-        x0_gains = np.nan_to_num(np.asarray(x0_gains, float))
-        if x0_gains.shape != (len(data.times), len(data.zones)):
-            raise IdentificationError(
-                f"x0_gains has shape {x0_gains.shape}; give one value per row and zone "
-                f"{(len(data.times), len(data.zones))}")
+    x0_gains = _per_row_and_zone(x0_gains, data, "x0_gains")
     for a, _ in train_spans + val_spans:
         if not any(s <= a - x0_window and a <= e for s, e in data.segments):
             raise IdentificationError(
@@ -652,11 +659,7 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     n_model = len(lo)
     names = list(model.params.param_names)
     if gain_shape is not None:
-        gain_shape = np.nan_to_num(np.asarray(gain_shape, float))
-        if gain_shape.shape != (len(data.times), len(data.zones)):
-            raise IdentificationError(
-                f"gain_shape has shape {gain_shape.shape}; give one value per row and zone "
-                f"{(len(data.times), len(data.zones))}")
+        gain_shape = _per_row_and_zone(gain_shape, data, "gain_shape")
         nz = len(data.zones)
         lo, hi = np.r_[lo, np.zeros(nz)], np.r_[hi, np.full(nz, 5.0)]
         scale = np.r_[scale, np.ones(nz)]

@@ -222,14 +222,22 @@ def _weekend_gains_case(five_zone, scale, level):
     """Model, parameter names, true parameters (gamma_IW x 1.6), the gains' per-zone shape
     (``level`` W/m2 x a zone factor, 10:00-17:00 of every day) and the data simulated with
     the shape times ``scale`` per zone as internal gains."""
-    model, zones, boxes, rng, times, u, v, day = _model_and_inputs(five_zone, 7)
+    def occupied(day):  # weekend occupancy, 10:00-17:00
+        return ((day % 1) > 0.4) & ((day % 1) < 0.7)
+
+    return _gains_case(five_zone, 7, occupied, level, scale)
+
+
+def _gains_case(five_zone, seed, when, level, scale=1.0):
+    """Model, parameter names, true parameters (gamma_IW x 1.6), per-zone gains (``level``
+    W/m2 x a zone factor where ``when(day)``) and the data simulated with them x ``scale``."""
+    model, zones, boxes, rng, times, u, v, day = _model_and_inputs(five_zone, seed)
     n = len(times)
     true = model.params.start_params.copy()
     names = model.params.param_names
     true[names.index("gamma_IW")] *= 1.6
     truth = model.with_params(true)
-    occupied = ((day % 1) > 0.4) & ((day % 1) < 0.7)  # weekend occupancy, 10:00-17:00
-    shape = np.where(occupied, level, 0.0)[:, None] * rng.uniform(0.5, 1.5, 5)
+    shape = np.where(when(day), level, 0.0)[:, None] * rng.uniform(0.5, 1.5, 5)
     sim = truth.simulate(truth.steady_state(u[0], v[0]), u, v, shape * scale)
     y = sim.y[:-1] + rng.normal(0.0, 0.05, (n, 5))
     data = ModelData(times, u, v, y, list(zones), list(boxes),
@@ -349,19 +357,10 @@ def test_the_x0_filter_told_the_days_gains_starts_the_weekend_right(five_zone):
     from zonecast.estimator.evaluate import rms_by_zone
     from zonecast.estimator.identify import weekend_simulations
 
-    model, zones, boxes, rng, times, u, v, day = _model_and_inputs(five_zone, 9)
-    n = len(times)
-    true = model.params.start_params.copy()
-    names = model.params.param_names
-    true[names.index("gamma_IW")] *= 1.6
-    truth = model.with_params(true)
-    friday = (day < 1) & ((day % 1) > 1 / 3) & ((day % 1) < 0.75)  # 08:00-18:00 Friday
-    gains = np.where(friday, 25.0, 0.0)[:, None] * rng.uniform(0.5, 1.5, 5)
-    sim = truth.simulate(truth.steady_state(u[0], v[0]), u, v, gains)
-    y = sim.y[:-1] + rng.normal(0.0, 0.05, (n, 5))
-    data = ModelData(times, u, v, y, list(zones), list(boxes),
-                     segments_of(times, pd.Timedelta("15min")), np.zeros(n, bool),
-                     "America/Los_Angeles")
+    def friday(day):  # 08:00-18:00 of the first day, the Friday
+        return (day < 1) & ((day % 1) > 1 / 3) & ((day % 1) < 0.75)
+
+    model, names, true, gains, data = _gains_case(five_zone, 9, friday, 25.0)
     blind = identify(model, data, train=["2015-04-18"], max_nfev=40)
     told = identify(model, data, train=["2015-04-18"], max_nfev=40, x0_gains=gains,
                     start=blind.params)

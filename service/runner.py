@@ -110,6 +110,8 @@ class Runner:
         self.est = OnlineEstimator(bundle, max_gap=pd.Timedelta(seconds=settings.max_gap))
         self.est.reheat_control = settings.thermostat_forecast
         self.next_time: pd.Timestamp | None = None
+        #: the filter's time right after the checkpoint was loaded (None: none loaded)
+        self.resumed_from: pd.Timestamp | None = None
         self.forecast: Forecast | None = None
         self.history: deque[Forecast] = deque(maxlen=1024)
         self.last_report: StepReport | None = None
@@ -164,6 +166,8 @@ class Runner:
             if self.est.started:
                 self._set_forecast(self.est.forecast())
         self.next_time = pd.Timestamp(meta["next_time"]) if meta.get("next_time") else None
+        #: the filter's time right after loading the checkpoint (None: no state loaded)
+        self.resumed_from = self.est.time if self.est.started else None
         # checkpoints before "unseen" was kept say nothing: take every point as seen
         unseen = set(meta.get("unseen", ()))
         self.unseen = np.array([p in unseen for p in self.points], dtype=bool)

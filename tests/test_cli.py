@@ -1,3 +1,7 @@
+import shutil
+from pathlib import Path
+
+import pytest
 from typer.testing import CliRunner
 
 from tests.conftest import telemetry_frame, write_site
@@ -107,3 +111,33 @@ def test_identify_passes_the_internal_gains_option_to_the_model(tmp_path):
                               "--out", str(tmp_path / "m.json"), "--internal-gains", "walls"])
     assert res.exit_code == 2
     assert "internal_gains must be 'air' or 'idf'" in res.output
+
+
+@pytest.mark.parametrize("command", ["identify", "reproduce"])
+def test_x0_profile_days_reaches_the_pipeline(tmp_path, monkeypatch, command):
+    """--x0-profile-days reaches Pipeline.identify through both commands (which stop at
+    the identification here); 0 is refused by the option's range."""
+    from zonecast.estimator.pipeline import Pipeline
+
+    seen = {}
+
+    def stop(self, *args, **kwargs):
+        seen.update(kwargs)
+        raise ValueError("stopped after the call")
+
+    monkeypatch.setattr(Pipeline, "identify", stop)
+    monkeypatch.setattr(Pipeline, "data", lambda self, *a, **k: None)
+    monkeypatch.setattr("zonecast.jobs.reproduce.week_split", lambda *a, **k: {"train": [0]})
+    site = tmp_path / "site.yaml"
+    args = (["identify", "--site", str(site), "--data", str(tmp_path), "--out",
+             str(tmp_path / "m.json")] if command == "identify" else
+            ["reproduce", "--out", str(tmp_path / "r"), "--campaign", str(tmp_path)])
+    nrel = Path(__file__).resolve().parents[1] / "configs" / "sites" / "nrel"
+    shutil.copy(nrel / "5ZoneAirCooled.site.yaml", site)
+    shutil.copy(nrel / "5ZoneAirCooled.idf", tmp_path / "5ZoneAirCooled.idf")
+    (tmp_path / "telemetry.csv").write_text("time\n")
+    res = runner.invoke(app, [*args, "--x0-profile-days", "2"])
+    assert "stopped after the call" in res.output, res.output
+    assert seen["x0_profile_days"] == 2
+    res = runner.invoke(app, [*args, "--x0-profile-days", "0"])
+    assert res.exit_code == 2 and "x0-profile-days" in res.output

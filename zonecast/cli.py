@@ -201,6 +201,10 @@ InternalGains = Annotated[str, typer.Option(
          "'idf' (split as the IDF's People, Lights and equipment: convective on the air, "
          "radiant on the inside faces, return-air share in the plenum; docs/model.md "
          "\"Internal gains\")")]
+X0ProfileDays = Annotated[int | None, typer.Option(
+    min=1, help="an option, off by default: refit with the x(0) filter running this many "
+                "days before each weekend and knowing the weekly internal-gains profile "
+                "there (docs/identification.md)")]
 Films = Annotated[str | None, typer.Option(
     help="priors and starting values of the inside films: 'combined' (the handbook's "
          "convection + radiation films) or 'convective' (convection alone); default "
@@ -298,6 +302,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "experiments as known f_IG; 'scaled': the profile as a per-zone "
                           "shape whose scale is fitted with the parameters (buildings occupied "
                           "at weekends; docs/identification.md)")] = "daytime",
+                 x0_profile_days: X0ProfileDays = None,
                  seed: Seed = 0) -> None:
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the
@@ -312,7 +317,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  ground=ground, shading=shading, return_air=return_air,
                                  roof_solar=roof_solar, sky=sky,
                                  interior_radiation=interior_radiation, films=films,
-                                 internal_gains=internal_gains,
+                                 internal_gains=internal_gains, x0_profile_days=x0_profile_days,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -383,10 +388,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                            "weather forecasts and calibrated intervals (Table 3's service "
                            "rows; most of the time on buildings that reheat); "
                            "--no-service leaves it out")] = True,
-                  x0_profile_days: Annotated[int | None, typer.Option(
-                      min=1, help="an option, off by default: refit with the x(0) filter "
-                                  "running this many days before each weekend and knowing "
-                                  "the weekly internal-gains profile there")] = None,
+                  x0_profile_days: X0ProfileDays = None,
                   infiltration: Annotated[str, typer.Option(
                       help="'idf' (the default): the IDF's infiltration as a fixed "
                            "outdoor-air conductance, or 'none' (the paper)")] = "idf",

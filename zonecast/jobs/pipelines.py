@@ -76,13 +76,14 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   ground: str = "idf", shading: str = "idf", return_air: str = "idf",
                   roof_solar: str = "horizontal", sky: str = "none",
                   interior_radiation: str = "none", films: str | None = None,
-                  internal_gains: str = "air", progress: Progress = _quiet) -> IdentifyOutcome:
+                  internal_gains: str = "air", progress: Progress = _quiet,
+                  x0_profile_days: int | None = None) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
-    ``weekend_gains``, ``films``: as
+    ``weekend_gains``, ``films``, ``x0_profile_days``: as
     :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
     pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar,
                                                          infiltration=infiltration,
@@ -94,7 +95,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,
-                        films=films, progress=lambda m: progress(f"identification: {m}"))
+                        films=films, progress=lambda m: progress(f"identification: {m}"),
+                        x0_profile_days=x0_profile_days)
     if profile_weeks:
         pipe.weekly_profile(d, progress=lambda m: progress(f"weekly internal-gains profile: {m}"))
     out.parent.mkdir(parents=True, exist_ok=True)

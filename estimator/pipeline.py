@@ -292,14 +292,8 @@ class Pipeline:
         if weekend_gains in ("known", "scaled"):
             self.params = res.model.params
             progress("weekly internal-gains profile for the weekends' gains")
-            # never the identification weekends themselves: their excitation misfit would
-            # come back as known gains; whole weeks without an experiment row only
-            pick = range(len(whole_weeks(data))) if gains_weeks is None else gains_weeks
-            quiet = [i for i in pick
-                     if not data.excitation[slice(*whole_weeks(data)[i]["rows"])].any()]
-            prof = self.weekly_profile(data, weeks=quiet) if quiet else None
-            if prof is not None:
-                f_ig = np.nan_to_num(prof(data.times))
+            f_ig = self._quiet_weeks_gains(data, gains_weeks)
+            if f_ig is not None:
                 known, shape = (f_ig, None) if weekend_gains == "known" else (None, f_ig)
                 res = identify(self.model(res.model.params), data, train, validation,
                                seed=seed, progress=progress, priors=priors or None,
@@ -311,13 +305,10 @@ class Pipeline:
                 raise PipelineError(f"x0_profile_days={x0_profile_days}: give 1 or more days")
             self.params = res.model.params
             progress("weekly internal-gains profile for the x(0) filter")
-            pick = range(len(whole_weeks(data))) if gains_weeks is None else gains_weeks
-            quiet = [i for i in pick
-                     if not data.excitation[slice(*whole_weeks(data)[i]["rows"])].any()]
-            if not quiet:
+            x0_gains = self._quiet_weeks_gains(data, gains_weeks)
+            if x0_gains is None:
                 raise PipelineError("x0_profile_days needs whole weeks without an experiment "
                                     "for the internal-gains profile")
-            x0_gains = np.nan_to_num(self.weekly_profile(data, weeks=quiet)(data.times))
             per_day = int(pd.Timedelta("1D") / (data.times[1] - data.times[0]))
             res = identify(self.model(res.model.params), data, train, validation,
                            seed=seed, progress=progress, priors=priors or None,
@@ -330,6 +321,19 @@ class Pipeline:
         self.params = res.model.params
         self._bundle = None
         return res
+
+    def _quiet_weeks_gains(self, data: ModelData, gains_weeks: Sequence[int] | None
+                           ) -> np.ndarray | None:
+        """The weekly internal-gains profile [W/m2] at every row of ``data``, estimated with
+        the current parameters from the whole weeks ``gains_weeks`` (default all) that hold
+        no experiment row (never the identification weekends: their excitation misfit
+        would come back as gains); None without such a week."""
+        weeks = whole_weeks(data)
+        pick = range(len(weeks)) if gains_weeks is None else gains_weeks
+        quiet = [i for i in pick if not data.excitation[slice(*weeks[i]["rows"])].any()]
+        if not quiet:
+            return None
+        return np.nan_to_num(self.weekly_profile(data, weeks=quiet)(data.times))
 
     def weekly_profile(self, data: ModelData, *, progress: Progress = _quiet,
                        weeks: Sequence[int] | None = None) -> WeeklyProfile | None:

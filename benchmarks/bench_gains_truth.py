@@ -45,9 +45,8 @@ import pandas as pd
 from zonecast.estimator.forecast import track_week, week_split, zone_floor_area
 from zonecast.estimator.internal_gains import truth_correlation, zone_gain_heat
 from zonecast.estimator.pipeline import Pipeline
+from zonecast.estimator.rc.network import CP_AIR  # the model's c_p of air [J/(kg K)]
 
-#: specific heat of air [J/(kg K)] for the reheat heat c_p u r (as the model's)
-CP_AIR = 1005.0
 PARTS = ("people", "lights", "equipment")
 
 

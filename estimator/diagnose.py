@@ -45,8 +45,10 @@ from zonecast.estimator.effects import (
     GAINS_PROFILE,
     SCHEDULE,
     SPECS,
+    adjacent_zones,
     box_zone_matrix,
     heat_regressor,
+    interzone_exchange,
     minimum_airflow_fraction,
     time_of_week_mean,
 )
@@ -79,6 +81,7 @@ __all__ = [
     "load_reference",
     "reference_terms",
     "scaled_capacity",
+    "scaled_internal_mass",
     "score_candidates",
     "sensitivities",
     "where",
@@ -93,10 +96,14 @@ MIN_SCORE = 0.02
 TIE_CONFIDENCE = 0.95
 #: effects the forward selection adds at most (the ranking's first included)
 FORWARD_STEPS = 3
-#: relative capacity step of the thermal-mass finite difference
+#: smallest relative area change of the thermal-mass secant (its first step)
 MASS_STEP = 0.1
-#: state kinds whose capacity the thermal-mass effect scales
-MASS_KINDS = ("room_air", "internal_mass")
+#: state kinds whose area the thermal-mass effect scales
+MASS_KINDS = ("internal_mass",)
+#: iterations of the thermal-mass secant towards the change the training weeks ask for
+MASS_SECANTS = 4
+#: range of the relative area change θ searched (the area times 1 + θ)
+MASS_SCALE_RANGE = (-0.9, 9.0)
 
 
 class DiagnosisError(ValueError):
@@ -226,6 +233,36 @@ def scaled_capacity(model: BilinearModel, scale: np.ndarray) -> BilinearModel:
     return BilinearModel(new, model.params, model.step, model.method, model.u_nominal)
 
 
+def _link_scaled(M: sp.spmatrix, inside: np.ndarray, scale: float) -> sp.csr_matrix:
+    """``M`` (rows: d/dt of each state) with the links of the states outside the set to the
+    states inside it multiplied by ``scale`` and the outside states' diagonals adjusted so
+    that each row still sums as before plus the extra conductance's loss."""
+    M = sp.csr_matrix(M)
+    out_rows = sp.diags((~inside).astype(float))
+    L = out_rows @ M @ sp.diags(inside.astype(float))
+    extra = (scale - 1.0) * L
+    return (M + extra - sp.diags(np.asarray(extra.sum(axis=1)).ravel())).tocsr()
+
+
+def scaled_internal_mass(model: BilinearModel, states: np.ndarray, scale: float) -> BilinearModel:
+    """The model with the area of the internal mass whose nodes are ``states`` multiplied by
+    ``scale`` [-]: their heat capacities and every conductance they have to the rest of the
+    network (the room's air, other faces) scale together. The set's own rows of A are
+    unchanged (capacity and conductance both scale); each other node's link to the set is
+    multiplied by ``scale``, with its diagonal adjusted (it now loses that much more heat)."""
+    st = model.structure
+    inside = np.zeros(model.n, bool)
+    inside[np.asarray(states, int)] = True
+    if scale <= 0:
+        raise ValueError(f"the internal-mass area scale must be > 0, got {scale}")
+    capacity = st.capacity.copy()
+    capacity[inside] *= scale
+    new = dataclasses.replace(
+        st, capacity=capacity, A0=_link_scaled(st.A0, inside, scale),
+        A_p=[_link_scaled(a, inside, scale) for a in st.A_p])
+    return BilinearModel(new, model.params, model.step, model.method, model.u_nominal)
+
+
 def _forecast_windows(base: Baseline):
     for i, (r, H) in enumerate(zip(base.issues, base.horizon)):
         yield i, r, int(H)
@@ -296,7 +333,10 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
                 continue
             if var == GAINS_PROFILE and gains is None:
                 continue
-            if spec.kind == "heat":
+            if e == "interzone_air":
+                out[(e, var)] = _exchange_response(model, data, base, temps, stepper,
+                                                   train_rows if net else None)
+            elif spec.kind == "heat":
                 q = heat_regressor(e, var, model, data, temps, heating_setpoint, gains)
                 if net:
                     q = q - time_of_week_mean(q, data, train_rows)
@@ -305,6 +345,26 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
                 out[(e, var)] = _bias_response(model, data, base, stepper)
             else:
                 out[(e, var)] = _mass_response(model, data, base)
+    return out
+
+
+def _exchange_response(model: BilinearModel, data: ModelData, base: Baseline,
+                       temps: np.ndarray, stepper, train_rows: np.ndarray | None) -> np.ndarray:
+    """(N, nz, nz) forecast change per unit interzone exchange of each zone: the heat of
+    :func:`~.effects.interzone_exchange` enters the zone and leaves its neighbours (net of
+    its training-week time-of-week mean when ``train_rows`` is given)."""
+    nz = model.n_zones
+    Q = interzone_exchange(adjacent_zones(model), temps)
+    out = np.zeros((len(data), nz, nz))
+    for j in range(nz):
+        q = Q[:, :, j]
+        if not q.any():
+            continue
+        if train_rows is not None:
+            q = q - time_of_week_mean(q, data, train_rows)
+        out[:, :, j] = _heat_response(model, data, base, q, stepper).sum(axis=2)
+    # rows outside every forecast window: NaN, as the other responses
+    out[~np.isfinite(base.pred).all(axis=1)] = np.nan
     return out
 
 
@@ -344,20 +404,51 @@ def _bias_response(model: BilinearModel, data: ModelData, base: Baseline, steppe
 
 
 def _mass_response(model: BilinearModel, data: ModelData, base: Baseline) -> np.ndarray:
-    """Finite difference of the forecasts in the capacity scale of each zone's air and
-    internal mass (step :data:`MASS_STEP`)."""
+    """Secant of the forecasts in the area of each zone's internal mass
+    (:func:`scaled_internal_mass`, 1 + θ): the forecasts' change at θ divided by θ. The
+    response is far from linear (a tripled furniture area is not 20 steps of 10 %), so θ is
+    iterated towards the change the training weeks' residuals ask for (least squares of
+    the residuals on the secant, :data:`MASS_SECANTS` times, within
+    :data:`MASS_SCALE_RANGE`, never smaller than :data:`MASS_STEP`); the column is the secant
+    there, and a fitted parameter near that θ reproduces the scaled model's forecasts. A
+    zone without internal mass has a zero column (no term)."""
     nz = model.n_zones
     states = _zone_states(model, MASS_KINDS)
     out = np.full((len(data), nz, nz), np.nan)
-    for j in range(nz):
-        scale = np.ones(model.n)
-        scale[states[j]] = 1.0 + MASS_STEP
-        m = scaled_capacity(model, scale)
-        for i, r, H in _forecast_windows(base):
+    windows = list(_forecast_windows(base))
+    for _, r, H in windows:
+        out[r + 1:r + 1 + H] = 0.0
+    train = base.rows_of(base.split["train"])
+    resid = data.y - base.pred
+
+    def change(j: int, theta: float) -> np.ndarray:
+        m = scaled_internal_mass(model, states[j], 1.0 + theta)
+        d = np.full((len(data), nz), np.nan)
+        for i, r, H in windows:
             f = _profile_at(base.profile, data.times[r:r + H])
             y = m.simulate(base.x0[i], data.u[r:r + H], data.v[r:r + H], f,
                            reheat=data.reheat[r:r + H]).y[1:]
-            out[r + 1:r + 1 + H, :, j] = (y - base.pred[r + 1:r + 1 + H]) / MASS_STEP
+            d[r + 1:r + 1 + H] = y - base.pred[r + 1:r + 1 + H]
+        return d
+
+    lo, hi = MASS_SCALE_RANGE
+    for j in range(nz):
+        if len(states[j]) == 0:
+            continue
+        theta = MASS_STEP
+        col = change(j, theta) / theta
+        for _ in range(MASS_SECANTS):
+            ok = train[:, None] & np.isfinite(col) & np.isfinite(resid)
+            den = float((col[ok] ** 2).sum())
+            if den <= 0:
+                break
+            new = float(np.clip((col[ok] * resid[ok]).sum() / den, lo, hi))
+            new = float(np.sign(new) or 1.0) * max(abs(new), MASS_STEP)
+            if abs(new - theta) <= 0.02 * max(abs(theta), MASS_STEP):
+                break
+            theta = new
+            col = change(j, theta) / theta
+        out[:, :, j] = np.where(np.isfinite(col), col, out[:, :, j])
     return out
 
 

@@ -196,6 +196,9 @@ def test_clean_model_data_give_no_confident_attribution(model, inputs):
     res = diagnose(model, _data(times, u, v, y), seed=0)
     assert not [c.effect for c in res.ranked if c.confident]
     assert res.forward == {"steps": [], "confident_after": [[]]}  # nothing to add
+    # this floor has no furniture: the thermal-mass term is empty, not a capacity knob
+    mass = next(c for c in res.ranked if c.effect == "thermal_mass")
+    assert mass.score == 0.0 and mass.confidence == 0.0
 
 
 def test_forward_selection_adds_both_of_two_effects_and_then_stops(model, inputs):

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -78,6 +78,7 @@ __all__ = [
     "bias_offset_states",
     "diagnose",
     "forward_selection",
+    "furniture_rebuilder",
     "load_reference",
     "reference_terms",
     "scaled_capacity",
@@ -263,6 +264,35 @@ def scaled_internal_mass(model: BilinearModel, states: np.ndarray, scale: float)
     return BilinearModel(new, model.params, model.step, model.method, model.u_nominal)
 
 
+def furniture_rebuilder(building, zones: Mapping[str, Sequence[str]], boxes: Mapping[str, str],
+                        model: BilinearModel) -> Callable[[int, float], BilinearModel]:
+    """``f(j, scale)``: ``model`` rebuilt from ``building`` (:func:`~.model.build_model`, the
+    model's own options and parameters) with the area of every InternalMass of zone j's
+    rooms multiplied by ``scale``: capacity, links to the room, and the shares of window
+    solar and radiant gains its faces take (the other faces' shares fall as EnergyPlus's
+    would) all follow, as in the building. The state layout is the model's."""
+    from zonecast.estimator.model import build_model  # import cycle at module level
+
+    names = list(model.structure.zones)
+    opts = model.structure.options
+
+    def rebuild(j: int, scale: float) -> BilinearModel:
+        rooms = {r.lower() for r in model.structure.zones[names[j]]}
+        masses = {n: dataclasses.replace(m, area=m.area * scale) if m.zone.lower() in rooms
+                  else m for n, m in building.internal_masses.items()}
+        b = dataclasses.replace(building, internal_masses=masses)
+        new = build_model(b, zones, boxes, model.params, options=opts, step=model.step,
+                          method=model.method, u_nominal=model.u_nominal)
+        if new.n != model.n or [lab.kind for lab in new.structure.labels] != \
+                [lab.kind for lab in model.structure.labels]:
+            raise DiagnosisError("the model rebuilt from the building has another state "
+                                 "layout than the model diagnosed: give the building the "
+                                 "model was built from")
+        return new
+
+    return rebuild
+
+
 def _forecast_windows(base: Baseline):
     for i, (r, H) in enumerate(zip(base.issues, base.horizon)):
         yield i, r, int(H)
@@ -290,7 +320,8 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
                   effects: Sequence[str] | None = None,
                   progress: Callable[[str], None] | None = None, *,
                   net_of_profile: bool | None = None,
-                  heating_setpoint: np.ndarray | None = None) -> dict:
+                  heating_setpoint: np.ndarray | None = None,
+                  mass_model: Callable[[int, float], BilinearModel] | None = None) -> dict:
     """Forecast sensitivities of every candidate.
 
     ``heating_setpoint`` (N,) [degC]: the site's scheduled heating set point; without it
@@ -344,7 +375,7 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
             elif spec.kind == "output":
                 out[(e, var)] = _bias_response(model, data, base, stepper)
             else:
-                out[(e, var)] = _mass_response(model, data, base)
+                out[(e, var)] = _mass_response(model, data, base, mass_model)
     return out
 
 
@@ -403,7 +434,9 @@ def _bias_response(model: BilinearModel, data: ModelData, base: Baseline, steppe
     return out
 
 
-def _mass_response(model: BilinearModel, data: ModelData, base: Baseline) -> np.ndarray:
+def _mass_response(model: BilinearModel, data: ModelData, base: Baseline,
+                   mass_model: Callable[[int, float], BilinearModel] | None = None
+                   ) -> np.ndarray:
     """Secant of the forecasts in the area of each zone's internal mass
     (:func:`scaled_internal_mass`, 1 + θ): the forecasts' change at θ divided by θ. The
     response is far from linear (a tripled furniture area is not 20 steps of 10 %), so θ is
@@ -422,7 +455,8 @@ def _mass_response(model: BilinearModel, data: ModelData, base: Baseline) -> np.
     resid = data.y - base.pred
 
     def change(j: int, theta: float) -> np.ndarray:
-        m = scaled_internal_mass(model, states[j], 1.0 + theta)
+        m = (mass_model(j, 1.0 + theta) if mass_model is not None
+             else scaled_internal_mass(model, states[j], 1.0 + theta))
         d = np.full((len(data), nz), np.nan)
         for i, r, H in windows:
             f = _profile_at(base.profile, data.times[r:r + H])
@@ -1010,7 +1044,8 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
              effects: Sequence[str] | None = None,
              reference: Reference | Sequence[dict] | None = None,
              heating_setpoint: np.ndarray | None = None, forward: bool = True,
-             progress: Callable[[str], None] | None = None) -> Diagnosis:
+             progress: Callable[[str], None] | None = None,
+             mass_model: Callable[[int, float], BilinearModel] | None = None) -> Diagnosis:
     """Where, which and how much (module docstring); ``seed`` draws the week split.
 
     ``reference``: a :class:`Reference` from the diagnosis of a period known to be free of
@@ -1028,6 +1063,10 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
 
     ``forward``: also run :func:`forward_selection` from the ranking's first effect (which
     other effects remain confident once it is in the model); it does not change the ranking.
+
+    ``mass_model``: ``f(j, scale)`` the model with zone j's furniture area scaled
+    (:func:`furniture_rebuilder`), for the thermal-mass term; without it the furniture's
+    own nodes are scaled (:func:`scaled_internal_mass`).
     """
     t0 = time.perf_counter()
     zones = list(data.zones)
@@ -1043,7 +1082,7 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
         progress("residual slices")
     wh = where(base, data, zones, box_zone_matrix(model))
     sens = sensitivities(model, data, base, effects, progress,
-                         heating_setpoint=heating_setpoint)
+                         heating_setpoint=heating_setpoint, mass_model=mass_model)
     resid = data.y - base.pred
     terms = list(reference.terms) if reference is not None else []
     if terms:
@@ -1055,7 +1094,7 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
             ref_sens = sens
         else:
             ref_sens = sensitivities(model, data, base, needed, progress, net_of_profile=net,
-                                     heating_setpoint=heating_setpoint)
+                                     heating_setpoint=heating_setpoint, mass_model=mass_model)
         resid = _apply_reference(resid, ref_sens, terms, zones)
     if progress:
         progress("scoring candidates")

@@ -469,3 +469,37 @@ def test_scaled_internal_mass_scales_capacity_and_links_together(furnished):
     assert np.sort(-ev3.real)[0] <= np.sort(-ev.real)[0] + 1e-12
     with pytest.raises(ValueError, match="must be > 0"):
         scaled_internal_mass(m, states, 0.0)
+
+
+def test_furniture_rebuilder_scales_the_furniture_and_its_shares(five_zone, furnished):
+    """Rebuilt from the building with one zone's furniture tripled: the furniture's
+    capacity triples, and its faces take a larger share of the window solar, which the
+    room's other faces give up (the solar put in stays the same)."""
+    import dataclasses
+
+    from zonecast.estimator.diagnose import furniture_rebuilder
+    from zonecast.estimator.idf import InternalMass
+    masses = {f"{r} Furniture": InternalMass(f"{r} Furniture", r, "FLOOR-SLAB-1",
+                                             0.5 * five_zone.zones[r].floor_area)
+              for rooms in ZONES.values() for r in rooms}
+    b = dataclasses.replace(five_zone, internal_masses=masses)
+    boxes = {f"VAV-{i}": f"SPACE{i}-1" for i in range(1, 6)}
+    rebuild = furniture_rebuilder(b, ZONES, boxes, furnished)
+    same = rebuild(ZONE, 1.0)
+    assert abs(same.structure.A(furnished.params.physical)
+               - furnished.structure.A(furnished.params.physical)).max() == 0
+    m3 = rebuild(ZONE, 3.0)
+    st, st3 = furnished.structure, m3.structure
+    states = _mass_states(furnished, ZONE)
+    np.testing.assert_allclose(st3.capacity[states], 3 * st.capacity[states])
+    # heat per unit solar on each node [W per W/m2]: capacity times the Bv row
+    bv, bv3 = (np.asarray(m.structure.capacity)[:, None] * np.asarray(
+        m.Bv.toarray() if hasattr(m.Bv, "toarray") else m.Bv) for m in (furnished, m3))
+    room = ZONES[list(ZONES)[ZONE]][0]
+    faces = [i for i, lab in enumerate(st.labels) if lab.room == room and i not in states]
+    col = int(np.argmax(np.abs(bv[states]).sum(axis=0)))  # the facade the windows face
+    assert bv3[states, col].sum() > 1.5 * bv[states, col].sum() > 0  # 3A / (rest + 3A)
+    assert bv3[faces, col].sum() < bv[faces, col].sum()
+    np.testing.assert_allclose(bv3[:, col].sum(), bv[:, col].sum(), rtol=1e-9)
+    with pytest.raises(Exception, match="state layout"):
+        furniture_rebuilder(five_zone, ZONES, boxes, furnished)(ZONE, 2.0)

@@ -34,8 +34,12 @@ name                      parameter   extra term in zone z
                                       (:func:`interzone_exchange`)
 ``sensor_bias``           K           measured ȳ_z = C_z x + θ (output equation)
 ``thermal_mass``          -           area of the zone's internal mass (furniture,
-                                      partitions) scaled by (1 + θ): its heat capacity and
-                                      its exchange with the room scale together
+                                      partitions) scaled by (1 + θ): the model rebuilt
+                                      from the building with that area, so its capacity,
+                                      its exchange with the room and its share of the
+                                      window solar and radiant gains all follow
+                                      (:func:`~.diagnose.furniture_rebuilder`); without
+                                      the building, its own nodes scaled
                                       (:func:`~.diagnose.scaled_internal_mass`); no term
                                       in a zone without internal mass
 ========================  ==========  ====================================================

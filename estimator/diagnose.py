@@ -14,7 +14,7 @@ Pipeline (docs/diagnosis.md has the method and the measured numbers):
    excitation vs normal operation) and forecast lead.
 3. :func:`sensitivities` — for every candidate effect of :mod:`.effects`, zone and variant,
    the change of the forecasts per unit of its parameter (exact for the heat and output
-   terms given the base prediction, finite difference for the capacity scaling). Heat terms
+   terms given the base prediction, a secant for the furniture-area scaling). Heat terms
    are taken net of their training-week time-of-week mean: a refitted weekly profile would
    absorb that part.
 4. :func:`score_candidates` — each candidate's parameter fitted by least squares on the
@@ -81,7 +81,6 @@ __all__ = [
     "furniture_rebuilder",
     "load_reference",
     "reference_terms",
-    "scaled_capacity",
     "scaled_internal_mass",
     "score_candidates",
     "sensitivities",
@@ -219,19 +218,6 @@ def baseline(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
 
 
 # --------------------------------------------------------------------------- sensitivities
-
-
-def scaled_capacity(model: BilinearModel, scale: np.ndarray) -> BilinearModel:
-    """The model with each state's heat capacity multiplied by ``scale`` (conductances kept):
-    every row of A, B_v and B_IG is divided by it."""
-    st = model.structure
-    scale = np.asarray(scale, float)
-    D = sp.diags(1.0 / scale)
-    new = dataclasses.replace(
-        st, capacity=st.capacity * scale, A0=(D @ st.A0).tocsr(),
-        A_p=[(D @ a).tocsr() for a in st.A_p], Bv0=(D @ st.Bv0).tocsr(),
-        Bv_p=[(D @ b).tocsr() for b in st.Bv_p], B_ig=st.B_ig / scale[:, None])
-    return BilinearModel(new, model.params, model.step, model.method, model.u_nominal)
 
 
 def _link_scaled(M: sp.spmatrix, inside: np.ndarray, scale: float) -> sp.csr_matrix:

@@ -14,7 +14,7 @@ Pipeline (docs/diagnosis.md has the method and the measured numbers):
    excitation vs normal operation) and forecast lead.
 3. :func:`sensitivities` — for every candidate effect of :mod:`.effects`, zone and variant,
    the change of the forecasts per unit of its parameter (exact for the heat and output
-   terms given the base prediction, finite difference for the capacity scaling). Heat terms
+   terms given the base prediction, a secant for the furniture-area scaling). Heat terms
    are taken net of their training-week time-of-week mean: a refitted weekly profile would
    absorb that part.
 4. :func:`score_candidates` — each candidate's parameter fitted by least squares on the
@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,8 +45,10 @@ from zonecast.estimator.effects import (
     GAINS_PROFILE,
     SCHEDULE,
     SPECS,
+    adjacent_zones,
     box_zone_matrix,
     heat_regressor,
+    interzone_exchange,
     minimum_airflow_fraction,
     time_of_week_mean,
 )
@@ -76,9 +78,10 @@ __all__ = [
     "bias_offset_states",
     "diagnose",
     "forward_selection",
+    "furniture_rebuilder",
     "load_reference",
     "reference_terms",
-    "scaled_capacity",
+    "scaled_internal_mass",
     "score_candidates",
     "sensitivities",
     "where",
@@ -93,10 +96,14 @@ MIN_SCORE = 0.02
 TIE_CONFIDENCE = 0.95
 #: effects the forward selection adds at most (the ranking's first included)
 FORWARD_STEPS = 3
-#: relative capacity step of the thermal-mass finite difference
+#: smallest relative area change of the thermal-mass secant (its first step)
 MASS_STEP = 0.1
-#: state kinds whose capacity the thermal-mass effect scales
-MASS_KINDS = ("room_air", "internal_mass")
+#: state kinds whose area the thermal-mass effect scales
+MASS_KINDS = ("internal_mass",)
+#: iterations of the thermal-mass secant towards the change the training weeks ask for
+MASS_SECANTS = 4
+#: range of the relative area change θ searched (the area times 1 + θ)
+MASS_SCALE_RANGE = (-0.9, 9.0)
 
 
 class DiagnosisError(ValueError):
@@ -213,17 +220,63 @@ def baseline(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
 # --------------------------------------------------------------------------- sensitivities
 
 
-def scaled_capacity(model: BilinearModel, scale: np.ndarray) -> BilinearModel:
-    """The model with each state's heat capacity multiplied by ``scale`` (conductances kept):
-    every row of A, B_v and B_IG is divided by it."""
+def _link_scaled(M: sp.spmatrix, inside: np.ndarray, scale: float) -> sp.csr_matrix:
+    """``M`` (rows: d/dt of each state) with the links of the states outside the set to the
+    states inside it multiplied by ``scale`` and the outside states' diagonals adjusted so
+    that each row still sums as before plus the extra conductance's loss."""
+    M = sp.csr_matrix(M)
+    out_rows = sp.diags((~inside).astype(float))
+    L = out_rows @ M @ sp.diags(inside.astype(float))
+    extra = (scale - 1.0) * L
+    return (M + extra - sp.diags(np.asarray(extra.sum(axis=1)).ravel())).tocsr()
+
+
+def scaled_internal_mass(model: BilinearModel, states: np.ndarray, scale: float) -> BilinearModel:
+    """The model with the area of the internal mass whose nodes are ``states`` multiplied by
+    ``scale`` [-]: their heat capacities and every conductance they have to the rest of the
+    network (the room's air, other faces) scale together. The set's own rows of A are
+    unchanged (capacity and conductance both scale); each other node's link to the set is
+    multiplied by ``scale``, with its diagonal adjusted (it now loses that much more heat)."""
     st = model.structure
-    scale = np.asarray(scale, float)
-    D = sp.diags(1.0 / scale)
+    inside = np.zeros(model.n, bool)
+    inside[np.asarray(states, int)] = True
+    if scale <= 0:
+        raise ValueError(f"the internal-mass area scale must be > 0, got {scale}")
+    capacity = st.capacity.copy()
+    capacity[inside] *= scale
     new = dataclasses.replace(
-        st, capacity=st.capacity * scale, A0=(D @ st.A0).tocsr(),
-        A_p=[(D @ a).tocsr() for a in st.A_p], Bv0=(D @ st.Bv0).tocsr(),
-        Bv_p=[(D @ b).tocsr() for b in st.Bv_p], B_ig=st.B_ig / scale[:, None])
+        st, capacity=capacity, A0=_link_scaled(st.A0, inside, scale),
+        A_p=[_link_scaled(a, inside, scale) for a in st.A_p])
     return BilinearModel(new, model.params, model.step, model.method, model.u_nominal)
+
+
+def furniture_rebuilder(building, zones: Mapping[str, Sequence[str]], boxes: Mapping[str, str],
+                        model: BilinearModel) -> Callable[[int, float], BilinearModel]:
+    """``f(j, scale)``: ``model`` rebuilt from ``building`` (:func:`~.model.build_model`, the
+    model's own options and parameters) with the area of every InternalMass of zone j's
+    rooms multiplied by ``scale``: capacity, links to the room, and the shares of window
+    solar and radiant gains its faces take (the other faces' shares fall as EnergyPlus's
+    would) all follow, as in the building. The state layout is the model's."""
+    from zonecast.estimator.model import build_model  # import cycle at module level
+
+    names = list(model.structure.zones)
+    opts = model.structure.options
+
+    def rebuild(j: int, scale: float) -> BilinearModel:
+        rooms = {r.lower() for r in model.structure.zones[names[j]]}
+        masses = {n: dataclasses.replace(m, area=m.area * scale) if m.zone.lower() in rooms
+                  else m for n, m in building.internal_masses.items()}
+        b = dataclasses.replace(building, internal_masses=masses)
+        new = build_model(b, zones, boxes, model.params, options=opts, step=model.step,
+                          method=model.method, u_nominal=model.u_nominal)
+        if new.n != model.n or [lab.kind for lab in new.structure.labels] != \
+                [lab.kind for lab in model.structure.labels]:
+            raise DiagnosisError("the model rebuilt from the building has another state "
+                                 "layout than the model diagnosed: give the building the "
+                                 "model was built from")
+        return new
+
+    return rebuild
 
 
 def _forecast_windows(base: Baseline):
@@ -253,7 +306,8 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
                   effects: Sequence[str] | None = None,
                   progress: Callable[[str], None] | None = None, *,
                   net_of_profile: bool | None = None,
-                  heating_setpoint: np.ndarray | None = None) -> dict:
+                  heating_setpoint: np.ndarray | None = None,
+                  mass_model: Callable[[int, float], BilinearModel] | None = None) -> dict:
     """Forecast sensitivities of every candidate.
 
     ``heating_setpoint`` (N,) [degC]: the site's scheduled heating set point; without it
@@ -296,7 +350,10 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
                 continue
             if var == GAINS_PROFILE and gains is None:
                 continue
-            if spec.kind == "heat":
+            if e == "interzone_air":
+                out[(e, var)] = _exchange_response(model, data, base, temps, stepper,
+                                                   train_rows if net else None)
+            elif spec.kind == "heat":
                 q = heat_regressor(e, var, model, data, temps, heating_setpoint, gains)
                 if net:
                     q = q - time_of_week_mean(q, data, train_rows)
@@ -304,7 +361,27 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
             elif spec.kind == "output":
                 out[(e, var)] = _bias_response(model, data, base, stepper)
             else:
-                out[(e, var)] = _mass_response(model, data, base)
+                out[(e, var)] = _mass_response(model, data, base, mass_model)
+    return out
+
+
+def _exchange_response(model: BilinearModel, data: ModelData, base: Baseline,
+                       temps: np.ndarray, stepper, train_rows: np.ndarray | None) -> np.ndarray:
+    """(N, nz, nz) forecast change per unit interzone exchange of each zone: the heat of
+    :func:`~.effects.interzone_exchange` enters the zone and leaves its neighbours (net of
+    its training-week time-of-week mean when ``train_rows`` is given)."""
+    nz = model.n_zones
+    Q = interzone_exchange(adjacent_zones(model), temps)
+    out = np.zeros((len(data), nz, nz))
+    for j in range(nz):
+        q = Q[:, :, j]
+        if not q.any():
+            continue
+        if train_rows is not None:
+            q = q - time_of_week_mean(q, data, train_rows)
+        out[:, :, j] = _heat_response(model, data, base, q, stepper).sum(axis=2)
+    # rows outside every forecast window: NaN, as the other responses
+    out[~np.isfinite(base.pred).all(axis=1)] = np.nan
     return out
 
 
@@ -343,21 +420,55 @@ def _bias_response(model: BilinearModel, data: ModelData, base: Baseline, steppe
     return out
 
 
-def _mass_response(model: BilinearModel, data: ModelData, base: Baseline) -> np.ndarray:
-    """Finite difference of the forecasts in the capacity scale of each zone's air and
-    internal mass (step :data:`MASS_STEP`)."""
+def _mass_response(model: BilinearModel, data: ModelData, base: Baseline,
+                   mass_model: Callable[[int, float], BilinearModel] | None = None
+                   ) -> np.ndarray:
+    """Secant of the forecasts in the area of each zone's internal mass
+    (:func:`scaled_internal_mass`, 1 + θ): the forecasts' change at θ divided by θ. The
+    response is far from linear (a tripled furniture area is not 20 steps of 10 %), so θ is
+    iterated towards the change the training weeks' residuals ask for (least squares of
+    the residuals on the secant, :data:`MASS_SECANTS` times, within
+    :data:`MASS_SCALE_RANGE`, never smaller than :data:`MASS_STEP`); the column is the secant
+    there, and a fitted parameter near that θ reproduces the scaled model's forecasts. A
+    zone without internal mass has a zero column (no term)."""
     nz = model.n_zones
     states = _zone_states(model, MASS_KINDS)
     out = np.full((len(data), nz, nz), np.nan)
-    for j in range(nz):
-        scale = np.ones(model.n)
-        scale[states[j]] = 1.0 + MASS_STEP
-        m = scaled_capacity(model, scale)
-        for i, r, H in _forecast_windows(base):
+    windows = list(_forecast_windows(base))
+    for _, r, H in windows:
+        out[r + 1:r + 1 + H] = 0.0
+    train = base.rows_of(base.split["train"])
+    resid = data.y - base.pred
+
+    def change(j: int, theta: float) -> np.ndarray:
+        m = (mass_model(j, 1.0 + theta) if mass_model is not None
+             else scaled_internal_mass(model, states[j], 1.0 + theta))
+        d = np.full((len(data), nz), np.nan)
+        for i, r, H in windows:
             f = _profile_at(base.profile, data.times[r:r + H])
             y = m.simulate(base.x0[i], data.u[r:r + H], data.v[r:r + H], f,
                            reheat=data.reheat[r:r + H]).y[1:]
-            out[r + 1:r + 1 + H, :, j] = (y - base.pred[r + 1:r + 1 + H]) / MASS_STEP
+            d[r + 1:r + 1 + H] = y - base.pred[r + 1:r + 1 + H]
+        return d
+
+    lo, hi = MASS_SCALE_RANGE
+    for j in range(nz):
+        if len(states[j]) == 0:
+            continue
+        theta = MASS_STEP
+        col = change(j, theta) / theta
+        for _ in range(MASS_SECANTS):
+            ok = train[:, None] & np.isfinite(col) & np.isfinite(resid)
+            den = float((col[ok] ** 2).sum())
+            if den <= 0:
+                break
+            new = float(np.clip((col[ok] * resid[ok]).sum() / den, lo, hi))
+            new = float(np.sign(new) or 1.0) * max(abs(new), MASS_STEP)
+            if abs(new - theta) <= 0.02 * max(abs(theta), MASS_STEP):
+                break
+            theta = new
+            col = change(j, theta) / theta
+        out[:, :, j] = np.where(np.isfinite(col), col, out[:, :, j])
     return out
 
 
@@ -919,7 +1030,8 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
              effects: Sequence[str] | None = None,
              reference: Reference | Sequence[dict] | None = None,
              heating_setpoint: np.ndarray | None = None, forward: bool = True,
-             progress: Callable[[str], None] | None = None) -> Diagnosis:
+             progress: Callable[[str], None] | None = None,
+             mass_model: Callable[[int, float], BilinearModel] | None = None) -> Diagnosis:
     """Where, which and how much (module docstring); ``seed`` draws the week split.
 
     ``reference``: a :class:`Reference` from the diagnosis of a period known to be free of
@@ -937,6 +1049,10 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
 
     ``forward``: also run :func:`forward_selection` from the ranking's first effect (which
     other effects remain confident once it is in the model); it does not change the ranking.
+
+    ``mass_model``: ``f(j, scale)`` the model with zone j's furniture area scaled
+    (:func:`furniture_rebuilder`), for the thermal-mass term; without it the furniture's
+    own nodes are scaled (:func:`scaled_internal_mass`).
     """
     t0 = time.perf_counter()
     zones = list(data.zones)
@@ -952,7 +1068,7 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
         progress("residual slices")
     wh = where(base, data, zones, box_zone_matrix(model))
     sens = sensitivities(model, data, base, effects, progress,
-                         heating_setpoint=heating_setpoint)
+                         heating_setpoint=heating_setpoint, mass_model=mass_model)
     resid = data.y - base.pred
     terms = list(reference.terms) if reference is not None else []
     if terms:
@@ -964,7 +1080,7 @@ def diagnose(model: BilinearModel, data: ModelData, *, seed: int = 0, gains: str
             ref_sens = sens
         else:
             ref_sens = sensitivities(model, data, base, needed, progress, net_of_profile=net,
-                                     heating_setpoint=heating_setpoint)
+                                     heating_setpoint=heating_setpoint, mass_model=mass_model)
         resid = _apply_reference(resid, ref_sens, terms, zones)
     if progress:
         progress("scoring candidates")

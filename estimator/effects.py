@@ -26,10 +26,22 @@ name                      parameter   extra term in zone z
 ``supply_offset``         K           heat q = θ · c_p · Σ_{boxes of z} u_j (supply air at the
                                       boxes θ warmer than the AHU sensor reads); one θ for
                                       all zones: the site has one supply temperature point
-``interzone_air``         W/K         heat q = θ · Σ_{n adjacent to z} (T_n − T_z)
+``interzone_air``         W/K         air exchanged both ways between zone z and each
+                                      adjacent zone n (open doors, transfer grilles,
+                                      EnergyPlus ZoneCrossMixing): z gains
+                                      θ · Σ_n (T_n − T_z) and each neighbour n loses
+                                      θ · (T_n − T_z), so the exchange conserves heat
+                                      (:func:`interzone_exchange`)
 ``sensor_bias``           K           measured ȳ_z = C_z x + θ (output equation)
-``thermal_mass``          -           capacity of the zone's room air and internal mass
-                                      scaled by (1 + θ)
+``thermal_mass``          -           area of the zone's internal mass (furniture,
+                                      partitions) scaled by (1 + θ): the model rebuilt
+                                      from the building with that area, so its capacity,
+                                      its exchange with the room and its share of the
+                                      window solar and radiant gains all follow
+                                      (:func:`~.diagnose.furniture_rebuilder`); without
+                                      the building, its own nodes scaled
+                                      (:func:`~.diagnose.scaled_internal_mass`); no term
+                                      in a zone without internal mass
 ========================  ==========  ====================================================
 
 The heat terms enter the model like internal gains (spread over the zone's rooms by floor
@@ -64,6 +76,7 @@ __all__ = [
     "box_zone_matrix",
     "first_order_lag",
     "heat_regressor",
+    "interzone_exchange",
     "minimum_airflow_fraction",
     "time_of_week_mean",
     "window_area_by_facade",
@@ -121,11 +134,11 @@ SPECS: dict[str, EffectSpec] = {s.name: s for s in (
                "supply air at the boxes warmer or colder than the AHU sensor reads",
                scope="system"),
     EffectSpec("interzone_air", "heat", "W/K", +1, (None,),
-               "air exchanged with adjacent zones (open doors, transfer grilles)"),
+               "air exchanged both ways with adjacent zones (open doors, transfer grilles)"),
     EffectSpec("sensor_bias", "output", "K", 0, (None,),
                "constant offset of the zone temperature sensors"),
     EffectSpec("thermal_mass", "capacity", "-", 0, (None,),
-               "room air and internal mass heat capacity scaled by (1 + parameter)"),
+               "internal mass (furniture) area scaled by (1 + parameter)"),
 )}
 #: effect names in a stable order
 EFFECTS = tuple(SPECS)
@@ -187,6 +200,29 @@ def adjacent_zones(model: BilinearModel) -> np.ndarray:
                 if a != b:
                     adj[a, b] = 1.0
     return adj
+
+
+def interzone_exchange(adj: np.ndarray, temps: np.ndarray) -> np.ndarray:
+    """(N, n_zones, n_zones) heat into each zone per unit exchange of each zone [W per W/K].
+
+    ``[k, i, j]`` is what zone i receives at row k when zone j exchanges air with each of its
+    adjacent zones (``adj``, :func:`adjacent_zones`) at a unit conductance c_p·ṁ = 1 W/K:
+    zone j gains Σ_n adj[j, n] (T_n − T_j) and each neighbour n loses adj[j, n] (T_n − T_j),
+    as EnergyPlus's ZoneCrossMixing moves the same air both ways. Every column sums to zero
+    over i (the exchange conserves heat). ``temps`` (N, n_zones) [degC].
+    """
+    adj = np.asarray(adj, float)
+    temps = np.asarray(temps, float)
+    nz = adj.shape[0]
+    if adj.shape != (nz, nz) or temps.ndim != 2 or temps.shape[1] != nz:
+        raise ValueError(f"adj must be (n_zones, n_zones) and temps (N, n_zones); got "
+                         f"{adj.shape} and {temps.shape}")
+    # flow[k, j, n]: heat zone j takes from neighbour n per unit exchange of zone j
+    flow = adj[None, :, :] * (temps[:, None, :] - temps[:, :, None])
+    out = -flow.transpose(0, 2, 1)
+    idx = np.arange(nz)
+    out[:, idx, idx] = flow.sum(axis=2)
+    return out
 
 
 def first_order_lag(x: np.ndarray, tau_h: float, step_s: float,

@@ -17,6 +17,7 @@ from zonecast.estimator.diagnose import (
     Diagnosis,
     DiagnosisError,
     diagnose,
+    furniture_rebuilder,
     load_reference,
 )
 from zonecast.estimator.effects import SPECS
@@ -54,8 +55,18 @@ def run(model_path: Path, data_path: Path, out: Path, *, site_path: Path | None 
     setpoint = None
     if site.thermostat is not None:
         setpoint = site.thermostat.heating_setpoint(data.times, site.timezone, data.excitation)
+    # the thermal-mass term rebuilds the model with a zone's furniture scaled when the
+    # site's EnergyPlus file can be read (else it scales the furniture's nodes alone)
+    try:
+        building = pipe.building()
+    except (OSError, ValueError) as exc:  # no EnergyPlus or no IDF here
+        building = None
+        if progress:
+            progress(f"thermal mass: furniture nodes scaled alone ({exc})")
+    mass_model = None if building is None else furniture_rebuilder(
+        building, site.zones, {b: box.room for b, box in site.boxes.items()}, model)
     res = diagnose(model, data, seed=seed, gains=gains, reference=ref,
-                   heating_setpoint=setpoint, progress=progress)
+                   heating_setpoint=setpoint, progress=progress, mass_model=mass_model)
     write(res, out, list(site.zones))
     return res
 

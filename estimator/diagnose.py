@@ -63,7 +63,7 @@ from zonecast.estimator.forecast import (
 )
 from zonecast.estimator.gains import WeeklyProfile
 from zonecast.estimator.internal_gains import stepper_for
-from zonecast.estimator.model import BilinearModel
+from zonecast.estimator.model import BilinearModel, build_model
 
 __all__ = [
     "CONFIDENCE",
@@ -257,8 +257,6 @@ def furniture_rebuilder(building, zones: Mapping[str, Sequence[str]], boxes: Map
     rooms multiplied by ``scale``: capacity, links to the room, and the shares of window
     solar and radiant gains its faces take (the other faces' shares fall as EnergyPlus's
     would) all follow, as in the building. The state layout is the model's."""
-    from zonecast.estimator.model import build_model  # import cycle at module level
-
     names = list(model.structure.zones)
     opts = model.structure.options
 

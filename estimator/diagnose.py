@@ -421,8 +421,9 @@ def _bias_response(model: BilinearModel, data: ModelData, base: Baseline, steppe
 def _mass_response(model: BilinearModel, data: ModelData, base: Baseline,
                    mass_model: Callable[[int, float], BilinearModel] | None = None
                    ) -> np.ndarray:
-    """Secant of the forecasts in the area of each zone's internal mass
-    (:func:`scaled_internal_mass`, 1 + θ): the forecasts' change at θ divided by θ. The
+    """Secant of the forecasts in the area of each zone's internal mass (1 + θ; the model
+    from ``mass_model``, :func:`furniture_rebuilder`, else :func:`scaled_internal_mass`):
+    the forecasts' change at θ divided by θ. The
     response is far from linear (a tripled furniture area is not 20 steps of 10 %), so θ is
     iterated towards the change the training weeks' residuals ask for (least squares of
     the residuals on the secant, :data:`MASS_SECANTS` times, within

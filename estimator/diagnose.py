@@ -45,8 +45,9 @@ from zonecast.estimator.effects import (
     GAINS_PROFILE,
     SCHEDULE,
     SPECS,
-    adjacent_zones,
+    adjacent_rooms,
     box_zone_matrix,
+    exchange_pairs,
     heat_regressor,
     interzone_exchange,
     minimum_airflow_fraction,
@@ -77,6 +78,7 @@ __all__ = [
     "baseline",
     "bias_offset_states",
     "diagnose",
+    "exchanged_air",
     "forward_selection",
     "furniture_rebuilder",
     "load_reference",
@@ -104,6 +106,10 @@ MASS_KINDS = ("internal_mass",)
 MASS_SECANTS = 4
 #: range of the relative area change θ searched (the area times 1 + θ)
 MASS_SCALE_RANGE = (-0.9, 9.0)
+#: first conductance of the interzone-exchange secant, per pair of rooms [W/K]
+EXCHANGE_STEP = 10.0
+#: largest conductance per pair of rooms searched [W/K] (c_p·ṁ of about 0.8 m3/s)
+EXCHANGE_MAX = 1000.0
 
 
 class DiagnosisError(ValueError):
@@ -250,6 +256,27 @@ def scaled_internal_mass(model: BilinearModel, states: np.ndarray, scale: float)
     return BilinearModel(new, model.params, model.step, model.method, model.u_nominal)
 
 
+def exchanged_air(model: BilinearModel, j: int, conductance: float) -> BilinearModel:
+    """The model with air exchanged both ways between each room of zone ``j`` and each
+    adjacent room of another zone (:func:`~.effects.adjacent_rooms`): a conductance
+    ``conductance`` = c_p·ṁ [W/K] per pair of rooms between their air states, as
+    EnergyPlus's ZoneCrossMixing moves the same flow each way. Heat is conserved: A's
+    capacity-weighted rows still sum as before."""
+    if conductance < 0:
+        raise ValueError(f"the exchange conductance must be >= 0 W/K, got {conductance}")
+    st = model.structure
+    nr = len(st.rooms)
+    adj = adjacent_rooms(model)
+    mine = np.isin(st.rooms, st.zones[list(st.zones)[j]])
+    pairs = np.outer(mine, ~mine) * adj
+    G = conductance * (pairs + pairs.T)  # (n_rooms, n_rooms) W/K
+    L = np.diag(G.sum(axis=1)) - G  # the exchange's Laplacian
+    D = sp.lil_matrix((model.n, model.n))
+    D[:nr, :nr] = -L / st.capacity[:nr, None]
+    new = dataclasses.replace(st, A0=(st.A0 + D.tocsr()).tocsr())
+    return BilinearModel(new, model.params, model.step, model.method, model.u_nominal)
+
+
 def furniture_rebuilder(building, zones: Mapping[str, Sequence[str]], boxes: Mapping[str, str],
                         model: BilinearModel) -> Callable[[int, float], BilinearModel]:
     """``f(j, scale)``: ``model`` rebuilt from ``building`` (:func:`~.model.build_model`, the
@@ -365,20 +392,23 @@ def sensitivities(model: BilinearModel, data: ModelData, base: Baseline,
 
 def _exchange_response(model: BilinearModel, data: ModelData, base: Baseline,
                        temps: np.ndarray, stepper, train_rows: np.ndarray | None) -> np.ndarray:
-    """(N, nz, nz) forecast change per unit interzone exchange of each zone: the heat of
-    :func:`~.effects.interzone_exchange` enters the zone and leaves its neighbours (net of
-    its training-week time-of-week mean when ``train_rows`` is given)."""
-    nz = model.n_zones
-    Q = interzone_exchange(adjacent_zones(model), temps)
-    out = np.zeros((len(data), nz, nz))
-    for j in range(nz):
-        q = Q[:, :, j]
-        if not q.any():
-            continue
-        if train_rows is not None:
-            q = q - time_of_week_mean(q, data, train_rows)
-        out[:, :, j] = _heat_response(model, data, base, q, stepper).sum(axis=2)
-    # rows outside every forecast window: NaN, as the other responses
+    """(N, nz, nz) forecast change per unit interzone exchange of each zone [K per W/K]:
+    the secant of the forecasts of :func:`exchanged_air` (the exchange changes the network,
+    and strong mixing shrinks the very differences that drive it, so the first-order heat
+    overstates it), iterated towards the conductance the training residuals ask for as
+    :func:`_secant_columns`. With ``train_rows`` (a profile refitted on these weeks) the
+    response to the training-week time-of-week mean of the linearised exchange heat
+    (:func:`~.effects.interzone_exchange`) is taken off: what the profile absorbs. A zone
+    without an adjacent room of another zone has a zero column."""
+    pairs = exchange_pairs(model)
+    has = pairs.sum(axis=1) > 0
+    out = _secant_columns(model, data, base, lambda j, t: exchanged_air(model, j, t), has,
+                          EXCHANGE_STEP, (EXCHANGE_STEP, EXCHANGE_MAX), MASS_SECANTS)
+    if train_rows is not None:
+        Q = interzone_exchange(pairs, temps)
+        for j in np.flatnonzero(has):
+            m = time_of_week_mean(Q[:, :, j], data, train_rows)
+            out[:, :, j] -= _heat_response(model, data, base, m, stepper).sum(axis=2)
     out[~np.isfinite(base.pred).all(axis=1)] = np.nan
     return out
 
@@ -422,16 +452,31 @@ def _mass_response(model: BilinearModel, data: ModelData, base: Baseline,
                    mass_model: Callable[[int, float], BilinearModel] | None = None
                    ) -> np.ndarray:
     """Secant of the forecasts in the area of each zone's internal mass (1 + θ; the model
-    from ``mass_model``, :func:`furniture_rebuilder`, else :func:`scaled_internal_mass`):
-    the forecasts' change at θ divided by θ. The
-    response is far from linear (a tripled furniture area is not 20 steps of 10 %), so θ is
-    iterated towards the change the training weeks' residuals ask for (least squares of
-    the residuals on the secant, :data:`MASS_SECANTS` times, within
-    :data:`MASS_SCALE_RANGE`, never smaller than :data:`MASS_STEP`); the column is the secant
-    there, and a fitted parameter near that θ reproduces the scaled model's forecasts. A
-    zone without internal mass has a zero column (no term)."""
-    nz = model.n_zones
+    from ``mass_model``, :func:`furniture_rebuilder`, else :func:`scaled_internal_mass`),
+    iterated as :func:`_secant_columns` within :data:`MASS_SCALE_RANGE`: the response is
+    far from linear (a tripled furniture area is not 20 steps of 10 %). A zone without
+    internal mass has a zero column (no term)."""
     states = _zone_states(model, MASS_KINDS)
+
+    def make(j: int, theta: float) -> BilinearModel:
+        return (mass_model(j, 1.0 + theta) if mass_model is not None
+                else scaled_internal_mass(model, states[j], 1.0 + theta))
+
+    return _secant_columns(model, data, base, make, np.array([len(s) > 0 for s in states]),
+                           MASS_STEP, MASS_SCALE_RANGE, MASS_SECANTS)
+
+
+def _secant_columns(model: BilinearModel, data: ModelData, base: Baseline,
+                    make: Callable[[int, float], BilinearModel], has: np.ndarray,
+                    step: float, bounds: tuple[float, float], secants: int) -> np.ndarray:
+    """(N, nz, nz) secants of the forecasts in a parameter θ_j that changes the model
+    (``make(j, θ)``): the forecasts' change at θ divided by θ, from every issue's state
+    with the base's internal gains. θ starts at ``step`` and is iterated towards the change
+    the training weeks' residuals ask for (least squares of the residuals on the secant,
+    ``secants`` times, within ``bounds``, never nearer zero than ``step``); the column is
+    the secant there, so a fitted parameter near that θ reproduces the changed model's
+    forecasts. Zones where ``has`` is False get a zero column."""
+    nz = model.n_zones
     out = np.full((len(data), nz, nz), np.nan)
     windows = list(_forecast_windows(base))
     for _, r, H in windows:
@@ -439,31 +484,39 @@ def _mass_response(model: BilinearModel, data: ModelData, base: Baseline,
     train = base.rows_of(base.split["train"])
     resid = data.y - base.pred
 
+    gains = _profile_at(base.profile, data.times)
+
     def change(j: int, theta: float) -> np.ndarray:
-        m = (mass_model(j, 1.0 + theta) if mass_model is not None
-             else scaled_internal_mass(model, states[j], 1.0 + theta))
+        m = make(j, theta)
         d = np.full((len(data), nz), np.nan)
+        if m.method != "exact":
+            for i, r, H in windows:
+                y = m.simulate(base.x0[i], data.u[r:r + H], data.v[r:r + H], gains[r:r + H],
+                               reheat=data.reheat[r:r + H]).y[1:]
+                d[r + 1:r + 1 + H] = y - base.pred[r + 1:r + 1 + H]
+            return d
+        # one stepper for every window (its set-up, the spectral bound, done once per
+        # model): the same exact stepping as ``m.simulate`` window by window
+        stepper = stepper_for(m, data.u)
+        forcing = (data.v @ m.Bv.T + (m.params.c_ig + gains) @ m.B_ig.T
+                   + m.reheat_forcing(data.u, data.reheat))
         for i, r, H in windows:
-            f = _profile_at(base.profile, data.times[r:r + H])
-            y = m.simulate(base.x0[i], data.u[r:r + H], data.v[r:r + H], f,
-                           reheat=data.reheat[r:r + H]).y[1:]
-            d[r + 1:r + 1 + H] = y - base.pred[r + 1:r + 1 + H]
+            xs = stepper.run(base.x0[i], data.u[r:r + H], forcing[r:r + H], data.v[r:r + H, 1])
+            d[r + 1:r + 1 + H] = xs[1:] @ m.C.T - base.pred[r + 1:r + 1 + H]
         return d
 
-    lo, hi = MASS_SCALE_RANGE
-    for j in range(nz):
-        if len(states[j]) == 0:
-            continue
-        theta = MASS_STEP
+    lo, hi = bounds
+    for j in np.flatnonzero(has):
+        theta = step
         col = change(j, theta) / theta
-        for _ in range(MASS_SECANTS):
+        for _ in range(secants):
             ok = train[:, None] & np.isfinite(col) & np.isfinite(resid)
             den = float((col[ok] ** 2).sum())
             if den <= 0:
                 break
             new = float(np.clip((col[ok] * resid[ok]).sum() / den, lo, hi))
-            new = float(np.sign(new) or 1.0) * max(abs(new), MASS_STEP)
-            if abs(new - theta) <= 0.02 * max(abs(theta), MASS_STEP):
+            new = float(np.sign(new) or 1.0) * max(abs(new), step)
+            if abs(new - theta) <= 0.02 * max(abs(theta), step):
                 break
             theta = new
             col = change(j, theta) / theta

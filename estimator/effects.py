@@ -26,12 +26,15 @@ name                      parameter   extra term in zone z
 ``supply_offset``         K           heat q = θ · c_p · Σ_{boxes of z} u_j (supply air at the
                                       boxes θ warmer than the AHU sensor reads); one θ for
                                       all zones: the site has one supply temperature point
-``interzone_air``         W/K         air exchanged both ways between zone z and each
-                                      adjacent zone n (open doors, transfer grilles,
-                                      EnergyPlus ZoneCrossMixing): z gains
-                                      θ · Σ_n (T_n − T_z) and each neighbour n loses
-                                      θ · (T_n − T_z), so the exchange conserves heat
-                                      (:func:`interzone_exchange`)
+``interzone_air``         W/K         air exchanged both ways between each room of zone z
+                                      and each adjacent room of another zone (open doors,
+                                      transfer grilles, EnergyPlus ZoneCrossMixing): a
+                                      conductance θ = c_p·ṁ between the two rooms' air
+                                      added to the network
+                                      (:func:`~.diagnose.exchanged_air`); linearised, z
+                                      gains θ · Σ_n p_zn (T_n − T_z) and each neighbour n
+                                      loses θ · p_zn (T_n − T_z), p_zn the adjacent room
+                                      pairs (:func:`interzone_exchange`)
 ``sensor_bias``           K           measured ȳ_z = C_z x + θ (output equation)
 ``thermal_mass``          -           area of the zone's internal mass (furniture,
                                       partitions) scaled by (1 + θ): the model rebuilt
@@ -72,8 +75,10 @@ __all__ = [
     "SOLAR_LAGS",
     "SPECS",
     "EffectSpec",
+    "adjacent_rooms",
     "adjacent_zones",
     "box_zone_matrix",
+    "exchange_pairs",
     "first_order_lag",
     "heat_regressor",
     "interzone_exchange",
@@ -180,8 +185,10 @@ def window_area_by_facade(model: BilinearModel) -> np.ndarray:
     return out
 
 
-def adjacent_zones(model: BilinearModel) -> np.ndarray:
-    """(n_zones, n_zones) 1 where two zones share an interzone element (wall, floor)."""
+def adjacent_rooms(model: BilinearModel) -> np.ndarray:
+    """(n_rooms, n_rooms) 1 where two rooms of different model zones share an interzone
+    element (wall, floor); rows and columns in the order of ``structure.rooms`` (the air
+    states), rooms outside every model zone (plenums) have none."""
     st = model.structure
     A = st.A(model.params.physical).tocsc()
     zone_of_room = {r: j for j, z in enumerate(st.zones) for r in st.zones[z]}
@@ -190,23 +197,46 @@ def adjacent_zones(model: BilinearModel) -> np.ndarray:
     for j, lab in enumerate(st.labels):
         if lab.element:
             by_element.setdefault(lab.element, []).append(j)
-    nz = len(st.zones)
-    adj = np.zeros((nz, nz))
+    adj = np.zeros((len(st.rooms), len(st.rooms)))
     for nodes in by_element.values():
-        rows = set(A[:, nodes].nonzero()[0])
-        zones = {air_zone[i] for i in rows if i in air_zone}
-        for a in zones:
-            for b in zones:
-                if a != b:
+        rows = {i for i in A[:, nodes].nonzero()[0] if i in air_zone}
+        for a in rows:
+            for b in rows:
+                if air_zone[a] != air_zone[b]:
                     adj[a, b] = 1.0
     return adj
+
+
+def _room_zone_matrix(model: BilinearModel) -> np.ndarray:
+    """(n_rooms, n_zones) 1 where an air state's room belongs to the zone."""
+    st = model.structure
+    M = np.zeros((len(st.rooms), len(st.zones)))
+    index = {r: i for i, r in enumerate(st.rooms)}
+    for j, z in enumerate(st.zones):
+        for r in st.zones[z]:
+            M[index[r], j] = 1.0
+    return M
+
+
+def adjacent_zones(model: BilinearModel) -> np.ndarray:
+    """(n_zones, n_zones) 1 where two zones share an interzone element (wall, floor)."""
+    return (exchange_pairs(model) > 0).astype(float)
+
+
+def exchange_pairs(model: BilinearModel) -> np.ndarray:
+    """(n_zones, n_zones) number of adjacent room pairs (:func:`adjacent_rooms`) between
+    two zones: the openings an exchange of air per pair of rooms passes through."""
+    M = _room_zone_matrix(model)
+    return M.T @ adjacent_rooms(model) @ M
 
 
 def interzone_exchange(adj: np.ndarray, temps: np.ndarray) -> np.ndarray:
     """(N, n_zones, n_zones) heat into each zone per unit exchange of each zone [W per W/K].
 
-    ``[k, i, j]`` is what zone i receives at row k when zone j exchanges air with each of its
-    adjacent zones (``adj``, :func:`adjacent_zones`) at a unit conductance c_p·ṁ = 1 W/K:
+    ``[k, i, j]`` is what zone i receives at row k when zone j exchanges air with its
+    adjacent zones at a unit conductance c_p·ṁ = 1 W/K per opening (``adj[j, n]``: the
+    openings between zones j and n, :func:`exchange_pairs`, or 1 per adjacent zone,
+    :func:`adjacent_zones`):
     zone j gains Σ_n adj[j, n] (T_n − T_j) and each neighbour n loses adj[j, n] (T_n − T_j),
     as EnergyPlus's ZoneCrossMixing moves the same air both ways. Every column sums to zero
     over i (the exchange conserves heat). ``temps`` (N, n_zones) [degC].
@@ -303,7 +333,7 @@ def heat_regressor(name: str, variant, model: BilinearModel, data: ModelData,
     if name == "supply_offset":
         return C_P * (data.u @ bz)
     if name == "interzone_air":
-        adj = adjacent_zones(model)
+        adj = exchange_pairs(model)
         return temps @ adj.T - temps * adj.sum(axis=1)[None, :]
     raise AssertionError(name)  # every heat effect is handled above
 

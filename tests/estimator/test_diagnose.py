@@ -5,12 +5,14 @@ import numpy as np
 import pandas as pd
 import pytest
 from zonecast.estimator.dataset import ModelData
-from zonecast.estimator.diagnose import baseline, diagnose, scaled_internal_mass
+from zonecast.estimator.diagnose import baseline, diagnose, exchanged_air, scaled_internal_mass
 from zonecast.estimator.effects import (
     EFFECTS,
     SPECS,
+    adjacent_rooms,
     adjacent_zones,
     box_zone_matrix,
+    exchange_pairs,
     heat_regressor,
     interzone_exchange,
     minimum_airflow_fraction,
@@ -122,13 +124,14 @@ def _case(effect, model, inputs):
         states = _mass_states(model, ZONE)
         assert len(states) > 0, "thermal_mass needs a furnished model"
         return _simulate(scaled_internal_mass(model, states, 3.0), times, u, v, f), 2.0
+    if effect == "interzone_air":  # air exchanged with every neighbour: a network change
+        return _simulate(exchanged_air(model, ZONE, 80.0), times, u, v, f), 80.0
     theta = {"reheat": 150.0, "infiltration": 60.0, "window_solar": 0.3,
              "supply_offset": 2.0, "interzone_air": 80.0, "occupancy_gains": 8.0}[effect]
     variant = SPECS[effect].variants[-1 if effect == "reheat" else 0]
 
     Q = heat_regressor(effect, variant, model, d0, np.zeros((len(u), 5)))
     at_min = minimum_airflow_fraction(u, box_zone_matrix(model))
-    adj = adjacent_zones(model)
 
     system = SPECS[effect].scope == "system"  # e.g. the AHU's supply offset: every zone
 
@@ -137,8 +140,6 @@ def _case(effect, model, inputs):
             q = at_min[k] * np.maximum(0.0, variant - yk)
         elif effect == "infiltration":
             q = v[k, 0] - yk
-        elif effect == "interzone_air":  # the zone's exchange heats it and cools neighbours
-            return theta * interzone_exchange(adj, yk[None, :])[0, :, ZONE]
         else:
             q = Q[k]
         out = np.zeros(5)
@@ -421,7 +422,8 @@ def test_ties_go_to_the_explanation_with_fewer_parameters():
 
 
 def test_interzone_exchange_conserves_heat(model):
-    adj = adjacent_zones(model)
+    adj = exchange_pairs(model)
+    assert (adj == adjacent_zones(model)).all()  # one room per zone: one opening per pair
     temps = np.random.default_rng(3).normal(21, 2, (50, 5))
     Q = interzone_exchange(adj, temps)
     assert Q.shape == (50, 5, 5)
@@ -438,6 +440,44 @@ def test_interzone_exchange_conserves_heat(model):
     assert q[core, core] == pytest.approx(-8.0) and q[east, core] == pytest.approx(2.0)
     with pytest.raises(ValueError, match="adj must be"):
         interzone_exchange(adj[:3], temps)
+
+
+def test_exchanged_air_is_a_conserving_conductance_between_neighbouring_rooms(model):
+    """The exchange adds θ [W/K] between the air of the zone's room and each adjacent room
+    of another zone, nothing else: reciprocal (diag(C) ΔA symmetric), conserving (its rows
+    sum to zero), and within a forward-Euler step of the linearised heat of the
+    one-zone regressor."""
+    st = model.structure
+    phys = model.params.physical
+    A = st.A(phys).toarray()
+    same = exchanged_air(model, ZONE, 0.0)
+    assert abs(same.structure.A(phys) - st.A(phys)).max() == 0
+    dA = exchanged_air(model, ZONE, 50.0).structure.A(phys).toarray() - A
+    dG = st.capacity[:, None] * dA  # W/K
+    np.testing.assert_allclose(dG, dG.T, atol=1e-9)
+    np.testing.assert_allclose(dG.sum(axis=1), 0.0, atol=1e-9)
+    nr = len(st.rooms)
+    assert not dG[nr:].any() and not dG[:, nr:].any()  # only air states change
+    rooms = adjacent_rooms(model)
+    east = st.rooms.index(ZONES[list(ZONES)[ZONE]][0])
+    links = np.flatnonzero(dG[east, :nr] > 0)
+    np.testing.assert_array_equal(links, np.flatnonzero(rooms[east]))
+    np.testing.assert_allclose(dG[east, links], 50.0)
+    np.testing.assert_allclose(dG[east, east], -50.0 * len(links))
+    # rooms of two other zones exchange nothing with each other
+    others = [i for i in range(nr) if i != east and i not in links]
+    assert not dG[np.ix_(others, others)].any()
+    # the heat it moves at given temperatures is the linearised regressor's (zone = room)
+    temps = np.random.default_rng(5).normal(21, 2, 5)
+    x = np.zeros(model.n)
+    for z, r in ZONES.items():
+        x[st.rooms.index(r[0])] = temps[list(ZONES).index(z)]
+    q = dG[:nr] @ x
+    lin = interzone_exchange(exchange_pairs(model), temps[None, :])[0, :, ZONE] * 50.0
+    for z, r in ZONES.items():
+        assert q[st.rooms.index(r[0])] == pytest.approx(lin[list(ZONES).index(z)])
+    with pytest.raises(ValueError, match="must be >= 0"):
+        exchanged_air(model, ZONE, -1.0)
 
 
 def test_scaled_internal_mass_scales_capacity_and_links_together(furnished):

@@ -184,12 +184,14 @@ def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
 def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequence,
                         window: str = "weekend", f_ig: np.ndarray | None = None,
                         x0_gains: np.ndarray | None = None,
-                        x0_window: int = X0_WINDOW) -> list[dict]:
+                        x0_window: int = X0_WINDOW,
+                        x0_offset: np.ndarray | None = None) -> list[dict]:
     """The identification's simulations (f_IG = 0, x(0) = x_KF(0) of ``model``) of the
     weekends starting on ``saturdays``, beside the measurements, for plots. ``f_ig``
     ((N, n_zones) [W/m2] over all rows of ``data``): gains the fit knew (e.g. the fitted
     weekend daytime rise), in the x(0) filter and the simulation, as in Table 2;
-    ``x0_gains``, ``x0_window``: the x(0) filter's, as :func:`identify`.
+    ``x0_gains``, ``x0_window``: the x(0) filter's, as :func:`identify`; ``x0_offset``
+    ((n_zones,) [K], ``result.x0_offset()``): the slow states' offsets added to x_KF(0).
 
     Returns one dict per weekend: ``saturday`` (date string), ``times`` (DatetimeIndex of the
     simulated rows), ``simulated`` and ``measured`` ((N, n_zones) [degC]); the rows and the
@@ -201,6 +203,8 @@ def weekend_simulations(model: BilinearModel, data: ModelData, saturdays: Sequen
     for a, b in identification_spans(data, saturdays, window):
         x0 = kalman_state(model, data, a - x0_window, a,
                           f_ig=gains if x0_gains is None else gains + x0_gains)
+        if x0_offset is not None:
+            x0 = x0 + slow_state_basis(model) @ np.asarray(x0_offset, float)
         y = model.simulate(x0, data.u[a:b], data.v[a:b], gains[a:b],
                            reheat=data.reheat[a:b]).y
         rows = measured_rows(data, a, b)
@@ -252,6 +256,10 @@ class IdentificationResult:
         Rows of the x(0) filter before each weekend.
     x0_gains : bool
         Whether the x(0) filter knew internal gains on those rows (``identify(x0_gains=)``).
+    x0_offsets : dict or None
+        With ``identify(x0_offset_sd=)``: zone -> {"value", "se", "prior_sd"}, the fitted
+        offset [K] of the zone's slow states at every weekend's start (not a model
+        parameter; rank and condition include them; :meth:`x0_offset` as an array).
     """
 
     param_names: list[str]
@@ -279,6 +287,13 @@ class IdentificationResult:
     gain_scale: dict | None = None
     x0_window: int = X0_WINDOW
     x0_gains: bool = False
+    x0_offsets: dict | None = None
+
+    def x0_offset(self) -> np.ndarray | None:
+        """(n_zones,) :attr:`x0_offsets` [K] in zone order, or None."""
+        if self.x0_offsets is None:
+            return None
+        return np.array([v["value"] for v in self.x0_offsets.values()])
 
     @property
     def bse(self) -> np.ndarray:
@@ -362,7 +377,7 @@ class IdentificationResult:
                  for n, p in self.priors.items()},
                 "map_sigma_e": self.sigma_e, "window": self.window, "spans": self.spans,
                 "gain_scale": self.gain_scale, "x0_window": self.x0_window,
-                "x0_gains": self.x0_gains}
+                "x0_gains": self.x0_gains, "x0_offsets": self.x0_offsets}
 
 
 class _Problem:
@@ -376,11 +391,16 @@ class _Problem:
     """
 
     def __init__(self, model: BilinearModel, data: ModelData, spans, x0s, threads: int = 2,
-                 f_ig: np.ndarray | None = None, shape: np.ndarray | None = None):
+                 f_ig: np.ndarray | None = None, shape: np.ndarray | None = None,
+                 x0_basis: np.ndarray | None = None):
         self.model, self.data, self.spans, self.x0s = model, data, spans, x0s
         # a per-zone gains shape [W/m2] whose scales follow c_IG in theta (identify(gain_shape=))
         self.shape = None if shape is None else [np.ascontiguousarray(shape[a:b], dtype=float)
                                                  for a, b in spans]
+        # (n, n_zones) directions of the zones' x(0) offsets whose sizes d [K] close theta
+        # (identify(x0_offset_sd=)): every span starts at x0s[i] + x0_basis @ d
+        self.x0_basis = (None if x0_basis is None
+                         else np.ascontiguousarray(x0_basis, dtype=float))
         self.threads = threads
         self.n_evaluations = 0
         st = model.structure
@@ -438,7 +458,9 @@ class _Problem:
         theta = np.asarray(theta, float)
         nz = self.B_ig.shape[1]
         phys, c_ig = theta[:self.n_phys], theta[self.n_phys:self.n_phys + nz]
-        scale = theta[self.n_phys + nz:]
+        k = self.n_phys + nz
+        scale = theta[k:k + nz] if self.shape is not None else None
+        offsets = self._offsets(theta)
         data_vals = self.d0 + phys @ self.dp
         n = len(self.capacity)
         L = self.bound(theta) if L is None else L
@@ -458,6 +480,8 @@ class _Problem:
             forcing = v @ Bv.T + c_ig @ self.B_ig.T + rh
             if self.shape is not None:
                 forcing = forcing + (self.shape[i] * scale) @ self.B_ig.T
+            if offsets is not None:
+                x0 = x0 + self.x0_basis @ offsets
             xs = np.empty((b - a + 1, n))
             _run(self.indptr, self.indices, data_vals, self.rooms, self.bxu, self.ret, self.retc,
                  np.ascontiguousarray(x0, float), np.ascontiguousarray(u, float),
@@ -466,6 +490,20 @@ class _Problem:
             out.append(xs[1:] @ self.C.T)
         self.n_evaluations += 1
         return out
+
+    def _offsets(self, theta: np.ndarray) -> np.ndarray | None:
+        """(n_zones,) x(0) offsets [K] at the end of ``theta``, or None."""
+        if self.x0_basis is None:
+            return None
+        return np.asarray(theta, float)[len(theta) - self.x0_basis.shape[1]:]
+
+    def offset_columns(self, theta: np.ndarray, L: float) -> np.ndarray:
+        """Exact derivatives of the residuals with respect to the x(0) offsets
+        (n_residuals, n_zones): the zone temperatures are affine in x(0), so each column
+        is the free response (no forcing, the spans' airflows) from its basis direction."""
+        m = self.x0_basis.shape[1]
+        return self._block_responses(theta, L, self.x0_basis, np.zeros((len(self.capacity), m)),
+                                     [np.zeros((b - a, m)) for a, b in self.spans])
 
     def residuals(self, theta: np.ndarray, L: float | None = None) -> np.ndarray:
         res = []
@@ -485,25 +523,40 @@ class _Problem:
         zone's shape for a scale), all columns in one compiled run per span
         (:func:`~zonecast.estimator.integrate._run_block`), on the series of ``theta`` and
         ``L`` as the residuals."""
+        n, nz = len(self.capacity), self.B_ig.shape[1]
+        m = nz if self.shape is None else 2 * nz
+        weights = []
+        for i, (a, b) in enumerate(self.spans):
+            w = np.ones((b - a, m))
+            if self.shape is not None:
+                w[:, nz:] = self.shape[i]
+            weights.append(w)
+        return self._block_responses(theta, L, np.zeros((n, m)),
+                                     np.tile(self.B_ig, (1, m // nz)), weights)
+
+    def _block_responses(self, theta: np.ndarray, L: float, x0: np.ndarray,
+                         bcols: np.ndarray, weights: list[np.ndarray]) -> np.ndarray:
+        """(n_residuals, m) zone-temperature responses of m columns at once, one compiled
+        run per span (:func:`~zonecast.estimator.integrate._run_block`): from the initial
+        states ``x0`` (n, m) under the forcing ``bcols`` (n, m) times ``weights`` (one
+        (rows, m) array per span), no supply air, on the series of ``theta`` and ``L`` as
+        the residuals; rows of missing measurements zero, as in :meth:`residuals`."""
         phys = np.asarray(theta, float)[:self.n_phys]
         data_vals = self.d0 + phys @ self.dp
-        n, nz = len(self.capacity), self.B_ig.shape[1]
+        n, m = x0.shape
         r = L * self.model.step / 2.0
         if self._rho is None:
             self.simulate(theta, L)  # sets rho (the first evaluation always comes first)
         coef = chebyshev_coefficients(r, rho=self._rho)
-        m = nz if self.shape is None else 2 * nz
-        bcols = np.ascontiguousarray(np.tile(self.B_ig, (1, m // nz)), dtype=float)
+        bcols = np.ascontiguousarray(bcols, dtype=float)
         out = []
-        for i, (a, b) in enumerate(self.spans):
+        for (a, b), w in zip(self.spans, weights):
             u = np.ascontiguousarray(self.data.u[a:b], dtype=float)
-            weights = np.ones((b - a, m))
-            if self.shape is not None:
-                weights[:, nz:] = self.shape[i]
             xs = np.empty((b - a + 1, n, m))
             _run_block(self.indptr, self.indices, data_vals, self.rooms, self.bxu, self.ret,
-                       self.retc, np.zeros((n, m)), u, bcols, weights,
-                       np.zeros(b - a), float(self.model.step), float(r), coef, xs)
+                       self.retc, np.array(x0, dtype=float), u, bcols,
+                       np.ascontiguousarray(w, dtype=float), np.zeros(b - a),
+                       float(self.model.step), float(r), coef, xs)
             dy = np.einsum("oi,kiz->koz", self.C, xs[1:])
             meas = self.data.y[measured_rows(self.data, a, b)]
             dy = np.where(np.isfinite(meas)[:, :, None], dy[:len(meas)], 0.0)
@@ -532,8 +585,21 @@ class _Problem:
 
         with ThreadPoolExecutor(max_workers=self.threads) as pool:
             gains = pool.submit(self.gain_columns, theta, L)
+            offsets = (None if self.x0_basis is None
+                       else pool.submit(self.offset_columns, theta, L))
             cols = list(pool.map(column, range(self.n_phys)))
-            return np.column_stack(cols + [gains.result()])
+            extra = [] if offsets is None else [offsets.result()]
+            return np.column_stack(cols + [gains.result()] + extra)
+
+
+def slow_state_basis(model: BilinearModel) -> np.ndarray:
+    """(n, n_zones) 1 on every state of a zone's rooms but the air (walls' layers, slabs,
+    furniture; :meth:`~.model.BilinearModel.state_zones`): the directions of the x(0)
+    offsets of ``identify(x0_offset_sd=)``."""
+    zones = model.state_zones()
+    slow = np.ones(model.n, bool)
+    slow[model.structure.air_states()] = False
+    return np.stack([(zones == j) & slow for j in range(model.n_zones)], axis=1).astype(float)
 
 
 def _per_row_and_zone(arr, data: ModelData, name: str) -> np.ndarray | None:
@@ -589,7 +655,8 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
              gain_shape: np.ndarray | None = None,
              shape_prior: tuple[float, float] = (1.0, 1.0),
              x0_gains: np.ndarray | None = None,
-             x0_window: int | None = None) -> IdentificationResult:
+             x0_window: int | None = None,
+             x0_offset_sd: float | None = None) -> IdentificationResult:
     """Identify the parameters of ``model`` (paper section 4-A).
 
     Parameters
@@ -641,6 +708,17 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         the filter only: the simulated weekends keep theirs.
     x0_window : int, optional
         Rows of the x(0) filter before each weekend (default :data:`X0_WINDOW`, a day).
+    x0_offset_sd : float, optional
+        Standard deviation [K] of the prior (mean 0) of one offset per zone of the slow
+        states' x(0), estimated with the parameters (an option, default off;
+        docs/identification.md "The x(0) filter's bias in the slow states"): every weekend
+        starts at x_KF(0) plus d_z on each state of zone z but the room air (walls' layers,
+        slabs, furniture; :func:`slow_state_basis`). The x(0) filter runs through a working
+        day with f_IG = 0 and leaves those states biased the same way before every weekend
+        (colder: the day's gains are missing), so the offset is shared by the weekends:
+        fitted on the training ones, applied to the validation ones in Table 2
+        (``result.x0_offsets``; :func:`weekend_simulations` ``x0_offset``). The forecasts
+        do not use this filter. Needs ``priors``.
     """
     t0 = time.perf_counter()
     rng = np.random.default_rng([seed, 11])
@@ -668,12 +746,31 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
             priors = {**priors, **{f"s_IG[{z}]": Prior(*shape_prior, "the gains shape's scale")
                                    for z in data.zones}}
 
+    n_shape = len(names) - n_model  # the gains shape's scales after the model's parameters
+    x0_basis = None
+    if x0_offset_sd is not None:
+        if priors is None:
+            raise IdentificationError("x0_offset_sd needs a MAP fit (priors): without a prior "
+                                      "the offsets of the slow states are not determined")
+        if not x0_offset_sd > 0:
+            raise IdentificationError(f"x0_offset_sd must be > 0 K, got {x0_offset_sd}")
+        x0_basis = slow_state_basis(model)
+        m = x0_basis.shape[1]
+        lo = np.r_[lo, np.full(m, -4.0 * x0_offset_sd)]
+        hi = np.r_[hi, np.full(m, 4.0 * x0_offset_sd)]
+        scale = np.r_[scale, np.full(m, x0_offset_sd)]
+        off_names = [f"dx0[{z}]" for z in data.zones]
+        names = names + off_names
+        priors = {**priors, **{n: Prior(0.0, x0_offset_sd, "the x(0) filter's uncertainty")
+                               for n in off_names}}
+    n_fit = n_model + n_shape  # parameters without the x(0) offsets
+
     def known_gains(theta):
         """f_IG known at every row for parameters ``theta``: the given gains and the shape
         times its scales."""
         if gain_shape is None:
             return f_ig
-        g = gain_shape * np.asarray(theta, float)[n_model:]
+        g = gain_shape * np.asarray(theta, float)[n_model:n_fit]
         return g if f_ig is None else f_ig + g
 
     def x0s(m, spans, theta):
@@ -709,11 +806,12 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     if start is not None:  # the given point first, the drawn ones after it
         thetas = [np.asarray(start, float)] + thetas[1:]
     if gain_shape is not None:
-        thetas = [t if len(t) == len(lo) else np.r_[t, np.full(len(lo) - len(t), shape_prior[0])]
+        thetas = [t if len(t) >= n_fit else np.r_[t, np.full(n_fit - len(t), shape_prior[0])]
                   for t in thetas]
+    thetas = [t if len(t) == len(lo) else np.r_[t, np.zeros(len(lo) - len(t))] for t in thetas]
     thetas = [np.clip(t, lo, hi) for t in thetas]
     first = _Problem(model, data, train_spans, x0s(model, train_spans, thetas[0]), f_ig=f_ig,
-                     shape=gain_shape)
+                     shape=gain_shape, x0_basis=x0_basis)
     for i, theta0 in enumerate(thetas):
         progress(f"start {i + 1}/{len(thetas)}")
         sol = fit(first, theta0)
@@ -732,7 +830,7 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     progress("x(0) at the best start's parameters, refit")
     problem = _Problem(model, data, train_spans,
                        x0s(model.with_params(best[1].x[:n_model]), train_spans, best[1].x),
-                       f_ig=f_ig, shape=gain_shape)
+                       f_ig=f_ig, shape=gain_shape, x0_basis=x0_basis)
     sol = fit(problem, best[1].x)
     theta = sol.x
     cost = float(np.sum(sol.fun ** 2))
@@ -752,14 +850,24 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     # Table 2 as the paper defines it: simulations from x(0) = x_KF(0) of the identified
     # model, the same for training and validation weekends (the last refit started from
     # x(0) of the parameters before it)
+    # with x(0) offsets (x0_offset_sd): every weekend, training and validation, starts at
+    # x_KF(0) plus the zones' fitted offsets of the slow states (the filter's bias)
     spans_x0 = x0s(fitted, train_spans + val_spans, theta)
     train_rms = _fit_rms(_Problem(model, data, train_spans, spans_x0[:len(train_spans)],
-                                  f_ig=f_ig, shape=gain_shape), theta, data.zones)
+                                  f_ig=f_ig, shape=gain_shape, x0_basis=x0_basis),
+                         theta, data.zones)
     val_rms = None
     if val_spans:
         vp = _Problem(model, data, val_spans, spans_x0[len(train_spans):], f_ig=f_ig,
-                      shape=gain_shape)
+                      shape=gain_shape, x0_basis=x0_basis)
         val_rms = _fit_rms(vp, theta, data.zones)
+    x0_offsets = None
+    if x0_basis is not None:
+        x0_offsets = {z: {"value": float(theta[n_fit + j]), "se": float(se[n_fit + j]),
+                          "prior_sd": float(x0_offset_sd)} for j, z in enumerate(data.zones)}
+        theta, se, corr = theta[:n_fit], se[:n_fit], corr[:n_fit, :n_fit]
+        lo, hi, names = lo[:n_fit], hi[:n_fit], names[:n_fit]
+        priors = {n: priors[n] for n in names}
     gain_scale = None
     if gain_shape is not None:
         gain_scale = {z: {"value": float(theta[n_model + i]), "se": float(se[n_model + i])}
@@ -780,4 +888,5 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         bounds=[(float(lo_), float(hi_)) for lo_, hi_ in zip(lo, hi)], model=fitted, rank=rank,
         condition=condition, priors=dict(priors) if priors is not None else None,
         sigma_e=sigma_e if priors is not None else None, window=window, spans=used,
-        gain_scale=gain_scale, x0_window=x0_window, x0_gains=x0_gains is not None)
+        gain_scale=gain_scale, x0_window=x0_window, x0_gains=x0_gains is not None,
+        x0_offsets=x0_offsets)

@@ -216,7 +216,8 @@ class Pipeline:
                  weekend_gains: bool | str = "daytime",
                  gains_weeks: Sequence[int] | None = None,
                  agree_rtol: float = 1e-3, films: str | None = None,
-                 x0_profile_days: int | None = None) -> IdentificationResult:
+                 x0_profile_days: int | None = None,
+                 x0_offset_sd: float | None = None) -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -260,6 +261,10 @@ class Pipeline:
         before each weekend and knowing the profile's gains there (the simulated
         weekends keep the mode's own gains); :attr:`x0_gains` keeps them for
         :func:`~.identify.weekend_simulations`.
+
+        ``x0_offset_sd`` [K] (an option, default off): every fit also estimates per
+        training weekend and zone an offset of the slow states' x(0) with this prior sd
+        (:func:`~.identify.identify`); Table 2 and the forecasts keep x_KF(0).
         """
         modes = {False: None, "none": None, True: "known", "known": "known",
                  "scaled": "scaled", "daytime": "daytime"}
@@ -285,7 +290,7 @@ class Pipeline:
             priors = building_priors(start, self._building_or_none(), convective=convective)
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
                        seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,
-                       window=window, agree_rtol=agree_rtol,
+                       window=window, agree_rtol=agree_rtol, x0_offset_sd=x0_offset_sd,
                        start=start.values if convective else None,
                        gain_shape=(weekend_daytime_shape(data)
                                    if weekend_gains == "daytime" else None))
@@ -298,7 +303,7 @@ class Pipeline:
                 res = identify(self.model(res.model.params), data, train, validation,
                                seed=seed, progress=progress, priors=priors or None,
                                sigma_e=sigma_e, window=window, f_ig=known, gain_shape=shape,
-                               start=res.model.params.values)
+                               start=res.model.params.values, x0_offset_sd=x0_offset_sd)
         self.x0_gains = None
         if x0_profile_days is not None:
             if x0_profile_days < 1:
@@ -315,7 +320,8 @@ class Pipeline:
                            sigma_e=sigma_e, window=window, start=res.model.params.values,
                            gain_shape=(weekend_daytime_shape(data)
                                        if weekend_gains == "daytime" else None),
-                           x0_gains=x0_gains, x0_window=x0_profile_days * per_day)
+                           x0_gains=x0_gains, x0_window=x0_profile_days * per_day,
+                           x0_offset_sd=x0_offset_sd)
             self.x0_gains = x0_gains
         self.identification = res
         self.params = res.model.params

@@ -114,9 +114,13 @@ def test_identify_passes_the_internal_gains_option_to_the_model(tmp_path):
 
 
 @pytest.mark.parametrize("command", ["identify", "reproduce"])
-def test_x0_profile_days_reaches_the_pipeline(tmp_path, monkeypatch, command):
-    """--x0-profile-days reaches Pipeline.identify through both commands (which stop at
-    the identification here); 0 is refused by the option's range."""
+@pytest.mark.parametrize(("option", "value", "expected", "refused"),
+                         [("--x0-profile-days", "2", 2, "0"),
+                          ("--x0-offset-sd", "0.5", 0.5, "0")])
+def test_x0_options_reach_the_pipeline(tmp_path, monkeypatch, command, option, value,
+                                       expected, refused):
+    """--x0-profile-days and --x0-offset-sd reach Pipeline.identify through both commands
+    (which stop at the identification here); 0 is refused by each option's range."""
     from zonecast.estimator.pipeline import Pipeline
 
     seen = {}
@@ -136,8 +140,8 @@ def test_x0_profile_days_reaches_the_pipeline(tmp_path, monkeypatch, command):
     shutil.copy(nrel / "5ZoneAirCooled.site.yaml", site)
     shutil.copy(nrel / "5ZoneAirCooled.idf", tmp_path / "5ZoneAirCooled.idf")
     (tmp_path / "telemetry.csv").write_text("time\n")
-    res = runner.invoke(app, [*args, "--x0-profile-days", "2"])
+    res = runner.invoke(app, [*args, option, value])
     assert "stopped after the call" in res.output, res.output
-    assert seen["x0_profile_days"] == 2
-    res = runner.invoke(app, [*args, "--x0-profile-days", "0"])
-    assert res.exit_code == 2 and "x0-profile-days" in res.output
+    assert seen[option[2:].replace("-", "_")] == expected
+    res = runner.invoke(app, [*args, option, refused])
+    assert res.exit_code == 2 and option[2:] in res.output

@@ -120,3 +120,15 @@ def test_reproduce_end_to_end_without_the_service_check(tmp_path):
     assert res.table2["training"]["mean"] <= 0.208
     assert res.table2["validation"]["mean"] <= 0.203
     assert res.table3["fixed"]["mean"] <= 0.318
+
+
+def test_report_states_the_x0_offsets_when_fitted(tmp_path):
+    """With --x0-offset-sd the report says every weekend starts at the filter's state plus
+    the fitted offsets, with their prior; without, it says nothing of them."""
+    offsets = {z: {"value": 0.8, "se": 0.1, "prior_sd": 0.5} for z in ZONES}
+    text = write_report(results(identification={"x0_offsets": offsets}), tmp_path, [],
+                        ZONES).read_text()
+    assert "prior 0 ± 0.5 K" in text and "NW +0.80 ± 0.10 K" in text
+    plain = write_report(results(identification={"x0_offsets": None}), tmp_path, [],
+                         ZONES).read_text()
+    assert "offset" not in plain

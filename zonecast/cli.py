@@ -205,6 +205,11 @@ X0ProfileDays = Annotated[int | None, typer.Option(
     min=1, help="an option, off by default: refit with the x(0) filter running this many "
                 "days before each weekend and knowing the weekly internal-gains profile "
                 "there (docs/identification.md)")]
+X0OffsetSd = Annotated[float | None, typer.Option(
+    min=1e-3, help="an option, off by default: fit one offset [K] per zone of the slow "
+                   "states' x(0) (walls, slabs, furniture) with the parameters, prior 0 +- "
+                   "this value, applied to every weekend (the x(0) filter's bias; "
+                   "docs/identification.md)")]
 Films = Annotated[str | None, typer.Option(
     help="priors and starting values of the inside films: 'combined' (the handbook's "
          "convection + radiation films) or 'convective' (convection alone); default "
@@ -303,6 +308,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "shape whose scale is fitted with the parameters (buildings occupied "
                           "at weekends; docs/identification.md)")] = "daytime",
                  x0_profile_days: X0ProfileDays = None,
+                 x0_offset_sd: X0OffsetSd = None,
                  seed: Seed = 0) -> None:
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the
@@ -318,6 +324,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  roof_solar=roof_solar, sky=sky,
                                  interior_radiation=interior_radiation, films=films,
                                  internal_gains=internal_gains, x0_profile_days=x0_profile_days,
+                                 x0_offset_sd=x0_offset_sd,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -389,6 +396,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                            "rows; most of the time on buildings that reheat); "
                            "--no-service leaves it out")] = True,
                   x0_profile_days: X0ProfileDays = None,
+                  x0_offset_sd: X0OffsetSd = None,
                   infiltration: Annotated[str, typer.Option(
                       help="'idf' (the default): the IDF's infiltration as a fixed "
                            "outdoor-air conductance, or 'none' (the paper)")] = "idf",
@@ -427,7 +435,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 roof_solar=roof_solar, sky=sky,
                                 interior_radiation=interior_radiation, films=films,
                                 internal_gains=internal_gains, service=service,
-                                x0_profile_days=x0_profile_days)
+                                x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

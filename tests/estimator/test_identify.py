@@ -376,3 +376,74 @@ def test_the_x0_filter_told_the_days_gains_starts_the_weekend_right(five_zone):
         identify(model, data, train=["2015-04-18"], x0_gains=gains, x0_window=2 * 96)
     with pytest.raises(IdentificationError, match="x0_gains has shape"):
         identify(model, data, train=["2015-04-18"], x0_gains=gains[:10])
+
+
+def test_x0_offset_columns_of_the_jacobian_are_exact(truth_and_data):
+    """The x(0) offsets' Jacobian columns (free responses from each zone's slow states)
+    equal the residuals' change for a unit offset of each zone (the zone temperatures are
+    affine in x(0)), over two spans at once; the air states carry no offset."""
+    from zonecast.estimator.identify import slow_state_basis
+
+    model, _, data = truth_and_data
+    basis = slow_state_basis(model)
+    assert basis.shape == (model.n, model.n_zones)
+    assert not basis[model.structure.air_states()].any()
+    assert (basis.sum(axis=1) <= 1).all() and basis.any(axis=0).all()
+    a, b = weekend_spans(data, ["2015-04-18"])[0]
+    spans = [(a, a + 96), (a + 96, b)]
+    prob = _Problem(model, data, spans, [np.full(model.n, 21.0), np.full(model.n, 20.0)],
+                    x0_basis=basis)
+    theta = np.r_[model.params.values, np.zeros(model.n_zones)]
+    L = 1.02 * prob.bound(theta)
+    f0 = prob.residuals(theta, L)
+    D = prob.offset_columns(theta, L)
+    assert D.shape == (len(f0), model.n_zones)
+    for z in range(model.n_zones):
+        t = theta.copy()
+        t[len(model.params.values) + z] += 1.0
+        np.testing.assert_allclose(D[:, z], prob.residuals(t, L) - f0, rtol=0, atol=1e-10)
+    lo, hi = (np.array(b) for b in zip(*model.params.bounds))
+    J = prob.jacobian(theta, np.r_[lo, -np.ones(5)], np.r_[hi, np.ones(5)])
+    np.testing.assert_array_equal(J[:, -model.n_zones:], D)
+
+
+def test_the_x0_filters_bias_in_the_slow_states_is_fitted(five_zone):
+    """Office gains on the Friday before the weekend: the x(0) filter (f_IG = 0) leaves the
+    walls cooler than they are. With the zones' slow-state offsets fitted (``x0_offset_sd``)
+    they come out positive, the fit is closer to the noise and gamma_IW nearer its truth;
+    Table 2 and the plotted simulations start from x_KF(0) plus the offsets; the model's
+    parameters stay the 13; a fit without priors is refused, saying why."""
+    from zonecast.estimator.evaluate import rms_by_zone
+    from zonecast.estimator.identify import weekend_simulations
+    from zonecast.estimator.priors import building_priors
+
+    def friday(day):
+        return (day < 1) & ((day % 1) > 1 / 3) & ((day % 1) < 0.75)
+
+    model, names, true, _, data = _gains_case(five_zone, 9, friday, 25.0)
+    priors = building_priors(model.params, five_zone)
+    blind = identify(model, data, train=["2015-04-18"], max_nfev=40, priors=priors,
+                     sigma_e=0.05)
+    fitted = identify(model, data, train=["2015-04-18"], max_nfev=40, priors=priors,
+                      sigma_e=0.05, x0_offset_sd=1.0, start=blind.params)
+    # blind: 0.11 K and gamma_IW 25 % low; with the offsets: the noise (0.05 K), within 10 %
+    assert fitted.train_rms["mean"] < 0.06
+    assert blind.train_rms["mean"] > 0.09
+    i = names.index("gamma_IW")
+    assert fitted.params[i] == pytest.approx(true[i], rel=0.1)
+    assert abs(blind.params[i] - true[i]) > 2 * abs(fitted.params[i] - true[i])
+    off = fitted.x0_offset()
+    assert off.shape == (5,) and (off > 0.2).all()
+    assert set(fitted.x0_offsets) == set(data.zones) and blind.x0_offsets is None
+    assert fitted.to_dict()["x0_offsets"]["Core"]["value"] == pytest.approx(off[-1])
+    # the model keeps its 13 parameters (and c_IG per zone); the offsets are the fit's
+    assert fitted.param_names == blind.param_names
+    assert len(fitted.params) == len(fitted.stderr) == len(fitted.bounds) == len(names)
+    assert set(fitted.priors) == set(names)
+    sim = weekend_simulations(fitted.model, data, ["2015-04-18"], x0_offset=off)[0]
+    assert rms_by_zone(sim["simulated"], sim["measured"], data.zones)["mean"] == \
+        pytest.approx(fitted.train_rms["mean"], rel=1e-9)
+    with pytest.raises(IdentificationError, match="needs a MAP fit"):
+        identify(model, data, train=["2015-04-18"], x0_offset_sd=1.0)
+    with pytest.raises(IdentificationError, match="must be > 0 K"):
+        identify(model, data, train=["2015-04-18"], priors=priors, x0_offset_sd=0.0)

@@ -151,6 +151,15 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                    "(`--weekend-gains scaled`), so Table 2 is the model with those gains, not the "
                    "paper's f_IG = 0. Scales: "
                    + _scales(scale) + "."), ""]
+    offsets = (results.identification or {}).get("x0_offsets")
+    if offsets:
+        prior = next(iter(offsets.values())).get("prior_sd")
+        lines += [("Every weekend, the validation one included, starts at the x(0) filter's "
+                   "state plus one fitted offset per zone of the slow states (walls' layers, "
+                   "slabs, furniture; `--x0-offset-sd`"
+                   + (f", prior 0 ± {prior:g} K" if prior else "") + "): "
+                   + ", ".join(f"{z} {v['value']:+.2f} ± {v['se']:.2f} K"
+                               for z, v in offsets.items()) + "."), ""]
     lines += _table(results.table2, zones, PAPER["table2"])
     if results.table2_window_solar_air:
         lines += ["", (f"Model options: {json.dumps(results.model_options)}. Sensitivity, the same "
@@ -403,14 +412,14 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         roof_solar: str = "horizontal", sky: str = "none",
         interior_radiation: str = "none", films: str | None = None,
         internal_gains: str = "air", service: bool = True,
-        x0_profile_days: int | None = None) -> Results:
+        x0_profile_days: int | None = None, x0_offset_sd: float | None = None) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
     ``service``: also the service check (:func:`service_check`, Table 3's ``service*``
     rows and the calibrated coverage; most of the job's time on buildings whose boxes
-    reheat); off, the report says it was left out; ``x0_profile_days``: as
-    :meth:`Pipeline.identify`;
+    reheat); off, the report says it was left out; ``x0_profile_days``,
+    ``x0_offset_sd``: as :meth:`Pipeline.identify`;
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
@@ -442,7 +451,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                           gains_weeks=(week_split(data, seed)["train"]
                                        if weekend_gains not in (False, None, "none")
                                        or x0_profile_days else None),
-                          x0_profile_days=x0_profile_days)
+                          x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd)
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
     progress("identification with window solar on the room air (paper's placement)")
@@ -503,7 +512,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     sims = weekend_simulations(fitted, data, ident.train_weekends + ident.validation_weekends,
                                window=ident.window,
                                f_ig=_daytime_gains(weekend_gains, ident, data),
-                               x0_gains=pipe.x0_gains, x0_window=ident.x0_window)
+                               x0_gains=pipe.x0_gains, x0_window=ident.x0_window,
+                               x0_offset=ident.x0_offset())
     roles = {**{d: "training" for d in ident.train_weekends},
              **{d: "validation" for d in ident.validation_weekends}}
     plot_weekends(sims, roles, list(site.zones), out / "fig1_identification.png",

@@ -295,6 +295,15 @@ class IdentificationResult:
             return None
         return np.array([v["value"] for v in self.x0_offsets.values()])
 
+    def x0_offsets_line(self) -> str:
+        """One line of the fitted x(0) offsets with their prior ('' without them)."""
+        if not self.x0_offsets:
+            return ""
+        sd = next(iter(self.x0_offsets.values()))["prior_sd"]
+        return (f"x(0) offsets of the slow states [K], every weekend, prior 0 +- {sd:g}: "
+                + ", ".join(f"{z} {v['value']:+.2f} +- {v['se']:.2f}"
+                            for z, v in self.x0_offsets.items()))
+
     @property
     def bse(self) -> np.ndarray:
         """Standard errors of :attr:`params` (statsmodels' name)."""
@@ -351,6 +360,8 @@ class IdentificationResult:
                            ("validation RMS [K]", self.validation_rms)):
             if row:
                 lines.append(f"{label}: " + ", ".join(f"{k} {v:.3f}" for k, v in row.items()))
+        if self.x0_offsets:
+            lines.append(self.x0_offsets_line())
         if self.rank is not None:
             lines.append(f"Jacobian rank {self.rank} of {len(self.params)}, condition number "
                          f"{self.condition:.3g}")

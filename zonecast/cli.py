@@ -338,6 +338,8 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     if t2["validation"]:
         typer.echo("validation RMS [degC]: "
                    + ", ".join(f"{k} {v:.3f}" for k, v in t2["validation"].items()))
+    if res.x0_offsets:
+        typer.echo(res.x0_offsets_line())
     pinned = res.at_bounds()
     if pinned:
         typer.secho(f"warning: at a bound (not determined by the data): {', '.join(pinned)}",

@@ -436,6 +436,8 @@ def test_the_x0_filters_bias_in_the_slow_states_is_fitted(five_zone):
     assert off.shape == (5,) and (off > 0.2).all()
     assert set(fitted.x0_offsets) == set(data.zones) and blind.x0_offsets is None
     assert fitted.to_dict()["x0_offsets"]["Core"]["value"] == pytest.approx(off[-1])
+    assert f"prior 0 +- 1: South {off[0]:+.2f}" in fitted.summary()
+    assert "x(0) offsets" not in blind.summary() and blind.x0_offsets_line() == ""
     # the model keeps its 13 parameters (and c_IG per zone); the offsets are the fit's
     assert fitted.param_names == blind.param_names
     assert len(fitted.params) == len(fitted.stderr) == len(fitted.bounds) == len(names)

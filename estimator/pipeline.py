@@ -262,9 +262,11 @@ class Pipeline:
         weekends keep the mode's own gains); :attr:`x0_gains` keeps them for
         :func:`~.identify.weekend_simulations`.
 
-        ``x0_offset_sd`` [K] (an option, default off): every fit also estimates per
-        training weekend and zone an offset of the slow states' x(0) with this prior sd
-        (:func:`~.identify.identify`); Table 2 and the forecasts keep x_KF(0).
+        ``x0_offset_sd`` [K] (an option, default off): every fit also estimates one offset
+        per zone of the slow states' x(0), shared by the weekends, with a prior 0 ± this sd
+        (:func:`~.identify.identify`); Table 2 and Fig. 1 start every weekend, the
+        validation one included, at x_KF(0) plus the offsets; the forecasts do not use
+        this filter.
         """
         modes = {False: None, "none": None, True: "known", "known": "known",
                  "scaled": "scaled", "daytime": "daytime"}

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from zonecast.estimator.rectangles import rectangle, subsurface
 from zonecast.estimator.schedules import CompactSchedule, ScheduleError
 from zonecast.estimator.shading import fin_polygons, overhang_polygon
 
@@ -770,15 +771,33 @@ class _Geometry:
     clockwise: bool
     north_axis: float
 
+    #: rectangular surfaces' corners and azimuths relative to their zone (GlobalGeometryRules
+    #: "Rectangular Surface Coordinate System"), with the building's north axis [deg]
+    rect_relative: bool = True
+    rect_north_axis: float = 0.0
+
     def to_world(self, pts: np.ndarray, zone: Mapping[str, Any]) -> np.ndarray:
         """Building-local vertices -> world coordinates (x east, y north)."""
         p = np.array(pts, dtype=float)
         if self.clockwise:
             p = p[::-1]
         if self.relative:
-            p = _rotate(p, float(zone.get("direction_of_relative_north", 0.0) or 0.0))
-            p = p + np.array([_num(zone.get(k), 0.0) for k in ("x_origin", "y_origin", "z_origin")])
+            p = _in_zone(p, zone)
         return _rotate(p, self.north_axis)
+
+    def rect_to_world(self, pts: np.ndarray, zone: Mapping[str, Any] | None) -> np.ndarray:
+        """Counter-clockwise vertices of a rectangular surface (:mod:`.rectangles`) in its
+        zone's coordinates (``zone`` None: the building's) -> world coordinates."""
+        p = np.array(pts, dtype=float)
+        if not self.rect_relative:
+            return p
+        return _rotate(_in_zone(p, zone) if zone is not None else p, self.rect_north_axis)
+
+
+def _in_zone(p: np.ndarray, zone: Mapping[str, Any]) -> np.ndarray:
+    """Zone coordinates -> building coordinates (the zone's rotation, then its origin)."""
+    p = _rotate(p, float(zone.get("direction_of_relative_north", 0.0) or 0.0))
+    return p + np.array([_num(zone.get(k), 0.0) for k in ("x_origin", "y_origin", "z_origin")])
 
 
 def _rotate(p: np.ndarray, degrees: float) -> np.ndarray:
@@ -826,27 +845,6 @@ _UNSUPPORTED_TYPES: dict[str, str] = {
     "Construction:ComplexFenestrationState": "complex fenestration not modelled",
     "Construction:WindowDataFile": "window data file construction not modelled",
     "Construction:WindowEquivalentLayer": "equivalent-layer window not modelled",
-    "Window": "simple-geometry Window not read; use FenestrationSurface:Detailed",
-    "Door": "simple-geometry Door not read; use FenestrationSurface:Detailed",
-    "GlazedDoor": "simple-geometry GlazedDoor not read; use FenestrationSurface:Detailed",
-    "Window:Interzone": "interzone window not read",
-    "Door:Interzone": "interzone door not read",
-    "GlazedDoor:Interzone": "interzone glazed door not read",
-    "Wall:Detailed": "Wall:Detailed not read; use BuildingSurface:Detailed",
-    "RoofCeiling:Detailed": "RoofCeiling:Detailed not read; use BuildingSurface:Detailed",
-    "Floor:Detailed": "Floor:Detailed not read; use BuildingSurface:Detailed",
-    "Wall:Exterior": "simple-geometry wall not read",
-    "Wall:Adiabatic": "simple-geometry wall not read",
-    "Wall:Underground": "simple-geometry wall not read",
-    "Wall:Interzone": "simple-geometry wall not read",
-    "Roof": "simple-geometry roof not read",
-    "Ceiling:Adiabatic": "simple-geometry ceiling not read",
-    "Ceiling:Interzone": "simple-geometry ceiling not read",
-    "Floor:GroundContact": "simple-geometry floor not read",
-    "Floor:Adiabatic": "simple-geometry floor not read",
-    "Floor:Interzone": "simple-geometry floor not read",
-    "Shading:Site": "shading not modelled",
-    "Shading:Building": "shading not modelled",
     "WindowShadingControl": "window shading control not modelled",
     "WindowProperty:FrameAndDivider": "window frame and divider not modelled",
     "DaylightingDevice:Tubular": "tubular daylighting device not modelled",
@@ -858,6 +856,33 @@ _UNSUPPORTED_TYPES: dict[str, str] = {
 }
 
 _SURFACE_TYPES = {"wall": "Wall", "floor": "Floor", "ceiling": "Ceiling", "roof": "Roof"}
+
+#: Base surfaces with their type in the object name (vertices as BuildingSurface:Detailed).
+_TYPED_DETAILED = {"Wall:Detailed": "Wall", "RoofCeiling:Detailed": "Roof",
+                   "Floor:Detailed": "Floor"}
+#: Rectangular ("simple geometry") base surfaces: type, outside boundary condition (None:
+#: the named surface or zone) and the name of the size field up the surface.
+_RECT_BASE = {
+    "Wall:Exterior": ("Wall", "Outdoors", "height"),
+    "Wall:Adiabatic": ("Wall", "Adiabatic", "height"),
+    "Wall:Underground": ("Wall", "Ground", "height"),
+    "Wall:Interzone": ("Wall", None, "height"),
+    "Roof": ("Roof", "Outdoors", "width"),
+    "Ceiling:Adiabatic": ("Ceiling", "Adiabatic", "width"),
+    "Ceiling:Interzone": ("Ceiling", None, "width"),
+    "Floor:GroundContact": ("Floor", "Ground", "width"),
+    "Floor:Adiabatic": ("Floor", "Adiabatic", "width"),
+    "Floor:Interzone": ("Floor", None, "width"),
+}
+#: Rectangular subsurfaces placed on their base surface, by FenestrationSurface type.
+_RECT_SUB = {"Window": "Window", "GlazedDoor": "GlassDoor", "Door": "Door",
+             "Window:Interzone": "Window", "GlazedDoor:Interzone": "GlassDoor",
+             "Door:Interzone": "Door"}
+#: [deg] a floor tilted less than this (facing up), or a roof/ceiling more than 180 minus
+#: this (facing down), is upside down: EnergyPlus reverses its vertices and warns
+_UPSIDE_DOWN = 1.0
+#: The type EnergyPlus gives the surface it creates on the far side of a "Zone" boundary.
+_MIRRORED_TYPE = {"Wall": "Wall", "Floor": "Ceiling", "Ceiling": "Floor", "Roof": "Floor"}
 
 
 def _materials(data: Mapping[str, Any], unsupported: list[Unsupported]) -> dict[str, Any]:
@@ -942,6 +967,66 @@ def _boundary(f: Mapping[str, Any]) -> tuple[str, str | None]:
     return cond, obj
 
 
+def _base_surface_objects(data: Mapping[str, Any]):
+    """(object type, name, fields) of every base heat-transfer surface object."""
+    for typ in ("BuildingSurface:Detailed", *_TYPED_DETAILED, *_RECT_BASE):
+        for name, f in data.get(typ, {}).items():
+            yield typ, name, f
+
+
+def _subsurface_objects(data: Mapping[str, Any]):
+    """(object type, name, fields) of every window and door object."""
+    for typ in ("FenestrationSurface:Detailed", *_RECT_SUB):
+        for name, f in data.get(typ, {}).items():
+            yield typ, name, f
+
+
+def _rect_size(typ: str, name: str, f: Mapping[str, Any], size: str) -> tuple[float, float]:
+    length, other = _num(f.get("length"), 0.0), _num(f.get(size), 0.0)
+    if not (length > 0 and other > 0):
+        raise BuildingDescriptionError(
+            f"{typ} {name!r} needs a positive length and {size} (got {length} and {other})."
+        )
+    return length, other
+
+
+def _rectangle_of(typ: str, name: str, f: Mapping[str, Any], size: str) -> np.ndarray:
+    """Counter-clockwise vertices, in the zone's coordinates, of a rectangular base surface."""
+    start = [_num(f.get(f"starting_{c}_coordinate"), 0.0) for c in "xyz"]
+    return rectangle(start, _num(f.get("azimuth_angle"), 0.0),
+                     _num(f.get("tilt_angle"), {"Wall": 90.0, "Roof": 0.0, "Ceiling": 0.0,
+                                                "Floor": 180.0}[_RECT_BASE[typ][0]]),
+                     *_rect_size(typ, name, f, size))
+
+
+def _mirror_zone_boundaries(base: dict[str, dict[str, Any]], zkey: Mapping[str, str],
+                            notes: list[str]) -> None:
+    """A surface whose outside boundary is another zone: EnergyPlus creates the far side
+    (named ``iz-`` + the surface's name, reversed vertices, the mirrored type, the same
+    construction) in that zone; the pair then couples the two zones as any interzone pair."""
+    for name, rec in list(base.items()):
+        if rec["boundary"] != "Zone" or rec["boundary_object"] is None:
+            continue
+        other = zkey.get(str(rec["boundary_object"]).lower())
+        if other is None:
+            raise BuildingDescriptionError(
+                f"surface {name!r} faces zone {rec['boundary_object']!r}, which is not defined."
+            )
+        twin = f"iz-{name}"
+        if twin.lower() in {k.lower() for k in base}:
+            continue
+        verts = rec["vertices"][::-1].copy()
+        normal = polygon_area_normal(verts)[1]
+        tilt, az = _tilt_azimuth(normal)
+        base[twin] = dict(rec, name=twin, zone=other, vertices=verts, normal=normal, tilt=tilt,
+                          azimuth=az, surface_type=_MIRRORED_TYPE.get(rec["surface_type"],
+                                                                      rec["surface_type"]),
+                          boundary="Surface", boundary_object=name, sub_area=0.0)
+        rec.update(boundary="Surface", boundary_object=twin)
+        notes.append(f"surface {name}: its far side in zone {other} created as {twin}, "
+                     "as EnergyPlus does")
+
+
 def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None) -> Building:
     """Build a :class:`Building` from epJSON data (see :func:`read_building`)."""
     notes = list(notes or [])
@@ -960,6 +1045,9 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
         # EnergyPlus ignores the building's north axis with World coordinates (and warns):
         # the vertices are already true-north coordinates
         north_axis=north if relative else 0.0,
+        rect_relative=str(rules.get("rectangular_surface_coordinate_system", "Relative"))
+        .lower() == "relative",
+        rect_north_axis=north,
     )
     if not geo.relative:
         notes.append("World coordinates: zone origins, zone north and building north axis "
@@ -992,38 +1080,67 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
             )
         return key
 
-    # base surfaces
+    # base surfaces: detailed (vertices), typed detailed and rectangular (simple geometry)
     base: dict[str, dict[str, Any]] = {}
-    for name, f in data.get("BuildingSurface:Detailed", {}).items():
+    surface_names = {n.lower() for typ in ("BuildingSurface:Detailed", *_TYPED_DETAILED,
+                                           *_RECT_BASE) for n in data.get(typ, {})}
+    for typ, name, f in _base_surface_objects(data):
         zone = zone_of(f["zone_name"], f"surface {name!r}")
-        verts = geo.to_world(_vertices_list(f), zones_raw[zone])
+        if typ in _RECT_BASE:
+            stype, cond, size = _RECT_BASE[typ]
+            verts = geo.rect_to_world(_rectangle_of(typ, name, f, size), zones_raw[zone])
+            obj = f.get("outside_boundary_condition_object") or None
+            if cond is None:  # interzone: the named surface, or a zone (EnergyPlus mirrors)
+                cond = "Surface" if obj is None or str(obj).lower() in surface_names \
+                    or str(obj).lower() not in zkey else "Zone"
+        else:
+            verts = geo.to_world(_vertices_list(f), zones_raw[zone])
+            stype = _TYPED_DETAILED.get(typ) or _SURFACE_TYPES.get(
+                str(f["surface_type"]).lower(), str(f["surface_type"]))
+            cond, obj = _boundary(f)
+            if typ == "RoofCeiling:Detailed" and cond != "Outdoors":
+                stype = "Ceiling"
         area, normal = polygon_area_normal(verts)
         tilt, az = _tilt_azimuth(normal)
-        stype = _SURFACE_TYPES.get(str(f["surface_type"]).lower(), str(f["surface_type"]))
-        cond, obj = _boundary(f)
+        if (stype == "Floor" and tilt < _UPSIDE_DOWN) or \
+                (stype in ("Roof", "Ceiling") and tilt > 180.0 - _UPSIDE_DOWN):
+            # EnergyPlus reverses an upside-down floor or roof/ceiling ("Automatic fix")
+            verts = verts[::-1].copy()
+            area, normal = polygon_area_normal(verts)
+            tilt, az = _tilt_azimuth(normal)
+            notes.append(f"surface {name}: {stype.lower()} upside down, vertices reversed as "
+                         "EnergyPlus does")
         base[name] = {
             "name": name, "zone": zone, "surface_type": stype,
             "construction": construction_of(f["construction_name"], f"surface {name!r}"),
             "gross_area": area, "tilt": tilt, "azimuth": az, "boundary": cond, "boundary_object": obj,
             "vertices": verts, "sub_area": 0.0, "normal": normal,
         }
+    _mirror_zone_boundaries(base, zkey, notes)
     bkey = {k.lower(): k for k in base}
 
     windows: dict[str, Window] = {}
     doors: dict[str, dict[str, Any]] = {}
-    for name, f in data.get("FenestrationSurface:Detailed", {}).items():
+    for typ, name, f in _subsurface_objects(data):
         parent_key = bkey.get(str(f["building_surface_name"]).lower())
         if parent_key is None:
             raise BuildingDescriptionError(
-                f"fenestration {name!r} sits on surface {f['building_surface_name']!r}, "
-                "which is not a BuildingSurface:Detailed."
+                f"{typ} {name!r} sits on surface {f['building_surface_name']!r}, which is "
+                "not a base surface zonecast reads (BuildingSurface:Detailed, Wall:Detailed, "
+                "Wall:Exterior, Roof, ... ); fix the name or define the surface."
             )
         parent = base[parent_key]
         mult = _num(f.get("multiplier"), 1.0)
-        verts = geo.to_world(_vertices_list(f), zones_raw[parent["zone"]])
+        if typ in _RECT_SUB:
+            verts = subsurface(parent["vertices"], _num(f.get("starting_x_coordinate"), 0.0),
+                               _num(f.get("starting_z_coordinate"), 0.0),
+                               *_rect_size(typ, name, f, "height"))
+            kind = _RECT_SUB[typ]
+        else:
+            verts = geo.to_world(_vertices_list(f), zones_raw[parent["zone"]])
+            kind = str(f["surface_type"])
         area = polygon_area_normal(verts)[0]
         parent["sub_area"] += area * mult
-        kind = str(f["surface_type"])
         cons = construction_of(f["construction_name"], f"fenestration {name!r}")
         c = constructions[cons]
         if kind.lower() in ("window", "glassdoor"):
@@ -1043,7 +1160,7 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
             )
         else:
             unsupported.append(Unsupported(
-                "FenestrationSurface:Detailed", name,
+                typ, name,
                 f"fenestration type {kind} not modelled; its area stays part of {parent_key}",
             ))
             parent["sub_area"] -= area * mult
@@ -1332,6 +1449,14 @@ def _shading(data: Mapping[str, Any], geo: _Geometry, zones_raw: Mapping[str, An
                     notes.append(f"{typ} {name}: transmittance schedule {sched!r} not followed "
                                  "(taken opaque)")
             out.setdefault("*", []).append(np.asarray(verts, dtype=float))
+    for typ in ("Shading:Site", "Shading:Building"):  # rectangles
+        for name, f in data.get(typ, {}).items():
+            rect = rectangle([_num(f.get(f"starting_{c}_coordinate"), 0.0) for c in "xyz"],
+                             _num(f.get("azimuth_angle"), 0.0), _num(f.get("tilt_angle"), 90.0),
+                             *_rect_size(typ, name, f, "height"))
+            # site shading is never moved or rotated with the building
+            out.setdefault("*", []).append(rect if typ == "Shading:Site"
+                                           else geo.rect_to_world(rect, None))
     n_win = sum(len(v) for k, v in out.items() if k != "*")
     if out:
         notes.append(f"exterior shading: {n_win} overhang/fin polygons on "

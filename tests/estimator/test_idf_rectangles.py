@@ -1,0 +1,262 @@
+"""Rectangular ("simple geometry") and typed detailed surfaces read as EnergyPlus reads them.
+
+The reference is EnergyPlus itself: it turns every rectangular surface into vertices when it
+reads its input and writes them to ``eplusout.eio`` (``Output:Surfaces:List,
+DetailsWithVertices``). Two zones, one rotated and moved, exercise every simple base surface
+type, windows and doors on simple and detailed walls, a tilted wall, a zone boundary (the far
+side EnergyPlus creates) and the typed detailed objects.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from zonecast.estimator.idf import BuildingDescriptionError, building_from_epjson, read_building
+from zonecast.estimator.rectangles import in_plane_axes, rectangle, subsurface
+
+EIO_IDF = """
+Version, 25.2;
+SimulationControl, No, No, No, No, Yes, No, 1;
+Building, Probe, 30, City, 0.04, 0.4, FullExterior, 25, 6;
+Timestep, 4;
+Site:Location, Golden, 39.74, -105.18, -7.0, 1829.0;
+RunPeriod, June, 6, 20, 2015, 6, 20, 2015, , No, No, No, Yes, Yes, No, Hour24;
+GlobalGeometryRules, UpperLeftCorner, Counterclockwise, Relative, Relative, Relative;
+Material, Brick, Rough, 0.2, 0.9, 1900, 800;
+WindowMaterial:SimpleGlazingSystem, Glass, 2.0, 0.4, 0.6;
+Construction, Wall, Brick;
+Construction, Win, Glass;
+Zone, A, 15, 2, 3, 1;
+Zone, B, 0, 0, 0, 0, 1, 1, 3, 90;
+Wall:Exterior, AS, Wall, A, , 180, 90, 0, 0, 3, 6, 3;
+Wall:Exterior, AE, Wall, A, , 90, 90, 6, 0, 3, 5, 3;
+Wall:Underground, AN, Wall, A, , 0, 90, 6, 5, 3, 6, 3;
+Wall:Interzone, AW, Wall, A, , B, 270, 90, 0, 5, 3, 5, 3;
+Roof, AR, Wall, A, , 180, 0, 0, 0, 6, 6, 5;
+Floor:GroundContact, AF, Wall, A, , 0, 180, 0, 0, 3, 6, 5;
+Window, AS_W, Win, AS, , 1, 1, 0.9, 4, 1.5;
+Door, AE_D, Wall, AE, 1, 1, 0, 1, 2;
+GlazedDoor, AE_G, Win, AE, , 1, 2.5, 0, 1, 2.2;
+Wall:Detailed, BD, Wall, B, , Outdoors, , SunExposed, WindExposed, , 4,
+    0, 0, 3, 0, 0, 0, 6, 0, 0, 6, 0, 3;
+Window, BD_W, Win, BD, , 1, 2, 0.5, 3, 2;
+Wall:Exterior, BT, Wall, B, , 200, 60, 1, 2, 3, 4, 2;
+Window, BT_W, Win, BT, , 1, 0.5, 0.5, 2, 1;
+RoofCeiling:Detailed, BR, Wall, B, , Outdoors, , SunExposed, WindExposed, , 4,
+    0, 5, 3, 0, 0, 3, 6, 0, 3, 6, 5, 3;
+Floor:Adiabatic, BF, Wall, B, , 90, 180, 0, 0, 0, 5, 6;
+Ceiling:Adiabatic, BC, Wall, B, , 30, 0, 0, 0, 3, 4, 5;
+Wall:Adiabatic, BA, Wall, B, , 300, 90, 0, 0, 0, 2, 3;
+Floor:Detailed, BFD, Wall, B, , Adiabatic, , NoSun, NoWind, , 4,
+    0, 0, 0, 0, 5, 0, -2, 5, 0, -2, 0, 0;
+! BFD faces up: EnergyPlus reverses it (upside-down floor, automatic fix)
+Output:Surfaces:List, DetailsWithVertices;
+"""
+
+
+def _eio_surfaces(path) -> dict[str, dict]:
+    """Heat-transfer surfaces EnergyPlus reports: class, area, azimuth, tilt, vertices."""
+    out = {}
+    for line in path.read_text().splitlines():
+        if not line.startswith("HeatTransfer Surface,"):
+            continue
+        f = [x.strip() for x in line.split(",")]
+        n = int(f[26])
+        verts = np.array([float(x) for x in f[27:27 + 3 * n]]).reshape(n, 3)
+        out[f[1].upper()] = {"class": f[2], "base": f[3].upper(), "area": float(f[9]),
+                             "azimuth": float(f[12]), "tilt": float(f[13]), "vertices": verts}
+    return out
+
+
+@pytest.fixture(scope="module")
+def probe(tmp_path_factory):
+    from zonecast.testbed.run import energyplus_dir, run_energyplus
+
+    work = tmp_path_factory.mktemp("rectangles")
+    idf = work / "in.idf"
+    idf.write_text(EIO_IDF)
+    run_energyplus(idf, energyplus_dir() / "WeatherData" / "USA_CO_Golden-NREL.724666_TMY3.epw",
+                   work)
+    return read_building(idf), _eio_surfaces(work / "eplusout.eio")
+
+
+@pytest.mark.energyplus
+def test_vertices_equal_energyplus(probe):
+    building, eio = probe
+    ours = {**{n.upper(): s for n, s in building.surfaces.items()},
+            **{n.upper(): w for n, w in building.windows.items()}}
+    # every surface EnergyPlus has (the zone boundary's far side included), and no other
+    assert set(ours) == set(eio)
+    for name, ref in eio.items():
+        # same corners in the same order (counter-clockwise from the upper left), to the
+        # 0.01 m EnergyPlus prints
+        np.testing.assert_allclose(ours[name].vertices, ref["vertices"], atol=0.006,
+                                   err_msg=name)
+        assert ours[name].area == pytest.approx(ref["area"], abs=0.006), name
+
+
+@pytest.mark.energyplus
+def test_types_boundaries_and_net_areas(probe):
+    building, eio = probe
+    s = building.surfaces
+    assert (s["AS"].boundary, s["AN"].boundary, s["AF"].boundary, s["BA"].boundary) == \
+        ("Outdoors", "Ground", "Ground", "Adiabatic")
+    assert (s["AR"].surface_type, s["BR"].surface_type, s["BC"].surface_type,
+            s["BFD"].surface_type) == ("Roof", "Roof", "Ceiling", "Floor")
+    # the interzone wall faces zone B: EnergyPlus's far side iz-AW, paired both ways
+    assert (s["AW"].boundary, s["AW"].boundary_object) == ("Surface", "iz-AW")
+    assert (s["iz-AW"].zone, s["iz-AW"].boundary_object) == ("B", "AW")
+    assert s["iz-AW"].azimuth == pytest.approx(eio["IZ-AW"]["azimuth"], abs=0.01)
+    # net areas: windows and doors taken off their walls, doors are opaque surfaces
+    assert s["AS"].area == pytest.approx(18.0 - 6.0)
+    assert s["AE"].area == pytest.approx(15.0 - 2.0 - 2.2)
+    assert s["AE_D"].area == pytest.approx(2.0) and "AE_G" in building.windows
+    assert building.windows["AE_G"].kind == "GlassDoor"
+    assert building.windows["BT_W"].u_value == 2.0
+    assert not [u for u in building.unsupported if u.object_type in (
+        "Wall:Exterior", "Window", "Door", "GlazedDoor", "Wall:Detailed", "Roof")]
+
+
+def _detailed_twin(data: dict, eio: dict[str, dict]) -> dict:
+    """The same building with every rectangular and typed surface replaced by
+    BuildingSurface:Detailed / FenestrationSurface:Detailed at EnergyPlus's own vertices
+    (world coordinates)."""
+    twin = {k: v for k, v in data.items() if k not in {
+        "Wall:Exterior", "Wall:Underground", "Wall:Interzone", "Wall:Adiabatic", "Roof",
+        "Floor:GroundContact", "Floor:Adiabatic", "Ceiling:Adiabatic", "Window", "Door",
+        "GlazedDoor", "Wall:Detailed", "RoofCeiling:Detailed", "Floor:Detailed"}}
+    twin["GlobalGeometryRules"] = {"GlobalGeometryRules 1": {
+        "starting_vertex_position": "UpperLeftCorner", "vertex_entry_direction":
+        "Counterclockwise", "coordinate_system": "World"}}
+    kinds = {"Wall": "Wall", "Roof": "Roof", "Floor": "Floor", "Window": "Window",
+             "Door": "Door", "GlassDoor": "GlassDoor"}
+    names = {n.upper(): n for typ in data for n in data[typ]}
+    zone_of = {n: f["zone_name"] for typ in data for n, f in data[typ].items()
+               if isinstance(f, dict) and "zone_name" in f}
+    bsd, fsd = {}, {}
+    boundary = {"AS": "Outdoors", "AE": "Outdoors", "AN": "Ground", "AR": "Outdoors",
+                "AF": "Ground", "BD": "Outdoors", "BT": "Outdoors", "BR": "Outdoors",
+                "BF": "Adiabatic", "BC": "Adiabatic", "BA": "Adiabatic", "BFD": "Adiabatic"}
+    for key, ref in eio.items():
+        name = names.get(key, "iz-AW" if key == "IZ-AW" else key)
+        verts = [{"vertex_x_coordinate": x, "vertex_y_coordinate": y, "vertex_z_coordinate": z}
+                 for x, y, z in ref["vertices"]]
+        if ref["base"]:
+            fsd[name] = {"surface_type": kinds[ref["class"]],
+                         "construction_name": "Wall" if ref["class"] == "Door" else "Win",
+                         "building_surface_name": names[ref["base"]], **{
+                f"vertex_{i + 1}_{c}_coordinate": float(v)
+                for i, p in enumerate(ref["vertices"]) for c, v in zip("xyz", p)}}
+            continue
+        zone = zone_of.get(name, "B")  # iz-AW: the far side, in zone B
+        if name in ("AW", "iz-AW"):
+            fields = {"outside_boundary_condition": "Surface",
+                      "outside_boundary_condition_object": "iz-AW" if name == "AW" else "AW"}
+        else:
+            fields = {"outside_boundary_condition": boundary[name]}
+        stype = {"BC": "Ceiling"}.get(name, kinds[ref["class"]])
+        bsd[name] = {"surface_type": stype, "construction_name": "Wall", "zone_name": zone,
+                     **fields, "vertices": verts}
+    twin["BuildingSurface:Detailed"] = bsd
+    twin["FenestrationSurface:Detailed"] = fsd
+    return twin
+
+
+@pytest.mark.energyplus
+def test_same_building_as_detailed_twin(probe, tmp_path):
+    """The rectangular description and a detailed one at EnergyPlus's vertices read alike."""
+    from zonecast.estimator.idf import load_epjson
+
+    building, eio = probe
+    idf = tmp_path / "in.idf"
+    idf.write_text(EIO_IDF)
+    data, _ = load_epjson(idf)
+    twin = building_from_epjson(json.loads(json.dumps(_detailed_twin(data, eio))))
+    assert set(twin.surfaces) == set(building.surfaces)
+    for name, s in building.surfaces.items():
+        t = twin.surfaces[name]
+        assert (t.zone, t.surface_type, t.boundary, t.construction) == \
+            (s.zone, s.surface_type, s.boundary, s.construction), name
+        # the twin's vertices are EnergyPlus's, printed to 0.01 m: areas within 1 %
+        assert t.area == pytest.approx(s.area, rel=0.01), name
+        assert t.tilt == pytest.approx(s.tilt, abs=0.2), name
+    for name, z in building.zones.items():
+        assert twin.zones[name].floor_area == pytest.approx(z.floor_area, rel=0.01), name
+
+
+def _minimal(**objects) -> dict:
+    data = {
+        "Version": {"Version 1": {"version_identifier": "25.2"}},
+        "GlobalGeometryRules": {"GlobalGeometryRules 1": {
+            "starting_vertex_position": "UpperLeftCorner",
+            "vertex_entry_direction": "Counterclockwise", "coordinate_system": "Relative"}},
+        "Material": {"Brick": {"roughness": "Rough", "thickness": 0.2, "conductivity": 0.9,
+                               "density": 1900, "specific_heat": 800}},
+        "Construction": {"Wall": {"outside_layer": "Brick"}},
+        "Zone": {"Z": {}},
+    }
+    data.update(objects)
+    return data
+
+
+def test_zero_length_rectangle_refused():
+    data = _minimal(**{"Wall:Exterior": {"W": {
+        "construction_name": "Wall", "zone_name": "Z", "azimuth_angle": 180,
+        "starting_x_coordinate": 0, "starting_y_coordinate": 0, "starting_z_coordinate": 0,
+        "length": 0, "height": 3}}})
+    with pytest.raises(BuildingDescriptionError, match="W.*positive length and height"):
+        building_from_epjson(data)
+
+
+def test_window_on_unknown_surface_refused():
+    data = _minimal(Window={"W1": {
+        "construction_name": "Wall", "building_surface_name": "Nowhere",
+        "starting_x_coordinate": 0, "starting_z_coordinate": 0, "length": 1, "height": 1}})
+    with pytest.raises(BuildingDescriptionError, match="Window 'W1' sits on surface 'Nowhere'"):
+        building_from_epjson(data)
+
+
+def test_rectangle_in_building_without_rotation():
+    """World rectangular coordinates: corners taken as they are, zone origin ignored."""
+    data = _minimal(**{"Wall:Exterior": {"W": {
+        "construction_name": "Wall", "zone_name": "Z", "azimuth_angle": 90,
+        "starting_x_coordinate": 4, "starting_y_coordinate": 0, "starting_z_coordinate": 0,
+        "length": 5, "height": 3}}})
+    data["Zone"]["Z"] = {"x_origin": 100, "direction_of_relative_north": 45}
+    data["GlobalGeometryRules"]["GlobalGeometryRules 1"][
+        "rectangular_surface_coordinate_system"] = "World"
+    w = building_from_epjson(data).surfaces["W"]
+    assert w.azimuth == pytest.approx(90.0) and w.area == pytest.approx(15.0)
+    np.testing.assert_allclose(w.vertices[1], [4, 0, 0])
+    np.testing.assert_allclose(w.vertices[2], [4, 5, 0])
+
+
+angles = st.floats(0, 359.9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(az=angles, tilt=st.floats(1, 179), length=st.floats(0.1, 20),
+       height=st.floats(0.1, 20), x=st.floats(0, 0.5), z=st.floats(0, 0.5))
+def test_rectangle_geometry(az, tilt, length, height, x, z):
+    """A rectangle's outward normal is its azimuth and tilt, its area length x height; a
+    subsurface lies in its base's plane, inside it, with the same normal."""
+    r = rectangle([1.0, 2.0, 3.0], az, tilt, length, height)
+    n = 0.5 * np.cross(r, np.roll(r, -1, axis=0)).sum(axis=0)
+    area = np.linalg.norm(n)
+    assert area == pytest.approx(length * height, rel=1e-9)
+    a, t = math.radians(az), math.radians(tilt)
+    np.testing.assert_allclose(n / area, [math.sin(t) * math.sin(a), math.sin(t) * math.cos(a),
+                                          math.cos(t)], atol=1e-9)
+    w = subsurface(r, x * length, z * height, 0.5 * length, 0.5 * height)
+    along, up = in_plane_axes(az, tilt)
+    rel = w - r[1]
+    np.testing.assert_allclose(rel @ (n / area), 0.0, atol=1e-9)
+    assert (rel @ along).min() >= -1e-9 and (rel @ along).max() <= length + 1e-9
+    assert (rel @ up).min() >= -1e-9 and (rel @ up).max() <= height + 1e-9
+    nw = 0.5 * np.cross(w, np.roll(w, -1, axis=0)).sum(axis=0)
+    np.testing.assert_allclose(nw / np.linalg.norm(nw), n / area, atol=1e-9)

@@ -15,6 +15,7 @@ modelled are listed in :attr:`Building.unsupported`, never skipped silently.
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import os
@@ -22,7 +23,7 @@ import shutil
 import subprocess
 import tempfile
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -1616,4 +1617,138 @@ def read_building(
     Building
     """
     data, notes = load_epjson(path, energyplus_dir)
-    return building_from_epjson(data, notes)
+    building = building_from_epjson(data, notes)
+    layered = sorted({w.construction for w in building.windows.values() if w.u_value is None})
+    if layered:
+        _rate_layered_glazing(building, data, layered, energyplus_dir)
+    return building
+
+
+#: Object types a layered window construction may draw on (copied into the rating run).
+_GLAZING_TYPES = ("MaterialProperty:GlazingSpectralData",)
+
+
+def _rate_layered_glazing(building: Building, data: Mapping[str, Any], layered: list[str],
+                          energyplus_dir: str | os.PathLike | None) -> None:
+    """U-factor and SHGC of layered window constructions, as EnergyPlus rates them.
+
+    A layered construction (``WindowMaterial:Glazing`` panes, gas gaps, ...) has no U or SHGC
+    in the input; EnergyPlus computes both at NFRC conditions for its Envelope Summary
+    ("Glass U-Factor", "Glass SHGC"). The same engine does it here: a one-box model holding
+    one small window per construction, run for one winter design day (about 0.5 s), and the
+    table read back. The values become the windows' ``u_value``/``shgc`` (the priors of
+    U_win and gamma_winSolAbs). Without an EnergyPlus install they stay None and a note says
+    so. Changes ``building`` in place.
+    """
+    try:
+        install = find_energyplus(energyplus_dir)
+    except EnergyPlusNotFoundError:
+        building.notes.append("layered window constructions: no EnergyPlus to rate their "
+                              "U-factor and SHGC; the handbook priors are used")
+        return
+    model: dict[str, Any] = {
+        k: v for k, v in data.items() if k.startswith("WindowMaterial:") or k in _GLAZING_TYPES}
+    model["Version"] = {"Version 1": {"version_identifier": f"{install.version[0]}."
+                                                           f"{install.version[1]}"}}
+    model["Construction"] = {n: data["Construction"][n] for n in layered}
+    model["Material"] = {"zonecast box": {"roughness": "Rough", "thickness": 0.2,
+                                          "conductivity": 0.9, "density": 1900,
+                                          "specific_heat": 800}}
+    model["Construction"]["zonecast box wall"] = {"outside_layer": "zonecast box"}
+    model["Building"] = {"zonecast glazing rating": {"north_axis": 0, "terrain": "City",
+                                                     "solar_distribution": "FullExterior"}}
+    model["GlobalGeometryRules"] = {"GlobalGeometryRules 1": {
+        "starting_vertex_position": "UpperLeftCorner",
+        "vertex_entry_direction": "Counterclockwise", "coordinate_system": "World"}}
+    model["SimulationControl"] = {"SimulationControl 1": {
+        "do_zone_sizing_calculation": "No", "do_system_sizing_calculation": "No",
+        "do_plant_sizing_calculation": "No", "run_simulation_for_sizing_periods": "Yes",
+        "run_simulation_for_weather_file_run_periods": "No"}}
+    model["Site:Location"] = {"Anywhere": {"latitude": 40, "longitude": -105, "time_zone": -7,
+                                           "elevation": 0}}
+    model["SizingPeriod:DesignDay"] = {"Winter": {
+        "month": 1, "day_of_month": 21, "day_type": "WinterDesignDay",
+        "maximum_dry_bulb_temperature": -17.3, "daily_dry_bulb_temperature_range": 0.0,
+        "humidity_condition_type": "WetBulb", "wetbulb_or_dewpoint_at_maximum_dry_bulb": -17.3,
+        "barometric_pressure": 101325, "wind_speed": 5.5, "wind_direction": 270,
+        "rain_indicator": "No", "snow_indicator": "No", "daylight_saving_time_indicator": "No",
+        "solar_model_indicator": "ASHRAEClearSky", "sky_clearness": 0.0}}
+    model["Output:Table:SummaryReports"] = {"Output:Table:SummaryReports 1": {
+        "reports": [{"report_name": "EnvelopeSummary"}]}}
+    model["OutputControl:Table:Style"] = {"OutputControl:Table:Style 1": {
+        "column_separator": "Comma"}}
+    model["Zone"] = {"zonecast box": {}}
+    # a closed 10 m box; the windows sit in a grid on its south wall (0.2 m squares)
+    side, top = 10.0, 10.0
+    corners = {"S": [(0, 0, top), (0, 0, 0), (side, 0, 0), (side, 0, top)],
+               "E": [(side, 0, top), (side, 0, 0), (side, side, 0), (side, side, top)],
+               "N": [(side, side, top), (side, side, 0), (0, side, 0), (0, side, top)],
+               "W": [(0, side, top), (0, side, 0), (0, 0, 0), (0, 0, top)],
+               "F": [(0, 0, 0), (0, side, 0), (side, side, 0), (side, 0, 0)],
+               "R": [(0, side, top), (0, 0, top), (side, 0, top), (side, side, top)]}
+    kinds = {"F": "Floor", "R": "Roof"}
+    model["BuildingSurface:Detailed"] = {
+        f"box {k}": {"surface_type": kinds.get(k, "Wall"), "construction_name": "zonecast box wall",
+                     "zone_name": "zonecast box", "outside_boundary_condition": "Outdoors",
+                     "sun_exposure": "SunExposed", "wind_exposure": "WindExposed",
+                     "vertices": [{"vertex_x_coordinate": x, "vertex_y_coordinate": y,
+                                   "vertex_z_coordinate": z} for x, y, z in pts]}
+        for k, pts in corners.items()}
+    fen = {}
+    for i, cons in enumerate(layered):
+        x, z = 0.1 + 0.3 * (i % 30), 0.1 + 0.3 * (i // 30)
+        pts = [(x, 0, z + 0.2), (x, 0, z), (x + 0.2, 0, z), (x + 0.2, 0, z + 0.2)]
+        fen[f"rate {i}"] = {"surface_type": "Window", "construction_name": cons,
+                            "building_surface_name": "box S", "multiplier": 1, **{
+                                f"vertex_{j + 1}_{c}_coordinate": float(v)
+                                for j, p in enumerate(pts) for c, v in zip("xyz", p)}}
+    model["FenestrationSurface:Detailed"] = fen
+    with tempfile.TemporaryDirectory(prefix="zonecast-glazing-") as tmp:
+        work = Path(tmp)
+        (work / "in.epJSON").write_text(json.dumps(model))
+        _run([str(install.binary), "-d", str(work), str(work / "in.epJSON")], work)
+        table = work / "eplustbl.csv"
+        ratings = _glazing_table(table) if table.is_file() else {}
+    found = {cons: ratings[f"RATE {i}"] for i, cons in enumerate(layered)
+             if f"RATE {i}" in ratings}
+    missing = [c for c in layered if c not in found]
+    if missing:
+        building.notes.append("layered window constructions not rated by EnergyPlus (its "
+                              f"rating run failed for them): {', '.join(missing)}")
+    for name, (u, g) in found.items():
+        building.constructions[name] = replace(building.constructions[name], u_value=u,
+                                               shgc=g)
+    for key, w in list(building.windows.items()):
+        if w.construction in found:
+            building.windows[key] = replace(w, u_value=found[w.construction][0],
+                                            shgc=found[w.construction][1])
+    building.unsupported[:] = [u for u in building.unsupported
+                               if not (u.object_type == "Construction" and u.name in found
+                                       and u.reason.startswith("layered window"))]
+    if found:
+        building.notes.append(
+            "layered window constructions rated by EnergyPlus (NFRC glass U-factor [W/m2K], "
+            "SHGC): " + "; ".join(f"{n} {u:.3f} / {g:.3f}" for n, (u, g) in found.items()))
+
+
+def _glazing_table(path: Path) -> dict[str, tuple[float, float]]:
+    """Window name (upper case) -> (glass U-factor [W/m2K], glass SHGC) from the Envelope
+    Summary's exterior fenestration table of a comma-separated ``eplustbl.csv``."""
+    out: dict[str, tuple[float, float]] = {}
+    header: list[str] | None = None
+    for row in csv.reader(path.read_text(errors="replace").splitlines()):
+        if "Glass U-Factor [W/m2-K]" in row and "Construction" in row:
+            header = row
+            continue
+        if header is None:
+            continue
+        if len(row) < len(header) or not row[1]:
+            header = None  # end of the table
+            continue
+        rec = dict(zip(header, row))
+        try:
+            out[row[1].upper()] = (float(rec["Glass U-Factor [W/m2-K]"]),
+                                   float(rec["Glass SHGC"]))
+        except (KeyError, ValueError):
+            continue
+    return out

@@ -853,7 +853,6 @@ _UNSUPPORTED_TYPES: dict[str, str] = {
     "ZoneCrossMixing": "inter-zone air mixing not modelled",
     "InternalMass:Space": "space internal mass not read",
     "Space": "spaces are read as their zone",
-    "ZoneList": "ZoneList references are not expanded",
 }
 
 _SURFACE_TYPES = {"wall": "Wall", "floor": "Floor", "ceiling": "Ceiling", "roof": "Roof"}
@@ -1185,17 +1184,18 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
 
     masses: dict[str, InternalMass] = {}
     for name, f in data.get("InternalMass", {}).items():
-        zname = f.get("zone_or_zonelist_name") or f.get("zone_name")
-        zlow = str(zname).lower()
-        if zlow not in zkey:
+        zname = f.get("zone_or_zonelist_name") or f.get("zone_name") \
+            or f.get("space_or_spacelist_name") or ""
+        targets = _gain_zones(data, zkey, str(zname))
+        if not targets:
             unsupported.append(Unsupported(
-                "InternalMass", name, f"refers to {zname!r}, not a single zone; not modelled"
-            ))
+                "InternalMass", name, f"refers to {zname!r}, which is no zone, zone list, "
+                "space or space list zonecast knows; not modelled"))
             continue
-        masses[name] = InternalMass(
-            name, zkey[zlow], construction_of(f["construction_name"], f"InternalMass {name!r}"),
-            float(f["surface_area"]),
-        )
+        cons = construction_of(f["construction_name"], f"InternalMass {name!r}")
+        for zone in targets:  # a list gives every zone in it the whole area, as EnergyPlus
+            key = name if len(targets) == 1 else f"{zone} {name}"
+            masses[key] = InternalMass(key, zone, cons, float(f["surface_area"]))
 
     zones = {n: _zone(n, f, base) for n, f in zones_raw.items()}
     for z in zones.values():
@@ -1234,7 +1234,8 @@ _GAIN_LEVELS["GasEquipment"] = _GAIN_LEVELS["OtherEquipment"] = {
 
 
 def _gain_zones(data: Mapping[str, Any], zkey: Mapping[str, str], name: str) -> list[str]:
-    """The zones an internal gain object's zone field names: a zone or a ZoneList's zones."""
+    """The zones an object's zone field names: a zone, a ZoneList's zones, a Space's zone or
+    a SpaceList's spaces' zones (each once, in order)."""
     low = name.strip().lower()
     if low in zkey:
         return [zkey[low]]
@@ -1242,7 +1243,14 @@ def _gain_zones(data: Mapping[str, Any], zkey: Mapping[str, str], name: str) -> 
         if key.lower() == low:
             return [zkey[str(z.get("zone_name", "")).lower()] for z in f.get("zones", [])
                     if str(z.get("zone_name", "")).lower() in zkey]
-    return []
+    spaces = {k.lower(): str(f.get("zone_name", "")).lower()
+              for k, f in data.get("Space", {}).items()}
+    names = [low]
+    for key, f in data.get("SpaceList", {}).items():
+        if key.lower() == low:
+            names = [str(sp.get("space_name", "")).lower() for sp in f.get("spaces", [])]
+    out = [zkey[spaces[n]] for n in names if spaces.get(n) in zkey]
+    return list(dict.fromkeys(out))
 
 
 def _people_count(f: Mapping[str, Any], floor_area: float) -> float:
@@ -1498,58 +1506,73 @@ def _infiltration(data: Mapping[str, Any], zkey: Mapping[str, str], zones: Mappi
     for name, f in data.get("ZoneInfiltration:DesignFlowRate", {}).items():
         zname = str(f.get("zone_or_zonelist_or_space_or_spacelist_name")
                     or f.get("zone_or_zonelist_name") or f.get("zone_name") or "")
-        if zname.lower() not in zkey:
-            unsupported.append(Unsupported("ZoneInfiltration:DesignFlowRate", name,
-                                           f"refers to {zname!r}, not a single zone; not modelled"))
+        targets = _gain_zones(data, zkey, zname)
+        if not targets:
+            unsupported.append(Unsupported(
+                "ZoneInfiltration:DesignFlowRate", name, f"refers to {zname!r}, which is no "
+                "zone, zone list, space or space list zonecast knows; not modelled"))
             continue
-        zone = zones[zkey[zname.lower()]]
-        method = str(f.get("design_flow_rate_calculation_method", "Flow/Zone")).lower()
-        outdoor = [s for s in surfaces.values() if s.zone == zone.name and s.boundary == "Outdoors"]
-        if method == "flow/zone":
-            design = _num(f.get("design_flow_rate"), 0.0)
-        elif method == "flow/area":
-            design = _num(f.get("flow_rate_per_floor_area"), 0.0) * zone.floor_area
-        elif method in ("flow/exteriorarea", "flow/exteriorwallarea"):
-            faces = outdoor if method == "flow/exteriorarea" else \
-                [s for s in outdoor if s.surface_type.lower() == "wall"]
-            design = (_num(f.get("flow_rate_per_exterior_surface_area"), 0.0)
-                      * sum(s.gross_area for s in faces))
-        elif method == "airchanges/hour":
-            design = _num(f.get("air_changes_per_hour"), 0.0) * zone.volume / 3600.0
-        else:
-            unsupported.append(Unsupported("ZoneInfiltration:DesignFlowRate", name,
-                                           f"calculation method {method!r}; not modelled"))
-            continue
-        sched = str(f.get("schedule_name", "")).lower()
-        factor = constants.get(sched, 1.0)
-        follows = ""
-        if sched in compact and sched not in constants:
-            sname, sfields = compact[sched]
-            try:
-                parsed = schedules.get(sname) or CompactSchedule.from_epjson(sname, sfields)
-            except ScheduleError as exc:
-                notes.append(f"infiltration {name}: {exc}; taken as 1")
-            else:
-                vals = {v for p in parsed.periods for r in p[1] for _, v in r[1]}
-                if len(vals) == 1:      # a compact schedule with one value is a constant
-                    factor = vals.pop()
-                else:
-                    schedules[sname] = parsed
-                    notes.extend(n for n in parsed.notes if n not in notes)
-                    follows = sname
-        elif sched and sched not in constants:
-            notes.append(f"infiltration {name}: schedule {f.get('schedule_name')} taken as 1")
-        zs = [float(z) for s in surfaces.values() if s.zone == zone.name
-              for z in np.asarray(s.vertices)[:, 2]]
-        centroid = 0.5 * (min(zs) + max(zs)) if zs else 0.5 * zone.ceiling_height
-        wind = local_wind(INFILTRATION_WIND, centroid, terrain)
-        terms = (_num(f.get("constant_term_coefficient"), 1.0)
-                 + _num(f.get("temperature_term_coefficient"), 0.0) * INFILTRATION_DELTA_T
-                 + _num(f.get("velocity_term_coefficient"), 0.0) * wind
-                 + _num(f.get("velocity_squared_term_coefficient"), 0.0) * wind**2)
-        flow = max(design * factor * terms, 0.0)
-        out[name] = Infiltration(name, zone.name, flow, follows)
+        for zone_name in targets:  # a list: the object applies to each of its zones
+            key = name if len(targets) == 1 else f"{zone_name} {name}"
+            inf = _infiltration_of(key, f, zones[zone_name], surfaces, constants, compact,
+                                   terrain, unsupported, notes, schedules)
+            if inf is not None:
+                out[key] = inf
     return out
+
+
+def _infiltration_of(name: str, f: Mapping[str, Any], zone: Zone,
+                     surfaces: Mapping[str, Surface], constants: Mapping[str, float],
+                     compact: Mapping[str, Any], terrain: str, unsupported: list[Unsupported],
+                     notes: list[str], schedules: dict[str, CompactSchedule]
+                     ) -> Infiltration | None:
+    """One ZoneInfiltration:DesignFlowRate object's nominal flow into ``zone``."""
+    method = str(f.get("design_flow_rate_calculation_method", "Flow/Zone")).lower()
+    outdoor = [s for s in surfaces.values() if s.zone == zone.name and s.boundary == "Outdoors"]
+    if method == "flow/zone":
+        design = _num(f.get("design_flow_rate"), 0.0)
+    elif method == "flow/area":
+        design = _num(f.get("flow_rate_per_floor_area"), 0.0) * zone.floor_area
+    elif method in ("flow/exteriorarea", "flow/exteriorwallarea"):
+        faces = outdoor if method == "flow/exteriorarea" else \
+            [s for s in outdoor if s.surface_type.lower() == "wall"]
+        design = (_num(f.get("flow_rate_per_exterior_surface_area"), 0.0)
+                  * sum(s.gross_area for s in faces))
+    elif method == "airchanges/hour":
+        design = _num(f.get("air_changes_per_hour"), 0.0) * zone.volume / 3600.0
+    else:
+        unsupported.append(Unsupported("ZoneInfiltration:DesignFlowRate", name,
+                                       f"calculation method {method!r}; not modelled"))
+        return None
+    sched = str(f.get("schedule_name", "")).lower()
+    factor = constants.get(sched, 1.0)
+    follows = ""
+    if sched in compact and sched not in constants:
+        sname, sfields = compact[sched]
+        try:
+            parsed = schedules.get(sname) or CompactSchedule.from_epjson(sname, sfields)
+        except ScheduleError as exc:
+            notes.append(f"infiltration {name}: {exc}; taken as 1")
+        else:
+            vals = {v for p in parsed.periods for r in p[1] for _, v in r[1]}
+            if len(vals) == 1:      # a compact schedule with one value is a constant
+                factor = vals.pop()
+            else:
+                schedules[sname] = parsed
+                notes.extend(n for n in parsed.notes if n not in notes)
+                follows = sname
+    elif sched and sched not in constants:
+        notes.append(f"infiltration {name}: schedule {f.get('schedule_name')} taken as 1")
+    zs = [float(z) for s in surfaces.values() if s.zone == zone.name
+          for z in np.asarray(s.vertices)[:, 2]]
+    centroid = 0.5 * (min(zs) + max(zs)) if zs else 0.5 * zone.ceiling_height
+    wind = local_wind(INFILTRATION_WIND, centroid, terrain)
+    terms = (_num(f.get("constant_term_coefficient"), 1.0)
+             + _num(f.get("temperature_term_coefficient"), 0.0) * INFILTRATION_DELTA_T
+             + _num(f.get("velocity_term_coefficient"), 0.0) * wind
+             + _num(f.get("velocity_squared_term_coefficient"), 0.0) * wind**2)
+    flow = max(design * factor * terms, 0.0)
+    return Infiltration(name, zone.name, flow, follows)
 
 
 def _zone(name: str, f: Mapping[str, Any], base: Mapping[str, Mapping[str, Any]]) -> Zone:
@@ -1617,6 +1640,7 @@ def read_building(
     Building
     """
     data, notes = load_epjson(path, energyplus_dir)
+    data = _with_fc_layers(data, notes, energyplus_dir)
     building = building_from_epjson(data, notes)
     layered = sorted({w.construction for w in building.windows.values() if w.u_value is None})
     if layered:
@@ -1626,6 +1650,78 @@ def read_building(
 
 #: Object types a layered window construction may draw on (copied into the rating run).
 _GLAZING_TYPES = ("MaterialProperty:GlazingSpectralData",)
+
+
+def _rating_model(install: EnergyPlusInstall, data: Mapping[str, Any]) -> dict[str, Any]:
+    """A minimal EnergyPlus model (one winter design day, no HVAC) that EnergyPlus is run on
+    to derive what an input leaves to it (glazing ratings, F/C-factor layers); the file's
+    window materials are copied in."""
+    model: dict[str, Any] = {
+        k: v for k, v in data.items() if k.startswith("WindowMaterial:") or k in _GLAZING_TYPES}
+    model["Version"] = {"Version 1": {"version_identifier": f"{install.version[0]}."
+                                                           f"{install.version[1]}"}}
+    model["Construction"] = {"zonecast box wall": {"outside_layer": "zonecast box"}}
+    model["Material"] = {"zonecast box": {"roughness": "Rough", "thickness": 0.2,
+                                          "conductivity": 0.9, "density": 1900,
+                                          "specific_heat": 800}}
+    model["Building"] = {"zonecast rating": {"north_axis": 0, "terrain": "City",
+                                             "solar_distribution": "FullExterior"}}
+    model["GlobalGeometryRules"] = {"GlobalGeometryRules 1": {
+        "starting_vertex_position": "UpperLeftCorner",
+        "vertex_entry_direction": "Counterclockwise", "coordinate_system": "World"}}
+    model["SimulationControl"] = {"SimulationControl 1": {
+        "do_zone_sizing_calculation": "No", "do_system_sizing_calculation": "No",
+        "do_plant_sizing_calculation": "No", "run_simulation_for_sizing_periods": "Yes",
+        "run_simulation_for_weather_file_run_periods": "No"}}
+    model["Site:Location"] = {"Anywhere": {"latitude": 40, "longitude": -105, "time_zone": -7,
+                                           "elevation": 0}}
+    model["SizingPeriod:DesignDay"] = {"Winter": {
+        "month": 1, "day_of_month": 21, "day_type": "WinterDesignDay",
+        "maximum_dry_bulb_temperature": -17.3, "daily_dry_bulb_temperature_range": 0.0,
+        "humidity_condition_type": "WetBulb", "wetbulb_or_dewpoint_at_maximum_dry_bulb": -17.3,
+        "barometric_pressure": 101325, "wind_speed": 5.5, "wind_direction": 270,
+        "rain_indicator": "No", "snow_indicator": "No", "daylight_saving_time_indicator": "No",
+        "solar_model_indicator": "ASHRAEClearSky", "sky_clearness": 0.0}}
+    model["Zone"] = {}
+    model["BuildingSurface:Detailed"] = {}
+    return model
+
+
+def _add_rating_box(model: dict[str, Any], zone: str, x0: float,
+                    faces: Mapping[str, tuple[str, str]] | None = None) -> None:
+    """A closed 10 m box zone at x = ``x0`` [m]; ``faces`` gives some faces (S, E, N, W, F,
+    R) another construction and outside boundary condition."""
+    side = 10.0
+    corners = {"S": [(0, 0, side), (0, 0, 0), (side, 0, 0), (side, 0, side)],
+               "E": [(side, 0, side), (side, 0, 0), (side, side, 0), (side, side, side)],
+               "N": [(side, side, side), (side, side, 0), (0, side, 0), (0, side, side)],
+               "W": [(0, side, side), (0, side, 0), (0, 0, 0), (0, 0, side)],
+               "F": [(0, 0, 0), (0, side, 0), (side, side, 0), (side, 0, 0)],
+               "R": [(0, side, side), (0, 0, side), (side, 0, side), (side, side, side)]}
+    kinds = {"F": "Floor", "R": "Roof"}
+    model["Zone"][zone] = {}
+    for k, pts in corners.items():
+        cons, cond = (faces or {}).get(k, ("zonecast box wall", "Outdoors"))
+        exposed = cond == "Outdoors"
+        model["BuildingSurface:Detailed"][f"{zone} {k}"] = {
+            "surface_type": kinds.get(k, "Wall"), "construction_name": cons,
+            "zone_name": zone, "outside_boundary_condition": cond,
+            "sun_exposure": "SunExposed" if exposed else "NoSun",
+            "wind_exposure": "WindExposed" if exposed else "NoWind",
+            "vertices": [{"vertex_x_coordinate": x + x0, "vertex_y_coordinate": y,
+                          "vertex_z_coordinate": z} for x, y, z in pts]}
+
+
+def _run_rating(install: EnergyPlusInstall, model: Mapping[str, Any],
+                outputs: tuple[str, ...]) -> dict[str, str]:
+    """Run EnergyPlus on ``model``; return the text of the named output files (missing
+    ones absent)."""
+    with tempfile.TemporaryDirectory(prefix="zonecast-rating-") as tmp:
+        work = Path(tmp)
+        (work / "in.epJSON").write_text(json.dumps(model))
+        _run([str(install.binary), "-d", str(work), str(work / "in.epJSON")], work)
+        return {name: (work / name).read_text(errors="replace") for name in outputs
+                if (work / name).is_file()}
 
 
 def _rate_layered_glazing(building: Building, data: Mapping[str, Any], layered: list[str],
@@ -1646,69 +1742,24 @@ def _rate_layered_glazing(building: Building, data: Mapping[str, Any], layered: 
         building.notes.append("layered window constructions: no EnergyPlus to rate their "
                               "U-factor and SHGC; the handbook priors are used")
         return
-    model: dict[str, Any] = {
-        k: v for k, v in data.items() if k.startswith("WindowMaterial:") or k in _GLAZING_TYPES}
-    model["Version"] = {"Version 1": {"version_identifier": f"{install.version[0]}."
-                                                           f"{install.version[1]}"}}
-    model["Construction"] = {n: data["Construction"][n] for n in layered}
-    model["Material"] = {"zonecast box": {"roughness": "Rough", "thickness": 0.2,
-                                          "conductivity": 0.9, "density": 1900,
-                                          "specific_heat": 800}}
-    model["Construction"]["zonecast box wall"] = {"outside_layer": "zonecast box"}
-    model["Building"] = {"zonecast glazing rating": {"north_axis": 0, "terrain": "City",
-                                                     "solar_distribution": "FullExterior"}}
-    model["GlobalGeometryRules"] = {"GlobalGeometryRules 1": {
-        "starting_vertex_position": "UpperLeftCorner",
-        "vertex_entry_direction": "Counterclockwise", "coordinate_system": "World"}}
-    model["SimulationControl"] = {"SimulationControl 1": {
-        "do_zone_sizing_calculation": "No", "do_system_sizing_calculation": "No",
-        "do_plant_sizing_calculation": "No", "run_simulation_for_sizing_periods": "Yes",
-        "run_simulation_for_weather_file_run_periods": "No"}}
-    model["Site:Location"] = {"Anywhere": {"latitude": 40, "longitude": -105, "time_zone": -7,
-                                           "elevation": 0}}
-    model["SizingPeriod:DesignDay"] = {"Winter": {
-        "month": 1, "day_of_month": 21, "day_type": "WinterDesignDay",
-        "maximum_dry_bulb_temperature": -17.3, "daily_dry_bulb_temperature_range": 0.0,
-        "humidity_condition_type": "WetBulb", "wetbulb_or_dewpoint_at_maximum_dry_bulb": -17.3,
-        "barometric_pressure": 101325, "wind_speed": 5.5, "wind_direction": 270,
-        "rain_indicator": "No", "snow_indicator": "No", "daylight_saving_time_indicator": "No",
-        "solar_model_indicator": "ASHRAEClearSky", "sky_clearness": 0.0}}
+    model = _rating_model(install, data)
+    model["Construction"].update({n: data["Construction"][n] for n in layered})
     model["Output:Table:SummaryReports"] = {"Output:Table:SummaryReports 1": {
         "reports": [{"report_name": "EnvelopeSummary"}]}}
     model["OutputControl:Table:Style"] = {"OutputControl:Table:Style 1": {
         "column_separator": "Comma"}}
-    model["Zone"] = {"zonecast box": {}}
-    # a closed 10 m box; the windows sit in a grid on its south wall (0.2 m squares)
-    side, top = 10.0, 10.0
-    corners = {"S": [(0, 0, top), (0, 0, 0), (side, 0, 0), (side, 0, top)],
-               "E": [(side, 0, top), (side, 0, 0), (side, side, 0), (side, side, top)],
-               "N": [(side, side, top), (side, side, 0), (0, side, 0), (0, side, top)],
-               "W": [(0, side, top), (0, side, 0), (0, 0, 0), (0, 0, top)],
-               "F": [(0, 0, 0), (0, side, 0), (side, side, 0), (side, 0, 0)],
-               "R": [(0, side, top), (0, 0, top), (side, 0, top), (side, side, top)]}
-    kinds = {"F": "Floor", "R": "Roof"}
-    model["BuildingSurface:Detailed"] = {
-        f"box {k}": {"surface_type": kinds.get(k, "Wall"), "construction_name": "zonecast box wall",
-                     "zone_name": "zonecast box", "outside_boundary_condition": "Outdoors",
-                     "sun_exposure": "SunExposed", "wind_exposure": "WindExposed",
-                     "vertices": [{"vertex_x_coordinate": x, "vertex_y_coordinate": y,
-                                   "vertex_z_coordinate": z} for x, y, z in pts]}
-        for k, pts in corners.items()}
-    fen = {}
+    _add_rating_box(model, "zonecast box", 0.0)
+    fen = {}  # the windows sit in a grid on the box's south wall (0.2 m squares)
     for i, cons in enumerate(layered):
         x, z = 0.1 + 0.3 * (i % 30), 0.1 + 0.3 * (i // 30)
         pts = [(x, 0, z + 0.2), (x, 0, z), (x + 0.2, 0, z), (x + 0.2, 0, z + 0.2)]
         fen[f"rate {i}"] = {"surface_type": "Window", "construction_name": cons,
-                            "building_surface_name": "box S", "multiplier": 1, **{
+                            "building_surface_name": "zonecast box S", "multiplier": 1, **{
                                 f"vertex_{j + 1}_{c}_coordinate": float(v)
                                 for j, p in enumerate(pts) for c, v in zip("xyz", p)}}
     model["FenestrationSurface:Detailed"] = fen
-    with tempfile.TemporaryDirectory(prefix="zonecast-glazing-") as tmp:
-        work = Path(tmp)
-        (work / "in.epJSON").write_text(json.dumps(model))
-        _run([str(install.binary), "-d", str(work), str(work / "in.epJSON")], work)
-        table = work / "eplustbl.csv"
-        ratings = _glazing_table(table) if table.is_file() else {}
+    out = _run_rating(install, model, ("eplustbl.csv",))
+    ratings = _glazing_table(out["eplustbl.csv"]) if "eplustbl.csv" in out else {}
     found = {cons: ratings[f"RATE {i}"] for i, cons in enumerate(layered)
              if f"RATE {i}" in ratings}
     missing = [c for c in layered if c not in found]
@@ -1731,12 +1782,115 @@ def _rate_layered_glazing(building: Building, data: Mapping[str, Any], layered: 
             "SHGC): " + "; ".join(f"{n} {u:.3f} / {g:.3f}" for n, (u, g) in found.items()))
 
 
-def _glazing_table(path: Path) -> dict[str, tuple[float, float]]:
+#: F- and C-factor constructions: EnergyPlus gives each an equivalent layered construction.
+_FC_TYPES = ("Construction:FfactorGroundFloor", "Construction:CfactorUndergroundWall")
+
+
+def _with_fc_layers(data: dict[str, Any], notes: list[str],
+                    energyplus_dir: str | os.PathLike | None) -> dict[str, Any]:
+    """The input with its F-factor floors and C-factor walls as EnergyPlus builds them.
+
+    ``Construction:FfactorGroundFloor`` and ``Construction:CfactorUndergroundWall`` (ASHRAE
+    90.1's slab-on-grade and below-grade wall ratings, used by the DOE prototype buildings)
+    name no layers: EnergyPlus makes each a 0.15 m concrete layer behind a fictitious
+    insulation whose resistance gives the rated F- or C-factor, and puts the surfaces'
+    outer face at the ``Site:GroundTemperature:FCfactorMethod`` temperatures. EnergyPlus
+    itself builds them here (a box per construction, one design day, the layers read from
+    ``eplusout.eio``), so its rules are not rewritten; the result goes into the input as
+    ordinary ``Construction`` objects of the same names, the surfaces' boundary
+    ``GroundFCfactorMethod`` becomes ``Ground``, and the FC-method ground temperatures are
+    used when the file has no ``Site:GroundTemperature:BuildingSurface``. Without an
+    EnergyPlus install the input is returned as it is (such constructions stay unsupported).
+    """
+    fc = [(typ, name) for typ in _FC_TYPES for name in data.get(typ, {})]
+    if not fc:
+        return data
+    try:
+        install = find_energyplus(energyplus_dir)
+    except EnergyPlusNotFoundError:
+        notes.append("F/C-factor constructions: no EnergyPlus to build their layers")
+        return data
+    model = _rating_model(install, data)
+    model["Output:Constructions"] = {"Output:Constructions 1": {
+        "details_type_1": "Constructions", "details_type_2": "Materials"}}
+    for typ in _FC_TYPES:
+        if typ in data:
+            model[typ] = data[typ]
+    if "Site:GroundTemperature:FCfactorMethod" in data:
+        model["Site:GroundTemperature:FCfactorMethod"] = \
+            data["Site:GroundTemperature:FCfactorMethod"]
+    for i, (typ, name) in enumerate(fc):
+        face = "F" if typ.endswith("FfactorGroundFloor") else "S"
+        _add_rating_box(model, f"zonecast fc {i}", 20.0 * i,
+                        {face: (name, "GroundFCfactorMethod")})
+    out = _run_rating(install, model, ("eplusout.eio",))
+    layers = _eio_construction_layers(out.get("eplusout.eio", ""))
+    data = dict(data)
+    data["Construction"] = dict(data.get("Construction", {}))
+    data["Material"] = dict(data.get("Material", {}))
+    data["Material:NoMass"] = dict(data.get("Material:NoMass", {}))
+    built = []
+    for typ, name in fc:
+        parts = layers.get(name.upper())
+        if not parts:
+            continue
+        names = []
+        for j, (mname, d, k, rho, cp, r) in enumerate(parts):
+            key = f"{name} {mname.strip('~')} {j + 1}"
+            if d > 0 and k > 0:
+                data["Material"][key] = {"roughness": "MediumRough", "thickness": d,
+                                         "conductivity": k, "density": rho,
+                                         "specific_heat": cp}
+            else:
+                data["Material:NoMass"][key] = {"roughness": "MediumRough",
+                                                "thermal_resistance": r}
+            names.append(key)
+        data["Construction"][name] = {"outside_layer": names[0], **{
+            f"layer_{j + 2}": n for j, n in enumerate(names[1:])}}
+        data[typ] = {k: v for k, v in data[typ].items() if k != name}
+        built.append(f"{name} R {sum(p[5] for p in parts):.3f} m2K/W")
+    if len(built) < len(fc):
+        notes.append("F/C-factor constructions EnergyPlus did not build: " + ", ".join(
+            n for _, n in fc if n.upper() not in layers))
+    if built:
+        notes.append("F/C-factor constructions as EnergyPlus builds them: " + "; ".join(built))
+    for typ in ("BuildingSurface:Detailed", *_TYPED_DETAILED):
+        if typ in data:
+            data[typ] = {n: (dict(f, outside_boundary_condition="Ground")
+                             if str(f.get("outside_boundary_condition", "")).lower()
+                             == "groundfcfactormethod" else f)
+                         for n, f in data[typ].items()}
+    fc_ground = data.get("Site:GroundTemperature:FCfactorMethod")
+    if fc_ground and not data.get("Site:GroundTemperature:BuildingSurface"):
+        data["Site:GroundTemperature:BuildingSurface"] = fc_ground
+        notes.append("ground temperatures: Site:GroundTemperature:FCfactorMethod (the file has "
+                     "no Site:GroundTemperature:BuildingSurface)")
+    return data
+
+
+def _eio_construction_layers(text: str) -> dict[str, list[tuple]]:
+    """Construction name (upper case) -> its layers, outside first, as (name, thickness [m],
+    conductivity [W/mK], density [kg/m3], specific heat [J/kgK], resistance [m2K/W]) from
+    ``eplusout.eio``'s "Construction CTF" / "Material CTF Summary" lines."""
+    out: dict[str, list[tuple]] = {}
+    current: list[tuple] | None = None
+    for line in text.splitlines():
+        f = [x.strip() for x in line.split(",")]
+        if f[0] == "Construction CTF":
+            current = out.setdefault(f[1].upper(), [])
+        elif f[0] == "Material CTF Summary" and current is not None and len(f) >= 7:
+            current.append((f[1], *(float(x) for x in f[2:7])))
+        elif f[0] and not f[0].startswith("!"):
+            current = None
+    return out
+
+
+def _glazing_table(text: str) -> dict[str, tuple[float, float]]:
     """Window name (upper case) -> (glass U-factor [W/m2K], glass SHGC) from the Envelope
-    Summary's exterior fenestration table of a comma-separated ``eplustbl.csv``."""
+    Summary's exterior fenestration table of a comma-separated ``eplustbl.csv`` (its text)."""
     out: dict[str, tuple[float, float]] = {}
     header: list[str] | None = None
-    for row in csv.reader(path.read_text(errors="replace").splitlines()):
+    for row in csv.reader(text.splitlines()):
         if "Glass U-Factor [W/m2-K]" in row and "Construction" in row:
             header = row
             continue

@@ -37,7 +37,7 @@ def envelope_summary(five_zone_path, tmp_path_factory):
                           capture_output=True, text=True, timeout=900, check=False)
     table = work / "eplustbl.csv"
     assert table.is_file(), proc.stdout[-2000:]
-    return _glazing_table(table)
+    return _glazing_table(table.read_text())
 
 
 def test_layered_windows_rated_as_energyplus_rates_them(five_zone, envelope_summary):

@@ -260,3 +260,41 @@ def test_rectangle_geometry(az, tilt, length, height, x, z):
     assert (rel @ up).min() >= -1e-9 and (rel @ up).max() <= height + 1e-9
     nw = 0.5 * np.cross(w, np.roll(w, -1, axis=0)).sum(axis=0)
     np.testing.assert_allclose(nw / np.linalg.norm(nw), n / area, atol=1e-9)
+
+
+def _two_rooms(**objects) -> dict:
+    walls = {f"{z} {k}": {"construction_name": "Wall", "zone_name": z, "azimuth_angle": az,
+                          "starting_x_coordinate": x, "starting_y_coordinate": y,
+                          "starting_z_coordinate": 0, "length": 4, "height": 3}
+             for z, dx in (("A", 0), ("B", 10))
+             for k, az, x, y in (("S", 180, dx, 0), ("E", 90, dx + 4, 0),
+                                 ("N", 0, dx + 4, 4), ("W", 270, dx, 4))}
+    floors = {f"{z} F": {"construction_name": "Wall", "zone_name": z, "azimuth_angle": 180,
+                         "starting_x_coordinate": dx + 4, "starting_y_coordinate": 0,
+                         "starting_z_coordinate": 0, "length": 4, "width": 4}
+              for z, dx in (("A", 0), ("B", 10))}
+    data = _minimal(**{"Wall:Exterior": walls, "Floor:Adiabatic": floors}, **objects)
+    data["Zone"] = {"A": {}, "B": {}}
+    data["ZoneList"] = {"Offices": {"zones": [{"zone_name": "A"}, {"zone_name": "B"}]}}
+    data["Space"] = {"A open": {"zone_name": "A"}}
+    return data
+
+
+def test_lists_and_spaces_expanded_to_their_zones():
+    """An InternalMass or infiltration object on a ZoneList applies to every zone of it, one
+    on a Space to the space's zone, as EnergyPlus does."""
+    b = building_from_epjson(_two_rooms(
+        InternalMass={"Furniture": {"construction_name": "Wall",
+                                    "zone_or_zonelist_name": "Offices", "surface_area": 20},
+                      "Desk": {"construction_name": "Wall", "space_or_spacelist_name": "A open",
+                               "surface_area": 5}},
+        **{"ZoneInfiltration:DesignFlowRate": {"Leak": {
+            "zone_or_zonelist_or_space_or_spacelist_name": "Offices",
+            "design_flow_rate_calculation_method": "AirChanges/Hour",
+            "air_changes_per_hour": 0.5}}}))
+    assert {(m.name, m.zone, m.area) for m in b.internal_masses.values()} == {
+        ("A Furniture", "A", 20.0), ("B Furniture", "B", 20.0), ("Desk", "A", 5.0)}
+    assert {i.zone for i in b.infiltration.values()} == {"A", "B"}
+    for inf in b.infiltration.values():
+        assert inf.flow == pytest.approx(0.5 * b.zones[inf.zone].volume / 3600.0)
+    assert not [u for u in b.unsupported if u.object_type in ("InternalMass", "ZoneList")]

@@ -52,11 +52,69 @@ RoofCeiling:Detailed, BR, Wall, B, , Outdoors, , SunExposed, WindExposed, , 4,
 Floor:Adiabatic, BF, Wall, B, , 90, 180, 0, 0, 0, 5, 6;
 Ceiling:Adiabatic, BC, Wall, B, , 30, 0, 0, 0, 3, 4, 5;
 Wall:Adiabatic, BA, Wall, B, , 300, 90, 0, 0, 0, 2, 3;
+Shading:Site, Bushes, 180, 90, 1, -4, 0, 20, 1;
+Shading:Building, Hedge, 90, 90, 12, -3, 0, 10, 2;
 Floor:Detailed, BFD, Wall, B, , Adiabatic, , NoSun, NoWind, , 4,
     0, 0, 0, 0, 5, 0, -2, 5, 0, -2, 0, 0;
 ! BFD faces up: EnergyPlus reverses it (upside-down floor, automatic fix)
 Output:Surfaces:List, DetailsWithVertices;
 """
+
+
+#: World rectangular coordinates, stacked zones coupled through Ceiling:Interzone /
+#: Floor:Interzone and an interzone wall with a Window:Interzone pair, site and building
+#: shading rectangles (the conventions of EnergyPlus's 4ZoneWithShading_Simple example)
+WORLD_IDF = """
+Version, 25.2;
+SimulationControl, No, No, No, No, Yes, No, 1;
+Building, Stack, 15, City, 0.04, 0.4, FullExterior, 25, 6;
+Timestep, 4;
+Site:Location, Golden, 39.74, -105.18, -7.0, 1829.0;
+RunPeriod, June, 6, 20, 2015, 6, 20, 2015, , No, No, No, Yes, Yes, No, Hour24;
+GlobalGeometryRules, UpperLeftCorner, CounterClockWise, World, , World;
+Material, Brick, Rough, 0.2, 0.9, 1900, 800;
+WindowMaterial:SimpleGlazingSystem, Glass, 2.0, 0.4, 0.6;
+Construction, Wall, Brick;
+Construction, Win, Glass;
+Zone, L, 0, 6, 6, 0;
+Zone, U, 0, 6, 6, 10;
+Zone, U2, 0, 26, 6, 10;
+Wall:Exterior, L1, Wall, L, , 180, 90, 6, 6, 0, 20, 10;
+Window, L1W, Win, L1, , 1, 4, 3, 3, 5;
+Wall:Exterior, L2, Wall, L, , 0, 90, 26, 26, 0, 20, 10;
+Wall:Exterior, L3, Wall, L, , 270, 90, 6, 26, 0, 20, 10;
+Wall:Adiabatic, L4, Wall, L, , 90, 90, 26, 6, 0, 20, 10;
+Floor:Adiabatic, LF, Wall, L, , 90, 180, 6, 6, 0, 20, 20;
+Ceiling:Interzone, LC, Wall, L, , UF, 180, 0, 6, 6, 10, 20, 20;
+Wall:Exterior, U1, Wall, U, , 180, 90, 6, 6, 10, 20, 10;
+Wall:Exterior, U2w, Wall, U, , 0, 90, 26, 26, 10, 20, 10;
+Wall:Exterior, U3, Wall, U, , 270, 90, 6, 26, 10, 20, 10;
+Wall:Interzone, U4, Wall, U, , V4, 90, 90, 26, 6, 10, 20, 10;
+Window:Interzone, U4W, Win, U4, V4W, 1, 4, 3, 3, 5;
+Floor:Interzone, UF, Wall, U, , LC, 90, 180, 6, 6, 10, 20, 20;
+Roof, UR, Wall, U, , 180, 0, 6, 6, 20, 20, 20;
+Wall:Exterior, V1, Wall, U2, , 180, 90, 26, 6, 10, 20, 10;
+Wall:Exterior, V2, Wall, U2, , 90, 90, 46, 6, 10, 20, 10;
+Wall:Exterior, V3, Wall, U2, , 0, 90, 46, 26, 10, 20, 10;
+Wall:Interzone, V4, Wall, U2, , U4, 270, 90, 26, 26, 10, 20, 10;
+Window:Interzone, V4W, Win, V4, U4W, 1, 13, 3, 3, 5;
+Floor:Adiabatic, VF, Wall, U2, , 90, 180, 26, 6, 10, 20, 20;
+Roof, VR, Wall, U2, , 180, 0, 26, 6, 20, 20, 20;
+Shading:Site, Bushes, 180, 90, 1, 0, 0, 50, 1;
+Shading:Building, Hedge, 90, 90, 51, 0, 0, 50, 1;
+Output:Surfaces:List, DetailsWithVertices;
+"""
+
+
+def _eio_shading(path) -> list[np.ndarray]:
+    """Vertices of the detached shading surfaces EnergyPlus reports (not their mirrors)."""
+    out = []
+    for line in path.read_text().splitlines():
+        f = [x.strip() for x in line.split(",")]
+        if f[0] == "Shading Surface" and not f[1].upper().startswith("MIR-"):
+            n = int(f[26])
+            out.append(np.array([float(x) for x in f[27:27 + 3 * n]]).reshape(n, 3))
+    return out
 
 
 def _eio_surfaces(path) -> dict[str, dict]:
@@ -73,21 +131,32 @@ def _eio_surfaces(path) -> dict[str, dict]:
     return out
 
 
-@pytest.fixture(scope="module")
-def probe(tmp_path_factory):
+def _run_probe(work, text: str):
     from zonecast.testbed.run import energyplus_dir, run_energyplus
 
-    work = tmp_path_factory.mktemp("rectangles")
     idf = work / "in.idf"
-    idf.write_text(EIO_IDF)
+    idf.write_text(text)
     run_energyplus(idf, energyplus_dir() / "WeatherData" / "USA_CO_Golden-NREL.724666_TMY3.epw",
                    work)
-    return read_building(idf), _eio_surfaces(work / "eplusout.eio")
+    building = read_building(idf)
+    building.eio_shading = _eio_shading(work / "eplusout.eio")  # the reference, for the test
+    return building, _eio_surfaces(work / "eplusout.eio")
+
+
+@pytest.fixture(scope="module")
+def probe(tmp_path_factory):
+    return _run_probe(tmp_path_factory.mktemp("rectangles"), EIO_IDF)
+
+
+@pytest.fixture(scope="module")
+def world_probe(tmp_path_factory):
+    return _run_probe(tmp_path_factory.mktemp("world"), WORLD_IDF)
 
 
 @pytest.mark.energyplus
-def test_vertices_equal_energyplus(probe):
-    building, eio = probe
+@pytest.mark.parametrize("which", ["probe", "world_probe"])
+def test_vertices_equal_energyplus(which, request):
+    building, eio = request.getfixturevalue(which)
     ours = {**{n.upper(): s for n, s in building.surfaces.items()},
             **{n.upper(): w for n, w in building.windows.items()}}
     # every surface EnergyPlus has (the zone boundary's far side included), and no other
@@ -98,6 +167,31 @@ def test_vertices_equal_energyplus(probe):
         np.testing.assert_allclose(ours[name].vertices, ref["vertices"], atol=0.006,
                                    err_msg=name)
         assert ours[name].area == pytest.approx(ref["area"], abs=0.006), name
+
+
+@pytest.mark.energyplus
+@pytest.mark.parametrize("which", ["probe", "world_probe"])
+def test_rectangular_shading_equals_energyplus(which, request):
+    """Shading:Site and Shading:Building rectangles where EnergyPlus puts them (the
+    building's turned by its north axis with relative coordinates, neither with World)."""
+    building, _ = request.getfixturevalue(which)
+    ours = building.shading["*"]
+    assert len(ours) == len(building.eio_shading) == 2
+    for ref in building.eio_shading:
+        assert any(np.allclose(p, ref, atol=0.006) for p in ours), ref
+
+
+@pytest.mark.energyplus
+def test_world_interzone_pairs(world_probe):
+    """World rectangles: the named interzone pairs couple both ways, interzone windows are
+    windows on a Surface wall."""
+    b, _ = world_probe
+    s = b.surfaces
+    assert (s["LC"].boundary, s["LC"].boundary_object, s["UF"].boundary_object) == \
+        ("Surface", "UF", "LC")
+    assert (s["U4"].boundary_object, s["V4"].boundary_object) == ("V4", "U4")
+    assert b.windows["U4W"].surface == "U4" and b.windows["V4W"].surface == "V4"
+    assert s["U4"].area == pytest.approx(200 - 15)
 
 
 @pytest.mark.energyplus

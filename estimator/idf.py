@@ -430,6 +430,9 @@ class Construction:
         Window U-factor [W/(m^2 K)] from WindowMaterial:SimpleGlazingSystem.
     shgc : float or None
         Window solar heat gain coefficient [-].
+    air_exchange : float or None
+        ``Construction:AirBoundary``: an open boundary between two zones, with this
+        simple-mixing air exchange [1/h] (0: none); None for every other construction.
     """
 
     name: str
@@ -437,6 +440,7 @@ class Construction:
     is_window: bool = False
     u_value: float | None = None
     shgc: float | None = None
+    air_exchange: float | None = None
 
     @property
     def resistance(self) -> float:
@@ -702,6 +706,9 @@ class Building:
     return_plenum: dict[str, str] = field(default_factory=dict)
     #: internal heat gain objects (People, Lights, equipment) by name
     internal_gains: dict[str, InternalGain] = field(default_factory=dict)
+    #: open boundaries between zones (Construction:AirBoundary surfaces): (zone, zone, air
+    #: exchange [m3/s]) per pair of zones, the simple mixing EnergyPlus adds between them
+    air_boundaries: list[tuple[str, str, float]] = field(default_factory=list)
 
     def gain_split(self, zone: str) -> tuple[float, float, float]:
         """(convective, radiant, return-air) shares [-] of ``zone``'s design internal heat,
@@ -842,7 +849,6 @@ _UNSUPPORTED_TYPES: dict[str, str] = {
     "Construction:InternalSource": "radiant (internal source) construction not modelled",
     "Construction:CfactorUndergroundWall": "C-factor wall construction not modelled",
     "Construction:FfactorGroundFloor": "F-factor floor construction not modelled",
-    "Construction:AirBoundary": "air-boundary construction not modelled",
     "Construction:ComplexFenestrationState": "complex fenestration not modelled",
     "Construction:WindowDataFile": "window data file construction not modelled",
     "Construction:WindowEquivalentLayer": "equivalent-layer window not modelled",
@@ -916,6 +922,14 @@ def _constructions(
         if typ.startswith(("Material", "WindowMaterial"))
         for name in data[typ]
     }
+    for name, f in data.get("Construction:AirBoundary", {}).items():
+        mixing = str(f.get("air_exchange_method", "None")).lower() == "simplemixing"
+        ach = _num(f.get("simple_mixing_air_changes_per_hour"), 0.5) if mixing else 0.0
+        if mixing and f.get("simple_mixing_schedule_name"):
+            unsupported.append(Unsupported(
+                "Construction:AirBoundary", name, "simple-mixing schedule not followed; the "
+                "air changes are taken as constant"))
+        out[name] = Construction(name, (), air_exchange=ach)
     for name, f in data.get("Construction", {}).items():
         layer_names = [f["outside_layer"]] + [
             f[f"layer_{i}"] for i in range(2, 11) if f"layer_{i}" in f
@@ -1025,6 +1039,33 @@ def _mirror_zone_boundaries(base: dict[str, dict[str, Any]], zkey: Mapping[str, 
         rec.update(boundary="Surface", boundary_object=twin)
         notes.append(f"surface {name}: its far side in zone {other} created as {twin}, "
                      "as EnergyPlus does")
+
+
+def _air_boundaries(base: Mapping[str, Mapping[str, Any]],
+                    constructions: Mapping[str, Construction],
+                    notes: list[str]) -> list[tuple[str, str, float]]:
+    """(zone, zone, air changes [1/h]) of each pair of zones joined by air-boundary
+    surfaces, once per pair (EnergyPlus adds one ZoneCrossMixing per pair whose flow is the
+    air changes times the smaller zone's volume: checked with EnergyPlus 25.2's eio)."""
+    bkey = {k.lower(): k for k in base}
+    pairs: dict[frozenset, tuple[str, str, float]] = {}
+    for name, rec in base.items():
+        ach = constructions[rec["construction"]].air_exchange
+        if ach is None:
+            continue
+        other = bkey.get(str(rec["boundary_object"] or "").lower())
+        if rec["boundary"] != "Surface" or other is None:
+            raise BuildingDescriptionError(
+                f"air-boundary surface {name!r} must face a surface or a zone (EnergyPlus "
+                "requires it); give its outside boundary condition object.")
+        a, b = rec["zone"], base[other]["zone"]
+        if a != b:
+            pairs.setdefault(frozenset((a, b)), (a, b, ach))
+    for a, b, ach in pairs.values():
+        notes.append(f"air boundary between {a} and {b}: no wall; simple mixing {ach:g} air "
+                     "changes/h of the smaller zone" if ach > 0 else
+                     f"air boundary between {a} and {b}: no wall, no air exchange")
+    return list(pairs.values())
 
 
 def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None) -> Building:
@@ -1165,8 +1206,11 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
             ))
             parent["sub_area"] -= area * mult
 
+    air_boundaries = _air_boundaries(base, constructions, notes)
     surfaces: dict[str, Surface] = {}
     for rec in list(base.values()) + list(doors.values()):
+        if constructions[rec["construction"]].air_exchange is not None:
+            continue  # an open boundary: no element (the pair is in air_boundaries)
         net = rec["gross_area"] - rec["sub_area"]
         if net < -1e-6:
             raise BuildingDescriptionError(
@@ -1212,7 +1256,9 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
         windows=windows, constructions=constructions, internal_masses=masses,
         unsupported=unsupported, notes=notes, infiltration=infiltration, schedules=schedules,
         ground_temperature=ground, shading=shading, return_plenum=plenums,
-        internal_gains=gains,
+        internal_gains=gains, air_boundaries=[
+            (a, b, ach * min(zones[a].volume, zones[b].volume) / 3600.0)
+            for a, b, ach in air_boundaries],
     )
 
 

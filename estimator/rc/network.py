@@ -908,6 +908,13 @@ def build_structure(
                                    opts.rho_air * opts.cp_air * inf.flow, -1)
 
 
+    for a, b, flow in building.air_boundaries:
+        if flow > 0 and a in room_state and b in room_state:
+            # an open boundary (Construction:AirBoundary): EnergyPlus's cross mixing,
+            # rho c_p q (x_b - x_a) both ways, fixed
+            asm.link(room_state[a], room_state[b], opts.rho_air * opts.cp_air * flow, -1)
+            notes.append(f"air boundary {a} - {b}: mixing {flow:.4g} m3/s")
+
     return_of_box = None
     if opts.return_air == "idf" and building.return_plenum:
         ret = [room_state.get(building.return_plenum.get(box_rooms[b], ""), -1)

@@ -392,3 +392,72 @@ def test_lists_and_spaces_expanded_to_their_zones():
     for inf in b.infiltration.values():
         assert inf.flow == pytest.approx(0.5 * b.zones[inf.zone].volume / 3600.0)
     assert not [u for u in b.unsupported if u.object_type in ("InternalMass", "ZoneList")]
+
+
+AIR_BOUNDARY_IDF = """
+Version, 25.2;
+SimulationControl, No, No, No, No, Yes, No, 1;
+Building, AB, 0, City, 0.04, 0.4, FullExterior, 25, 6;
+Timestep, 4;
+Site:Location, Golden, 39.74, -105.18, -7.0, 1829.0;
+RunPeriod, June, 6, 20, 2015, 6, 20, 2015, , No, No, No, Yes, Yes, No, Hour24;
+GlobalGeometryRules, UpperLeftCorner, Counterclockwise, Relative, Relative, Relative;
+Material, Brick, Rough, 0.2, 0.9, 1900, 800;
+Construction, Wall, Brick;
+Construction:AirBoundary, Open, SimpleMixing, 0.5;
+Zone, A;
+Zone, B;
+Wall:Exterior, AS, Wall, A, , 180, 90, 0, 0, 0, 4, 3;
+Wall:Exterior, AN, Wall, A, , 0, 90, 4, 5, 0, 4, 3;
+Wall:Exterior, AW, Wall, A, , 270, 90, 0, 5, 0, 5, 3;
+Wall:Interzone, AE, Open, A, , BW, 90, 90, 4, 0, 0, 5, 3;
+Floor:Adiabatic, AF, Wall, A, , 0, 180, 4, 0, 0, 4, 5;
+Roof, AR, Wall, A, , 180, 0, 0, 0, 3, 4, 5;
+Wall:Exterior, BS, Wall, B, , 180, 90, 4, 0, 0, 8, 3;
+Wall:Exterior, BN, Wall, B, , 0, 90, 12, 5, 0, 8, 3;
+Wall:Exterior, BE, Wall, B, , 90, 90, 12, 0, 0, 5, 3;
+Wall:Interzone, BW, Open, B, , AE, 270, 90, 4, 5, 0, 5, 3;
+Floor:Adiabatic, BF, Wall, B, , 0, 180, 12, 0, 0, 8, 5;
+Roof, BR, Wall, B, , 180, 0, 4, 0, 3, 8, 5;
+"""
+
+
+@pytest.mark.energyplus
+def test_air_boundary_is_energyplus_cross_mixing(tmp_path):
+    """An air wall (Construction:AirBoundary, simple mixing) is no wall: the two rooms'
+    air exchange the flow EnergyPlus's cross mixing has (its eio), fixed, both ways."""
+    from zonecast.estimator.rc.network import ModelOptions, build_structure
+    from zonecast.testbed.run import energyplus_dir, run_energyplus
+
+    idf = tmp_path / "in.idf"
+    idf.write_text(AIR_BOUNDARY_IDF)
+    run_energyplus(idf, energyplus_dir() / "WeatherData" / "USA_CO_Golden-NREL.724666_TMY3.epw",
+                   tmp_path)
+    ref = [ln.split(",") for ln in (tmp_path / "eplusout.eio").read_text().splitlines()
+           if ln.startswith(" CrossMixing Airflow Stats Nominal,")]
+    assert len(ref) == 1
+    flow = float(ref[0][7])
+    b = read_building(idf)
+    assert "AE" not in b.surfaces and "BW" not in b.surfaces
+    assert len(b.air_boundaries) == 1
+    za, zb, q = b.air_boundaries[0]
+    assert {za, zb} == {"A", "B"} and q == pytest.approx(flow, rel=1e-3)
+    assert b.zones["A"].volume == pytest.approx(60.0) and b.zones["B"].volume == pytest.approx(120.0)
+    st = build_structure(b, {"A": ["A"], "B": ["B"]}, {})
+    ia = next(i for i, lab in enumerate(st.labels) if lab.kind == "room_air" and lab.room == "A")
+    ib = next(i for i, lab in enumerate(st.labels) if lab.kind == "room_air" and lab.room == "B")
+    g = ModelOptions().rho_air * ModelOptions().cp_air * q
+    a0 = st.A0.toarray()
+    assert a0[ia, ib] * st.capacity[ia] == pytest.approx(g, rel=1e-9)
+    assert a0[ib, ia] * st.capacity[ib] == pytest.approx(g, rel=1e-9)
+    assert not [u for u in b.unsupported if u.object_type == "Construction:AirBoundary"]
+
+
+def test_air_boundary_without_neighbour_refused():
+    data = _minimal(**{"Construction:AirBoundary": {"Open": {"air_exchange_method": "None"}},
+                       "Wall:Adiabatic": {"W": {
+                           "construction_name": "Open", "zone_name": "Z", "azimuth_angle": 90,
+                           "starting_x_coordinate": 0, "starting_y_coordinate": 0,
+                           "starting_z_coordinate": 0, "length": 3, "height": 3}}})
+    with pytest.raises(BuildingDescriptionError, match="air-boundary surface 'W' must face"):
+        building_from_epjson(data)

@@ -19,17 +19,21 @@ from hypothesis import strategies as st
 from zonecast.estimator.idf import BuildingDescriptionError, building_from_epjson, read_building
 from zonecast.estimator.rectangles import in_plane_axes, rectangle, subsurface
 
-EIO_IDF = """
+#: what every probe file starts with: one June day at Golden, a brick wall construction
+HEADER = """
 Version, 25.2;
 SimulationControl, No, No, No, No, Yes, No, 1;
-Building, Probe, 30, City, 0.04, 0.4, FullExterior, 25, 6;
 Timestep, 4;
 Site:Location, Golden, 39.74, -105.18, -7.0, 1829.0;
 RunPeriod, June, 6, 20, 2015, 6, 20, 2015, , No, No, No, Yes, Yes, No, Hour24;
-GlobalGeometryRules, UpperLeftCorner, Counterclockwise, Relative, Relative, Relative;
 Material, Brick, Rough, 0.2, 0.9, 1900, 800;
-WindowMaterial:SimpleGlazingSystem, Glass, 2.0, 0.4, 0.6;
 Construction, Wall, Brick;
+"""
+
+EIO_IDF = HEADER + """
+Building, Probe, 30, City, 0.04, 0.4, FullExterior, 25, 6;
+GlobalGeometryRules, UpperLeftCorner, Counterclockwise, Relative, Relative, Relative;
+WindowMaterial:SimpleGlazingSystem, Glass, 2.0, 0.4, 0.6;
 Construction, Win, Glass;
 Zone, A, 15, 2, 3, 1;
 Zone, B, 0, 0, 0, 0, 1, 1, 3, 90;
@@ -64,17 +68,10 @@ Output:Surfaces:List, DetailsWithVertices;
 #: World rectangular coordinates, stacked zones coupled through Ceiling:Interzone /
 #: Floor:Interzone and an interzone wall with a Window:Interzone pair, site and building
 #: shading rectangles (the conventions of EnergyPlus's 4ZoneWithShading_Simple example)
-WORLD_IDF = """
-Version, 25.2;
-SimulationControl, No, No, No, No, Yes, No, 1;
+WORLD_IDF = HEADER + """
 Building, Stack, 15, City, 0.04, 0.4, FullExterior, 25, 6;
-Timestep, 4;
-Site:Location, Golden, 39.74, -105.18, -7.0, 1829.0;
-RunPeriod, June, 6, 20, 2015, 6, 20, 2015, , No, No, No, Yes, Yes, No, Hour24;
 GlobalGeometryRules, UpperLeftCorner, CounterClockWise, World, , World;
-Material, Brick, Rough, 0.2, 0.9, 1900, 800;
 WindowMaterial:SimpleGlazingSystem, Glass, 2.0, 0.4, 0.6;
-Construction, Wall, Brick;
 Construction, Win, Glass;
 Zone, L, 0, 6, 6, 0;
 Zone, U, 0, 6, 6, 10;
@@ -394,16 +391,9 @@ def test_lists_and_spaces_expanded_to_their_zones():
     assert not [u for u in b.unsupported if u.object_type in ("InternalMass", "ZoneList")]
 
 
-AIR_BOUNDARY_IDF = """
-Version, 25.2;
-SimulationControl, No, No, No, No, Yes, No, 1;
+AIR_BOUNDARY_IDF = HEADER + """
 Building, AB, 0, City, 0.04, 0.4, FullExterior, 25, 6;
-Timestep, 4;
-Site:Location, Golden, 39.74, -105.18, -7.0, 1829.0;
-RunPeriod, June, 6, 20, 2015, 6, 20, 2015, , No, No, No, Yes, Yes, No, Hour24;
 GlobalGeometryRules, UpperLeftCorner, Counterclockwise, Relative, Relative, Relative;
-Material, Brick, Rough, 0.2, 0.9, 1900, 800;
-Construction, Wall, Brick;
 Construction:AirBoundary, Open, SimpleMixing, 0.5;
 Zone, A;
 Zone, B;

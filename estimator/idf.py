@@ -849,9 +849,12 @@ _UNSUPPORTED_TYPES: dict[str, str] = {
     "Construction:InternalSource": "radiant (internal source) construction not modelled",
     "Construction:CfactorUndergroundWall": "C-factor wall construction not modelled",
     "Construction:FfactorGroundFloor": "F-factor floor construction not modelled",
-    "Construction:ComplexFenestrationState": "complex fenestration not modelled",
-    "Construction:WindowDataFile": "window data file construction not modelled",
-    "Construction:WindowEquivalentLayer": "equivalent-layer window not modelled",
+    "Construction:ComplexFenestrationState": "complex fenestration (BSDF) window: read as a "
+                                             "window of unknown U-factor and SHGC",
+    "Construction:WindowDataFile": "window data file construction: read as a window of unknown "
+                                   "U-factor and SHGC",
+    "Construction:WindowEquivalentLayer": "equivalent-layer window: its U-factor and SHGC as "
+                                          "EnergyPlus rates them when it can",
     "WindowShadingControl": "window shading control not modelled",
     "WindowProperty:FrameAndDivider": "window frame and divider not modelled",
     "DaylightingDevice:Tubular": "tubular daylighting device not modelled",
@@ -861,6 +864,11 @@ _UNSUPPORTED_TYPES: dict[str, str] = {
     "Space": "spaces are read as their zone",
 }
 
+#: Window constructions that are not layer lists: read as windows without a U-factor or
+#: SHGC (EnergyPlus rates the equivalent-layer ones, see _rate_layered_glazing)
+_OTHER_WINDOW_CONSTRUCTIONS = ("Construction:ComplexFenestrationState",
+                               "Construction:WindowDataFile",
+                               "Construction:WindowEquivalentLayer")
 _SURFACE_TYPES = {"wall": "Wall", "floor": "Floor", "ceiling": "Ceiling", "roof": "Roof"}
 
 #: Base surfaces with their type in the object name (vertices as BuildingSurface:Detailed).
@@ -922,6 +930,9 @@ def _constructions(
         if typ.startswith(("Material", "WindowMaterial"))
         for name in data[typ]
     }
+    for typ in _OTHER_WINDOW_CONSTRUCTIONS:  # windows all the same, their U/SHGC unknown
+        for name in data.get(typ, {}):
+            out[name] = Construction(name, (), True)
     for name, f in data.get("Construction:AirBoundary", {}).items():
         mixing = str(f.get("air_exchange_method", "None")).lower() == "simplemixing"
         ach = _num(f.get("simple_mixing_air_changes_per_hour"), 0.5) if mixing else 0.0
@@ -1789,7 +1800,13 @@ def _rate_layered_glazing(building: Building, data: Mapping[str, Any], layered: 
                               "U-factor and SHGC; the handbook priors are used")
         return
     model = _rating_model(install, data)
-    model["Construction"].update({n: data["Construction"][n] for n in layered})
+    kinds = {n: typ for typ in ("Construction", "Construction:WindowEquivalentLayer")
+             for n in data.get(typ, {})}
+    layered = [n for n in layered if n in kinds]
+    if not layered:
+        return
+    for name in layered:
+        model.setdefault(kinds[name], {})[name] = data[kinds[name]][name]
     model["Output:Table:SummaryReports"] = {"Output:Table:SummaryReports 1": {
         "reports": [{"report_name": "EnvelopeSummary"}]}}
     model["OutputControl:Table:Style"] = {"OutputControl:Table:Style 1": {
@@ -1819,9 +1836,10 @@ def _rate_layered_glazing(building: Building, data: Mapping[str, Any], layered: 
         if w.construction in found:
             building.windows[key] = replace(w, u_value=found[w.construction][0],
                                             shgc=found[w.construction][1])
-    building.unsupported[:] = [u for u in building.unsupported
-                               if not (u.object_type == "Construction" and u.name in found
-                                       and u.reason.startswith("layered window"))]
+    building.unsupported[:] = [
+        u for u in building.unsupported
+        if not (u.name in found and (u.object_type == "Construction:WindowEquivalentLayer"
+                                     or u.reason.startswith("layered window")))]
     if found:
         building.notes.append(
             "layered window constructions rated by EnergyPlus (NFRC glass U-factor [W/m2K], "

@@ -17,6 +17,7 @@ from zonecast.estimator.idf import (
     building_from_epjson,
     find_energyplus,
     load_epjson,
+    read_building,
 )
 
 pytestmark = pytest.mark.energyplus
@@ -61,3 +62,41 @@ def test_without_energyplus_the_windows_stay_unrated(five_zone_path, tmp_path):
     assert all(w.u_value is None for w in building.windows.values())
     assert any("no EnergyPlus to rate" in n for n in building.notes)
     assert [u for u in building.unsupported if u.reason.startswith("layered window")]
+
+
+OTHER_WINDOWS_IDF = """
+Version, 25.2;
+Building, W, 0, City, 0.04, 0.4, FullExterior, 25, 6;
+GlobalGeometryRules, UpperLeftCorner, Counterclockwise, Relative;
+Material, Brick, Rough, 0.2, 0.9, 1900, 800;
+Construction, Wall, Brick;
+WindowMaterial:Glazing:EquivalentLayer, Clear EQL, SpectralAverage, ,
+    0.837, 0.837, 0.075, 0.075, 0.898, 0.898, 0.081, 0.081;
+WindowMaterial:Gap:EquivalentLayer, Air EQL, Air, 0.0127, Sealed;
+Construction:WindowEquivalentLayer, Double EQL, Clear EQL, Air EQL, Clear EQL;
+Construction:WindowDataFile, From Window, Window5DataFile.dat;
+Zone, Z;
+Wall:Exterior, S, Wall, Z, , 180, 90, 0, 0, 0, 6, 3;
+Wall:Exterior, N, Wall, Z, , 0, 90, 6, 5, 0, 6, 3;
+Wall:Exterior, E, Wall, Z, , 90, 90, 6, 0, 0, 5, 3;
+Wall:Exterior, Wt, Wall, Z, , 270, 90, 0, 5, 0, 5, 3;
+Floor:Adiabatic, F, Wall, Z, , 0, 180, 6, 0, 0, 6, 5;
+Roof, R, Wall, Z, , 180, 0, 0, 0, 3, 6, 5;
+Window, Eql, Double EQL, S, , 1, 1, 1, 2, 1.5;
+Window, Dat, From Window, N, , 1, 1, 1, 2, 1.5;
+"""
+
+
+def test_other_window_constructions_read_as_windows(tmp_path):
+    """Equivalent-layer and data-file windows are windows (before, the reader failed on
+    them): the equivalent-layer one with EnergyPlus's own rating, the data-file one unrated
+    and reported."""
+    idf = tmp_path / "in.idf"
+    idf.write_text(OTHER_WINDOWS_IDF)
+    b = read_building(idf)
+    eql, dat = b.windows["Eql"], b.windows["Dat"]
+    assert eql.area == dat.area == pytest.approx(3.0)
+    assert 2.5 < eql.u_value < 3.0 and 0.6 < eql.shgc < 0.85  # double clear, 13 mm air
+    assert dat.u_value is None and dat.shgc is None
+    reported = {u.name for u in b.unsupported}
+    assert "From Window" in reported and "Double EQL" not in reported

@@ -1192,7 +1192,7 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
             verts = geo.to_world(_vertices_list(f), zones_raw[parent["zone"]])
             kind = str(f["surface_type"])
         area = polygon_area_normal(verts)[0]
-        parent["sub_area"] += area * mult
+        parent["sub_area"] += area  # EnergyPlus: the base loses one, the heat is x mult
         cons = construction_of(f["construction_name"], f"fenestration {name!r}")
         c = constructions[cons]
         if kind.lower() in ("window", "glassdoor"):
@@ -1215,7 +1215,7 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
                 typ, name,
                 f"fenestration type {kind} not modelled; its area stays part of {parent_key}",
             ))
-            parent["sub_area"] -= area * mult
+            parent["sub_area"] -= area
 
     air_boundaries = _air_boundaries(base, constructions, notes)
     surfaces: dict[str, Surface] = {}

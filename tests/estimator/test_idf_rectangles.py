@@ -451,3 +451,38 @@ def test_air_boundary_without_neighbour_refused():
                            "starting_z_coordinate": 0, "length": 3, "height": 3}}})
     with pytest.raises(BuildingDescriptionError, match="air-boundary surface 'W' must face"):
         building_from_epjson(data)
+
+
+@pytest.mark.energyplus
+def test_window_multiplier_as_energyplus(tmp_path):
+    """A window with multiplier 4 (4 x 3 m2 on an 18 m2 wall): EnergyPlus takes one window
+    off the wall (net 15 m2, its eio) and counts the window's heat four times; before, the
+    reader took all four off and would refuse a multiplied area larger than the wall."""
+    from zonecast.testbed.run import energyplus_dir, run_energyplus
+
+    idf = tmp_path / "in.idf"
+    idf.write_text(HEADER + """
+Building, M, 0, City, 0.04, 0.4, FullExterior, 25, 6;
+GlobalGeometryRules, UpperLeftCorner, Counterclockwise, Relative, Relative, Relative;
+WindowMaterial:SimpleGlazingSystem, Glass, 2.0, 0.4, 0.6;
+Construction, Win, Glass;
+Zone, Z;
+Wall:Exterior, S, Wall, Z, , 180, 90, 0, 0, 0, 6, 3;
+Wall:Exterior, N, Wall, Z, , 0, 90, 6, 5, 0, 6, 3;
+Wall:Exterior, E, Wall, Z, , 90, 90, 6, 0, 0, 5, 3;
+Wall:Exterior, W, Wall, Z, , 270, 90, 0, 5, 0, 5, 3;
+Floor:Adiabatic, F, Wall, Z, , 0, 180, 6, 0, 0, 6, 5;
+Roof, R, Wall, Z, , 180, 0, 0, 0, 3, 6, 5;
+Window, SW, Win, S, , 4, 1, 1, 2, 1.5;
+Output:Surfaces:List, Details;
+""")
+    run_energyplus(idf, energyplus_dir() / "WeatherData" / "USA_CO_Golden-NREL.724666_TMY3.epw",
+                   tmp_path)
+    eio = {}
+    for line in (tmp_path / "eplusout.eio").read_text().splitlines():
+        f = [x.strip() for x in line.split(",")]
+        if f[0] == "HeatTransfer Surface":
+            eio[f[1]] = float(f[9])
+    b = read_building(idf)
+    assert b.surfaces["S"].area == pytest.approx(eio["S"]) == pytest.approx(15.0)
+    assert b.windows["SW"].area == pytest.approx(4 * eio["SW"]) == pytest.approx(12.0)

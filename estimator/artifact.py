@@ -225,11 +225,13 @@ def _noise(doc: dict, path: Path) -> NoiseSettings:
 
 
 _OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration", "facades", "ground",
-                "shading", "return_air", "sky", "interior_radiation", "internal_gains")
+                "shading", "return_air", "sky", "interior_radiation", "internal_gains",
+                "window_angle")
 #: what a model file without an option was built with (options added later)
 _LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal", "ground": "adiabatic",
                     "shading": "none", "return_air": "none", "roof_solar": "mean",
-                    "sky": "none", "interior_radiation": "none", "internal_gains": "air"}
+                    "sky": "none", "interior_radiation": "none", "internal_gains": "air",
+                    "window_angle": "none"}
 #: what a model file without ``model_options`` was built with (files written before the
 #: key existed put window solar on the room air, the paper's placement)
 LEGACY_OPTIONS = {"window_solar": "air"}
@@ -415,6 +417,8 @@ def save_structure(path: str | Path, structure: RCStructure,
         meta["scheduled"] = structure.scheduled
     if structure.shading:  # likewise
         meta["shading"] = structure.shading
+    if structure.window_panes:  # likewise
+        meta["window_panes"] = int(structure.window_panes)
     path = Path(path)
     with path.open("wb") as fh:
         np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)
@@ -449,7 +453,8 @@ def load_structure(path: str | Path) -> tuple[RCStructure, dict[str, float]]:
             facade_rotation=float(meta.get("facade_rotation", 0.0)),
             scheduled=dict(meta.get("scheduled", {})),
             shading=list(meta.get("shading", [])),
-            return_of_box=z["return_of_box"] if "return_of_box" in z.files else None)
+            return_of_box=z["return_of_box"] if "return_of_box" in z.files else None,
+            window_panes=int(meta.get("window_panes", 0)))
     return structure, {k: float(v) for k, v in meta["room_volume"].items()}
 
 

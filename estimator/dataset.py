@@ -190,7 +190,7 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
                sky_model: str = "perez", albedo: float = 0.2,
                facade_azimuths: Sequence[float] = FACADE_AZIMUTHS,
                scheduled: Mapping[str, Mapping] | None = None,
-               shading=None) -> ModelData:
+               shading=None, panes: int = 0) -> ModelData:
     """Build :class:`ModelData` from validated telemetry.
 
     Parameters
@@ -205,6 +205,8 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
         appended after the site's boxes to u and the rise (:func:`with_scheduled`).
     shading : the model's shaded windows (:attr:`~.rc.network.RCStructure.facade_shading`),
         applied to the solar columns (:func:`~zonecast.estimator.solar.facade_columns`).
+    panes : the windows' panes whose angular transmission weighs the facade columns
+        (:attr:`~.rc.network.RCStructure.window_panes`; 0: none).
     """
     site = tel.site
     w = tel.weather()
@@ -216,7 +218,7 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
                             loc.elevation)
         sol[ok] = facade_columns(geom, w.ghi.to_numpy()[ok], w.dni.to_numpy()[ok],
                                  w.dhi.to_numpy()[ok], facade_azimuths, shading=shading,
-                                 albedo=albedo, sky_model=sky_model)
+                                 albedo=albedo, sky_model=sky_model, panes=panes)
     v = np.column_stack([w.Ta.to_numpy(), w.Ts.to_numpy(), sol])
     exc = np.zeros(len(w), dtype=bool)
     for e in site.experiments:

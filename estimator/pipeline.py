@@ -206,7 +206,8 @@ class Pipeline:
         return model_data(tel, model.room_weights(),
                           facade_azimuths=model.structure.facade_azimuths,
                           scheduled=model.structure.scheduled,
-                          shading=model.structure.facade_shading)
+                          shading=model.structure.facade_shading,
+                          panes=model.structure.window_panes)
 
     # --- identification ----------------------------------------------------------------
     def identify(self, data: ModelData, train: Sequence[str] | None = None,

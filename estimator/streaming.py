@@ -177,7 +177,8 @@ def model_rows(bundle: ModelBundle, frame: pd.DataFrame) -> ModelData:
     return model_data(tel, bundle.room_volume,
                       facade_azimuths=bundle.model.structure.facade_azimuths,
                       scheduled=bundle.model.structure.scheduled,
-                      shading=bundle.model.structure.facade_shading)
+                      shading=bundle.model.structure.facade_shading,
+                      panes=bundle.model.structure.window_panes)
 
 
 def rows_from_frame(bundle: ModelBundle, frame: pd.DataFrame):
@@ -807,7 +808,8 @@ class OnlineEstimator:
             structure = self.bundle.model.structure
             sol[ok] = facade_columns(geom, vals[ok, 1], vals[ok, 2], vals[ok, 3],
                                      structure.facade_azimuths,
-                                     shading=structure.facade_shading)
+                                     shading=structure.facade_shading,
+                                     panes=structure.window_panes)
         self._wx = (int(first), np.column_stack([vals[:, 0], sol]))
 
     def persistence_inputs(self) -> np.ndarray:
@@ -1082,6 +1084,7 @@ class RowConverter:
         self.solar = SolarGeometryCache(loc.latitude, loc.longitude, loc.elevation, site.step)
         self._azimuths = bundle.model.structure.facade_azimuths
         self._shading = bundle.model.structure.facade_shading
+        self._panes = bundle.model.structure.window_panes
         self._sunlit_day: tuple[int, np.ndarray] | None = None
         self.albedo, self.sky_model = float(albedo), sky_model
         self._site, self._scheduled = site, bundle.model.structure.scheduled
@@ -1140,7 +1143,8 @@ class RowConverter:
                                      shading=self._shading, albedo=self.albedo,
                                      sky_model=self.sky_model,
                                      sunlit=self._sunlit(np.asarray(times_ns,
-                                                                    dtype=np.int64)[ok]))
+                                                                    dtype=np.int64)[ok]),
+                                     panes=self._panes)
         v = np.column_stack([si[:, self._ta], si[:, self._ts], sol])
         u = si[:, self._box]
         reheat = np.zeros_like(u)

@@ -114,6 +114,25 @@ def test_identify_passes_the_internal_gains_option_to_the_model(tmp_path):
 
 
 @pytest.mark.parametrize("command", ["identify", "reproduce"])
+def test_window_angle_reaches_the_model_options(tmp_path, command):
+    """--window-angle reaches ModelOptions through both commands: a wrong value fails with
+    the options' message."""
+    from pathlib import Path
+
+    site = Path(__file__).resolve().parents[1] / "configs" / "sites" / "nrel" / "5ZoneAirCooled.site.yaml"
+    args = (["identify", "--site", str(site), "--data", str(tmp_path), "--out",
+             str(tmp_path / "m.json")] if command == "identify" else
+            ["reproduce", "--out", str(tmp_path / "r"), "--campaign", str(tmp_path)])
+    if command == "reproduce":  # a campaign folder the job accepts without running one
+        (tmp_path / "telemetry.csv").write_text("time\n")
+        (tmp_path / "site.yaml").write_text(site.read_text().replace(
+            "idf: 5ZoneAirCooled.idf", f"idf: {site.parent / '5ZoneAirCooled.idf'}"))
+    res = runner.invoke(app, [*args, "--window-angle", "tinted"])
+    assert res.exit_code == 2, res.output
+    assert "window_angle must be 'none' or 'glass'" in res.output
+
+
+@pytest.mark.parametrize("command", ["identify", "reproduce"])
 @pytest.mark.parametrize(("option", "value", "expected", "refused"),
                          [("--x0-profile-days", "2", 2, "0"),
                           ("--x0-offset-sd", "0.5", 0.5, "0")])

@@ -214,6 +214,10 @@ Films = Annotated[str | None, typer.Option(
     help="priors and starting values of the inside films: 'combined' (the handbook's "
          "convection + radiation films) or 'convective' (convection alone); default "
          "'convective' with --interior-radiation star, else 'combined'")]
+WindowAngle = Annotated[str, typer.Option(
+    help="'none' (the default): the facade columns are the global irradiance on each "
+         "facade; 'glass': each part weighed by what the windows' panes let through at its "
+         "angle of incidence (docs/model.md \"Windows' angular transmission\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -298,6 +302,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  sky: Sky = "none",
                  interior_radiation: InteriorRadiation = "none",
                  internal_gains: InternalGains = "air",
+                 window_angle: WindowAngle = "none",
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'daytime' (the default since 2026-11-25): a weekend 08-18 h rise of "
@@ -323,7 +328,8 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  ground=ground, shading=shading, return_air=return_air,
                                  roof_solar=roof_solar, sky=sky,
                                  interior_radiation=interior_radiation, films=films,
-                                 internal_gains=internal_gains, x0_profile_days=x0_profile_days,
+                                 internal_gains=internal_gains, window_angle=window_angle,
+                                 x0_profile_days=x0_profile_days,
                                  x0_offset_sd=x0_offset_sd,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
@@ -415,6 +421,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   sky: Sky = "none",
                   interior_radiation: InteriorRadiation = "none",
                   internal_gains: InternalGains = "air",
+                  window_angle: WindowAngle = "none",
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'daytime' (the default since 2026-11-25: a weekend 08-18 h "
@@ -437,6 +444,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 roof_solar=roof_solar, sky=sky,
                                 interior_radiation=interior_radiation, films=films,
                                 internal_gains=internal_gains, service=service,
+                                window_angle=window_angle,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)

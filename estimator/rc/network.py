@@ -77,6 +77,9 @@ GLASS_CAPACITY = 12600.0
 #: U-factor [W/(m2 K)] of windows whose IDF gives none (layered glazing) when no window of
 #: the building has one: double glazing in an aluminium frame (the U_win prior's mean)
 WINDOW_U_DEFAULT = 2.8
+#: [W/(m2 K)] a rated window U-factor at or above this is single glazing (clear single
+#: panes rate 5-6, double 1.5-3.3), for the panes of ``ModelOptions.window_angle``
+SINGLE_PANE_U = 4.0
 #: Specific heat capacity of air c_p [J/(kg K)].
 CP_AIR = 1005.0
 #: Air density for room air capacity [kg/m3].
@@ -132,6 +135,16 @@ class ModelOptions:
 
     Attributes
     ----------
+    window_angle : {"none", "glass"}
+        How the facade columns of v weigh the sun's angle of incidence: "none" (the
+        paper's, the default) takes the global irradiance on the facade; "glass" weighs
+        each part by what a window's panes let through at its angle relative to normal
+        incidence (beam and circumsolar by the incidence angle, sky, horizon and ground by
+        their hemispherical averages;
+        :func:`~zonecast.estimator.solar.window_transmission`). The columns follow the
+        windows, whose solar gain is an order of magnitude larger than the opaque walls'
+        (as with the windows' shading). Panes from the windows' rated U-factor
+        (:attr:`RCStructure.window_panes`).
     roof_solar : {"horizontal", "mean", "none"}
         Solar input on roofs and other surfaces tilted less than 60 deg from
         horizontal (their opaque outer faces and skylights): the global horizontal
@@ -231,8 +244,11 @@ class ModelOptions:
     sky: str = "none"
     interior_radiation: str = "none"
     internal_gains: str = "air"
+    window_angle: str = "none"
 
     def __post_init__(self):
+        if self.window_angle not in ("none", "glass"):
+            raise ModelDefinitionError("window_angle must be 'none' or 'glass'")
         if self.internal_gains not in ("air", "idf"):
             raise ModelDefinitionError("internal_gains must be 'air' or 'idf'")
         if self.interior_radiation not in ("none", "star"):
@@ -386,6 +402,10 @@ class RCStructure:
         Air state of the return plenum each box's return air flows into, -1 for none (a
         room without a plenum, a scheduled input); None: no return paths. The plenum gains
         c_p u_j (x_room - x_plenum) (:attr:`returns`).
+    window_panes : int
+        With ``options.window_angle == "glass"``: the glass panes whose angular
+        transmission weighs the facade columns (1 when the windows' area-weighted rated
+        U-factor is at least :data:`SINGLE_PANE_U`, else 2); 0: no weighting.
     """
 
     labels: list[StateLabel]
@@ -409,6 +429,7 @@ class RCStructure:
     scheduled: dict[str, dict] = field(default_factory=dict)
     shading: list[dict] = field(default_factory=list)
     return_of_box: np.ndarray | None = None
+    window_panes: int = 0
 
     @property
     def returns(self) -> tuple[np.ndarray, np.ndarray]:
@@ -976,4 +997,6 @@ def build_structure(
         facade_rotation=rotation,
         scheduled=scheduled,
         shading=shading,
+        window_panes=(1 if u_nominal >= SINGLE_PANE_U else 2)
+        if opts.window_angle == "glass" else 0,
     )

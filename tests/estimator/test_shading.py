@@ -4,10 +4,12 @@ import math
 
 import numpy as np
 import pandas as pd
+import pvlib
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from zonecast.estimator import shading as sh
+from zonecast.estimator import solar as sol
 from zonecast.estimator.artifact import load_structure, save_structure
 from zonecast.estimator.idf import building_from_epjson
 from zonecast.estimator.rc.network import ModelOptions, build_structure
@@ -227,3 +229,70 @@ def test_unknown_window_is_noted():
         "window_or_door_name": "Nope", "height_above_window_or_door": 0.0, "depth": 1.0}}}))
     assert b.shading == {}
     assert any("'Nope'" in n and "left out" in n for n in b.notes)
+
+
+def test_window_transmission_matches_ashrae_clear_glass():
+    """One clear pane relative to normal incidence (ASHRAE Fundamentals ch. 15, 3 mm clear:
+    0.90 at 60 deg, 0.74 at 70, 0.45 at 80); two panes lose more; 1 at normal incidence,
+    0 at grazing."""
+    from zonecast.estimator.solar import window_transmission
+
+    one = window_transmission([0.0, 60.0, 70.0, 80.0, 90.0], 1)
+    np.testing.assert_allclose(one[:4], [1.0, 0.90, 0.74, 0.45], atol=0.051)
+    assert one[4] == pytest.approx(0.0, abs=1e-9)
+    two = window_transmission([0.0, 60.0, 70.0, 80.0], 2)
+    np.testing.assert_allclose(two, one[:4] ** 2)
+
+
+def test_facade_columns_weighed_by_the_windows_angle():
+    """With panes, each facade column is its beam and circumsolar times the transmission at
+    the sun's angle, its sky, horizon and ground parts times their hemispherical averages;
+    the roofs' column is not weighed; with shading the loss is taken from the weighed parts."""
+    from zonecast.estimator.solar import _diffuse_transmission, window_transmission
+
+    geom, ghi, dni, dhi = _day()
+    az = (90, 180, 270, 0)
+    planes = np.array([(90.0, a) for a in az] + [(0.0, 180.0)])
+    comp = transpose(geom, ghi, dni, dhi, planes)
+    circ_share, hor_share = sol._perez_shares(geom, dni, dhi, planes)
+    sky = comp["poa_sky_diffuse"]
+    circ, hor = sky * circ_share, sky * hor_share
+    aoi = pvlib.irradiance.aoi(planes[:, 0], planes[:, 1], geom[1][:, None], geom[3][:, None])
+    tau = np.where(aoi < 90, window_transmission(np.minimum(aoi, 90), 2), 0.0)
+    d = _diffuse_transmission(2)
+    want = ((comp["poa_direct"] + circ) * tau + (sky - circ - hor) * d["sky"]
+            + hor * d["horizon"] + comp["poa_ground_diffuse"] * d["ground"])
+    got = facade_columns(geom, ghi, dni, dhi, az, panes=2)
+    plain = facade_columns(geom, ghi, dni, dhi, az)
+    np.testing.assert_allclose(got[:, :4], want[:, :4], rtol=1e-9, atol=1e-9)
+    assert np.array_equal(got[:, 4], plain[:, 4])
+    noon = np.argmax(plain[:, 1])  # a high June sun on the south facade: far off normal
+    assert got[noon, 1] < 0.8 * plain[noon, 1] and np.all(got <= plain + 1e-9)
+    ws = sh.WindowShading("w", 1, 1.0, WIN, [sh.overhang_polygon(WIN, 0, 90, 1, 1, 1.0)])
+    shaded = facade_columns(geom, ghi, dni, dhi, az, shading=sh.FacadeShading([ws]), panes=2)
+    assert np.all(shaded[:, 1] <= got[:, 1] + 1e-9) and np.all(shaded >= 0)
+    assert np.array_equal(shaded[:, [0, 2, 3]], got[:, [0, 2, 3]])
+
+
+@pytest.mark.parametrize(("u", "panes"), [(5.9, 1), (2.0, 2)])
+def test_window_angle_panes_from_the_rated_u(tmp_path, u, panes):
+    """window_angle="glass": one pane for single glazing's rated U, two otherwise; the
+    structure file keeps it; model data built from it weigh the columns (Pipeline.data and
+    the other callers pass the structure's panes to facade_columns)."""
+    data = _box_with_window({})
+    data["WindowMaterial:SimpleGlazingSystem"]["G"]["u_factor"] = u
+    b = building_from_epjson(data)
+    s = build_structure(b, {"Z": ["Box"]}, {}, options=ModelOptions(ground="adiabatic",
+                                                                    window_angle="glass"))
+    assert s.window_panes == panes
+    back, _ = load_structure(save_structure(tmp_path / "s.npz", s, {"Box": 60.0}))
+    assert back.window_panes == panes and back.options.window_angle == "glass"
+    plain = build_structure(b, {"Z": ["Box"]}, {}, options=ModelOptions(ground="adiabatic"))
+    assert plain.window_panes == 0
+    back0, _ = load_structure(save_structure(tmp_path / "p.npz", plain, {"Box": 60.0}))
+    assert back0.window_panes == 0
+
+
+def test_window_angle_refused_when_unknown():
+    with pytest.raises(ValueError, match="window_angle must be 'none' or 'glass'"):
+        ModelOptions(window_angle="tinted")

@@ -41,7 +41,8 @@ def run(model_path: Path, data_path: Path, out: Path, *, site_path: Path | None 
     model = pipe.model()
     data = model_data(tel, model.room_weights(), facade_azimuths=model.structure.facade_azimuths,
                       scheduled=model.structure.scheduled,
-                      shading=model.structure.facade_shading)
+                      shading=model.structure.facade_shading,
+                      panes=model.structure.window_panes)
     ref = None
     if reference is not None:
         try:

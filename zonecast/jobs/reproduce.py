@@ -412,7 +412,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         roof_solar: str = "horizontal", sky: str = "none",
         interior_radiation: str = "none", films: str | None = None,
         internal_gains: str = "air", service: bool = True,
-        x0_profile_days: int | None = None, x0_offset_sd: float | None = None) -> Results:
+        x0_profile_days: int | None = None, x0_offset_sd: float | None = None,
+        window_angle: str = "none") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
@@ -421,7 +422,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     reheat); off, the report says it was left out; ``x0_profile_days``,
     ``x0_offset_sd``: as :meth:`Pipeline.identify`;
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
-    ``interior_radiation``, ``internal_gains``:
+    ``interior_radiation``, ``internal_gains``, ``window_angle``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``films``: as :meth:`Pipeline.identify`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
@@ -440,7 +441,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                                    shading=shading, return_air=return_air,
                                                    roof_solar=roof_solar, sky=sky,
                                                    interior_radiation=interior_radiation,
-                                                   internal_gains=internal_gains))
+                                                   internal_gains=internal_gains,
+                                                   window_angle=window_angle))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()

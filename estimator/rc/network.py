@@ -862,6 +862,8 @@ def build_structure(
     u_nominal = (sum(u * a for u, a in rated) / sum(a for _, a in rated)) if rated \
         else WINDOW_U_DEFAULT
     shaded: list[tuple[str, int, float, np.ndarray, list[np.ndarray]]] = []
+    interior_glass: dict[frozenset, dict[str, float]] = {}
+    rooms_of_pair: dict[frozenset, tuple[int, int]] = {}
     for name in sorted(building.windows):
         w = building.windows[name]
         parent = surfaces[w.surface]
@@ -898,10 +900,18 @@ def build_structure(
             area_win += w.area
         elif parent.boundary == "Surface":
             other = surfaces[skey[parent.boundary_object.lower()]]
-            asm.link(r, room_state[other.zone], w.area, UWIN)
+            # an interzone window is listed on both walls of the pair (EnergyPlus requires
+            # it), or on one when EnergyPlus made the far side: one coupling per wall pair,
+            # of the larger side's glass area
+            side = interior_glass.setdefault(frozenset((parent.name, other.name)), {})
+            side[parent.name] = side.get(parent.name, 0.0) + w.area
+            rooms_of_pair[frozenset((parent.name, other.name))] = (r, room_state[other.zone])
             notes.append(f"interior window {name}: U_win coupling between rooms")
         else:
             notes.append(f"window {name} on a {parent.boundary} surface: ignored")
+    for pair, side in interior_glass.items():
+        ra, rb = rooms_of_pair[pair]
+        asm.link(ra, rb, max(side.values()), UWIN)
     shading = _window_shading(shaded, window_area, notes)
     if opts.interior_radiation == "star":
         for room, faces in glass_faces.items():

@@ -486,3 +486,18 @@ Output:Surfaces:List, Details;
     b = read_building(idf)
     assert b.surfaces["S"].area == pytest.approx(eio["S"]) == pytest.approx(15.0)
     assert b.windows["SW"].area == pytest.approx(4 * eio["SW"]) == pytest.approx(12.0)
+
+
+@pytest.mark.energyplus
+def test_interzone_window_pair_couples_once(world_probe):
+    """A Window:Interzone pair (listed on both walls, as EnergyPlus requires) couples the two
+    rooms' air once, by one window's area times U_win (before: twice)."""
+    from zonecast.estimator.rc.network import UWIN, ModelOptions, build_structure
+
+    b, _ = world_probe
+    st = build_structure(b, {"L": ["L"], "U": ["U"], "U2": ["U2"]}, {},
+                         ModelOptions(ground="adiabatic"))
+    room = {lab.room: i for i, lab in enumerate(st.labels) if lab.kind == "room_air"}
+    a = st.A_p[UWIN].toarray()
+    assert a[room["U"], room["U2"]] * st.capacity[room["U"]] == pytest.approx(15.0)
+    assert a[room["U2"], room["U"]] * st.capacity[room["U2"]] == pytest.approx(15.0)

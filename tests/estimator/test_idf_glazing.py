@@ -20,6 +20,8 @@ from zonecast.estimator.idf import (
     read_building,
 )
 
+from tests.estimator.idf_text import BOX, HEADER
+
 pytestmark = pytest.mark.energyplus
 
 
@@ -64,24 +66,15 @@ def test_without_energyplus_the_windows_stay_unrated(five_zone_path, tmp_path):
     assert [u for u in building.unsupported if u.reason.startswith("layered window")]
 
 
-OTHER_WINDOWS_IDF = """
-Version, 25.2;
+OTHER_WINDOWS_IDF = HEADER + """
 Building, W, 0, City, 0.04, 0.4, FullExterior, 25, 6;
 GlobalGeometryRules, UpperLeftCorner, Counterclockwise, Relative;
-Material, Brick, Rough, 0.2, 0.9, 1900, 800;
-Construction, Wall, Brick;
 WindowMaterial:Glazing:EquivalentLayer, Clear EQL, SpectralAverage, ,
     0.837, 0.837, 0.075, 0.075, 0.898, 0.898, 0.081, 0.081;
 WindowMaterial:Gap:EquivalentLayer, Air EQL, Air, 0.0127, Sealed;
 Construction:WindowEquivalentLayer, Double EQL, Clear EQL, Air EQL, Clear EQL;
 Construction:WindowDataFile, From Window, Window5DataFile.dat;
-Zone, Z;
-Wall:Exterior, S, Wall, Z, , 180, 90, 0, 0, 0, 6, 3;
-Wall:Exterior, N, Wall, Z, , 0, 90, 6, 5, 0, 6, 3;
-Wall:Exterior, E, Wall, Z, , 90, 90, 6, 0, 0, 5, 3;
-Wall:Exterior, Wt, Wall, Z, , 270, 90, 0, 5, 0, 5, 3;
-Floor:Adiabatic, F, Wall, Z, , 0, 180, 6, 0, 0, 6, 5;
-Roof, R, Wall, Z, , 180, 0, 0, 0, 3, 6, 5;
+""" + BOX + """
 Window, Eql, Double EQL, S, , 1, 1, 1, 2, 1.5;
 Window, Dat, From Window, N, , 1, 1, 1, 2, 1.5;
 """

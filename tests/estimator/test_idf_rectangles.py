@@ -19,16 +19,7 @@ from hypothesis import strategies as st
 from zonecast.estimator.idf import BuildingDescriptionError, building_from_epjson, read_building
 from zonecast.estimator.rectangles import in_plane_axes, rectangle, subsurface
 
-#: what every probe file starts with: one June day at Golden, a brick wall construction
-HEADER = """
-Version, 25.2;
-SimulationControl, No, No, No, No, Yes, No, 1;
-Timestep, 4;
-Site:Location, Golden, 39.74, -105.18, -7.0, 1829.0;
-RunPeriod, June, 6, 20, 2015, 6, 20, 2015, , No, No, No, Yes, Yes, No, Hour24;
-Material, Brick, Rough, 0.2, 0.9, 1900, 800;
-Construction, Wall, Brick;
-"""
+from tests.estimator.idf_text import BOX, HEADER
 
 EIO_IDF = HEADER + """
 Building, Probe, 30, City, 0.04, 0.4, FullExterior, 25, 6;
@@ -466,14 +457,7 @@ Building, M, 0, City, 0.04, 0.4, FullExterior, 25, 6;
 GlobalGeometryRules, UpperLeftCorner, Counterclockwise, Relative, Relative, Relative;
 WindowMaterial:SimpleGlazingSystem, Glass, 2.0, 0.4, 0.6;
 Construction, Win, Glass;
-Zone, Z;
-Wall:Exterior, S, Wall, Z, , 180, 90, 0, 0, 0, 6, 3;
-Wall:Exterior, N, Wall, Z, , 0, 90, 6, 5, 0, 6, 3;
-Wall:Exterior, E, Wall, Z, , 90, 90, 6, 0, 0, 5, 3;
-Wall:Exterior, W, Wall, Z, , 270, 90, 0, 5, 0, 5, 3;
-Floor:Adiabatic, F, Wall, Z, , 0, 180, 6, 0, 0, 6, 5;
-Roof, R, Wall, Z, , 180, 0, 0, 0, 3, 6, 5;
-Window, SW, Win, S, , 4, 1, 1, 2, 1.5;
+""" + BOX + """Window, SW, Win, S, , 4, 1, 1, 2, 1.5;
 Output:Surfaces:List, Details;
 """)
     run_energyplus(idf, energyplus_dir() / "WeatherData" / "USA_CO_Golden-NREL.724666_TMY3.epw",

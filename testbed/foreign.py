@@ -51,6 +51,8 @@ import numpy as np
 import pandas as pd
 from zonecast.estimator.idf import find_energyplus, load_epjson
 from zonecast.estimator.site import Site
+from zonecast.estimator.site_draft import DraftError, local_timezone, zone_terminals
+from zonecast.estimator.site_draft import point_names as draft_point_names
 from zonecast.testbed.config import load_config
 from zonecast.testbed.effects import Effects
 from zonecast.testbed.run import (
@@ -94,9 +96,6 @@ SURFACE_TYPES = ("BuildingSurface:Detailed", "Wall:Detailed", "RoofCeiling:Detai
                  "Floor:Detailed")
 WINDOW_TYPES = ("FenestrationSurface:Detailed", "Window", "GlazedDoor")
 SCHEDULE_TYPES = ("Schedule:Compact", "Schedule:Year", "Schedule:Constant", "Schedule:File")
-# IANA zones for US daylight-saving rules by standard UTC offset [h]
-US_ZONES = {-5.0: "America/New_York", -6.0: "America/Chicago", -7.0: "America/Denver",
-            -8.0: "America/Los_Angeles", -9.0: "America/Anchorage"}
 ZONE_VARIABLES = ("Zone Mean Air Temperature", "Zone People Total Heating Rate",
                   "Zone Lights Total Heating Rate", "Zone Electric Equipment Total Heating Rate",
                   "Zone Infiltration Sensible Heat Gain Energy",
@@ -216,27 +215,15 @@ def describe(data: dict) -> Layout:
         If no zone has a supported terminal, or a terminal's air loop cannot be traced.
     """
     # zone -> terminals, through the equipment connections and air distribution units
-    adus = _objects(data, "ZoneHVAC:AirDistributionUnit")
-    lists = _objects(data, "ZoneHVAC:EquipmentList")
-    thermostats = {f.get("zone_or_zonelist_name", "").upper()
-                   for f in _objects(data, "ZoneControl:Thermostat").values()}
     found: list[tuple[str, str, str]] = []  # (zone, type, terminal)
     unsupported = []
-    for conn in _objects(data, "ZoneHVAC:EquipmentConnections").values():
-        zone = _find(_objects(data, "Zone"), conn.get("zone_name", ""))
-        lst = _find(lists, conn.get("zone_conditioning_equipment_list_name", ""))
-        if zone is None or lst is None or zone.upper() not in thermostats:
-            continue
-        for eq in lists[lst].get("equipment", []):
-            if eq.get("zone_equipment_object_type", "").upper() != "ZONEHVAC:AIRDISTRIBUTIONUNIT":
-                continue
-            adu = adus[_find(adus, eq["zone_equipment_name"])]
-            kind = adu["air_terminal_object_type"]
-            kind = next((k for k in VAV_TYPES + CV_TYPES if k.upper() == kind.upper()), kind)
-            if kind in VAV_TYPES + CV_TYPES:
-                found.append((zone, kind, adu["air_terminal_name"]))
-            else:
-                unsupported.append(f"{adu['air_terminal_name']} ({kind})")
+    links, _ = zone_terminals(data)
+    for link in links:
+        kind = next((k for k in VAV_TYPES + CV_TYPES if k.upper() == link.kind.upper()), link.kind)
+        if kind in VAV_TYPES + CV_TYPES:
+            found.append((link.zone, kind, link.name))
+        else:
+            unsupported.append(f"{link.name} ({kind})")
     if not found:
         raise ForeignBuildingError(
             "no thermostat-controlled zone is served by a supported air terminal "
@@ -551,33 +538,14 @@ def find_weather(data: dict, weather: str | Path | None = None) -> Path:
     return best
 
 
-def local_timezone(data: dict, utc_offset: float, timezone: str | None = None) -> str:
-    """IANA time zone of the building's schedules: ``timezone`` if given; with the file's
-    RunPeriodControl:DaylightSavingTime, the US zone of the standard offset; without it, the
-    fixed offset (``Etc/GMT+6`` for UTC-6: EnergyPlus then keeps standard time all year)."""
-    if timezone is not None:
-        ZoneInfo(timezone)
-        return timezone
-    if _objects(data, "RunPeriodControl:DaylightSavingTime"):
-        if utc_offset not in US_ZONES:
-            raise ForeignBuildingError(f"daylight saving time at UTC{utc_offset:+g}: pass the "
-                                       "IANA timezone of the site (timezone=...)")
-        return US_ZONES[utc_offset]
-    if utc_offset != int(utc_offset):
-        raise ForeignBuildingError(f"UTC offset {utc_offset} h: pass the IANA timezone")
-    return f"Etc/GMT{-int(utc_offset):+d}" if utc_offset else "Etc/GMT"
-
-
 def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
 def point_names(layout: Layout) -> dict:
-    """Telemetry columns: ``T_<zone>``, ``<terminal>_flow``, AHU_SAT, OAT, GHI, DNI, DHI."""
-    return {"temp": {z: f"T_{_safe(z)}" for z in layout.zones},
-            "flow": {t.name: f"{_safe(t.name)}_flow" for t in layout.terminals},
-            "discharge": {t.name: f"{_safe(t.name)}_DAT" for t in layout.terminals},
-            "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI"}
+    """Telemetry columns: ``T_<zone>``, ``<terminal>_flow``, AHU_SAT, OAT, GHI, DNI, DHI (the
+    convention of ``zonecast site draft``)."""
+    return draft_point_names(layout.zones, [t.name for t in layout.terminals])
 
 
 def to_quarter_hours(wide: pd.DataFrame, per_hour: int) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -767,7 +735,10 @@ def run_foreign(idf: str | Path, out: str | Path, weeks: list[dt.date] | None = 
     layout = describe(data)
     wfile = find_weather(data, weather)
     loc = _epw_location(wfile)
-    tzname = local_timezone(data, loc["time_zone"], timezone)
+    try:
+        tzname = local_timezone(data, loc["time_zone"], timezone)
+    except DraftError as exc:
+        raise ForeignBuildingError(str(exc)) from None
     std = dt.timezone(dt.timedelta(hours=loc["time_zone"]))
     periods = run_periods(weeks)
     lo = max([t.minimum_fraction for t in layout.terminals if t.vav]

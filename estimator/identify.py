@@ -252,6 +252,9 @@ class IdentificationResult:
         With a weekend gains shape (``identify(gain_shape=)``): zone -> {"value", "se"},
         the shape's fitted scale [-] (not a model parameter; rank and condition include
         it).
+    gain_day_scale : dict or None
+        With ``identify(day_scale_sd=)``: "zone,date" -> {"value", "se"}, each training
+        weekend day's deviation of the zone's scale [-].
     x0_window : int
         Rows of the x(0) filter before each weekend.
     x0_gains : bool
@@ -285,6 +288,7 @@ class IdentificationResult:
     window: str = "weekend"
     spans: list[dict] = field(default_factory=list)
     gain_scale: dict | None = None
+    gain_day_scale: dict | None = None
     x0_window: int = X0_WINDOW
     x0_gains: bool = False
     x0_offsets: dict | None = None
@@ -387,7 +391,8 @@ class IdentificationResult:
                 {n: {"mean": p.mean, "sd": p.sd, "source": p.source}
                  for n, p in self.priors.items()},
                 "map_sigma_e": self.sigma_e, "window": self.window, "spans": self.spans,
-                "gain_scale": self.gain_scale, "x0_window": self.x0_window,
+                "gain_scale": self.gain_scale, "gain_day_scale": self.gain_day_scale,
+                "x0_window": self.x0_window,
                 "x0_gains": self.x0_gains, "x0_offsets": self.x0_offsets}
 
 
@@ -403,11 +408,14 @@ class _Problem:
 
     def __init__(self, model: BilinearModel, data: ModelData, spans, x0s, threads: int = 2,
                  f_ig: np.ndarray | None = None, shape: np.ndarray | None = None,
-                 x0_basis: np.ndarray | None = None):
+                 x0_basis: np.ndarray | None = None, shape_zones: np.ndarray | None = None):
         self.model, self.data, self.spans, self.x0s = model, data, spans, x0s
-        # a per-zone gains shape [W/m2] whose scales follow c_IG in theta (identify(gain_shape=))
+        # gains shapes [W/m2] whose scales follow c_IG in theta (identify(gain_shape=)): one
+        # column per scale, column k on zone shape_zones[k] (default: column z on zone z)
         self.shape = None if shape is None else [np.ascontiguousarray(shape[a:b], dtype=float)
                                                  for a, b in spans]
+        self.shape_zones = (None if shape is None else np.arange(shape.shape[1])
+                            if shape_zones is None else np.asarray(shape_zones, int))
         # (n, n_zones) directions of the zones' x(0) offsets whose sizes d [K] close theta
         # (identify(x0_offset_sd=)): every span starts at x0s[i] + x0_basis @ d
         self.x0_basis = (None if x0_basis is None
@@ -470,7 +478,8 @@ class _Problem:
         nz = self.B_ig.shape[1]
         phys, c_ig = theta[:self.n_phys], theta[self.n_phys:self.n_phys + nz]
         k = self.n_phys + nz
-        scale = theta[k:k + nz] if self.shape is not None else None
+        scale = theta[k:k + len(self.shape_zones)] if self.shape is not None else None
+        b_shape = None if self.shape is None else self.B_ig[:, self.shape_zones]
         offsets = self._offsets(theta)
         data_vals = self.d0 + phys @ self.dp
         n = len(self.capacity)
@@ -490,7 +499,7 @@ class _Problem:
             u, v = self.data.u[a:b], self.data.v[a:b]
             forcing = v @ Bv.T + c_ig @ self.B_ig.T + rh
             if self.shape is not None:
-                forcing = forcing + (self.shape[i] * scale) @ self.B_ig.T
+                forcing = forcing + (self.shape[i] * scale) @ b_shape.T
             if offsets is not None:
                 x0 = x0 + self.x0_basis @ offsets
             xs = np.empty((b - a + 1, n))
@@ -527,7 +536,7 @@ class _Problem:
 
     def gain_columns(self, theta: np.ndarray, L: float) -> np.ndarray:
         """Exact derivatives of the residuals with respect to c_IG (n_residuals, n_zones),
-        and with a gains shape to its per-zone scales too (n_residuals, 2 n_zones).
+        and with gains shapes to their scales too (n_residuals, n_zones + n_scales).
 
         The zone temperatures are affine in c_IG (and in the scales): each column is the
         response of a zero state to the forcing B_IG[:, z] held over every step (times the
@@ -535,15 +544,16 @@ class _Problem:
         (:func:`~zonecast.estimator.integrate._run_block`), on the series of ``theta`` and
         ``L`` as the residuals."""
         n, nz = len(self.capacity), self.B_ig.shape[1]
-        m = nz if self.shape is None else 2 * nz
+        m = nz if self.shape is None else nz + len(self.shape_zones)
         weights = []
         for i, (a, b) in enumerate(self.spans):
             w = np.ones((b - a, m))
             if self.shape is not None:
                 w[:, nz:] = self.shape[i]
             weights.append(w)
-        return self._block_responses(theta, L, np.zeros((n, m)),
-                                     np.tile(self.B_ig, (1, m // nz)), weights)
+        bcols = (self.B_ig if self.shape is None
+                 else np.hstack([self.B_ig, self.B_ig[:, self.shape_zones]]))
+        return self._block_responses(theta, L, np.zeros((n, m)), bcols, weights)
 
     def _block_responses(self, theta: np.ndarray, L: float, x0: np.ndarray,
                          bcols: np.ndarray, weights: list[np.ndarray]) -> np.ndarray:
@@ -613,6 +623,25 @@ def slow_state_basis(model: BilinearModel) -> np.ndarray:
     return np.stack([(zones == j) & slow for j in range(model.n_zones)], axis=1).astype(float)
 
 
+def _day_shapes(data: ModelData, shape: np.ndarray, spans
+                ) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """``shape`` (N, n_zones) extended by one column per (weekend day of ``spans``, zone):
+    the zone's shape on that local day's rows, zero elsewhere. Returns the columns
+    (N, n_zones + n_days n_zones), the zone of each column and the day columns' names
+    ``ds_IG[zone,YYYY-MM-DD]``."""
+    local = data.local_times()
+    dates = np.asarray(local.date)
+    weekend = np.asarray(local.day_of_week >= 5)
+    days = sorted({dates[r] for a, b in spans for r in range(a, b) if weekend[r]})
+    cols, zones, names = [shape], list(range(shape.shape[1])), []
+    for d in days:
+        on = (dates == d)[:, None]
+        cols.append(shape * on)
+        zones += list(range(shape.shape[1]))
+        names += [f"ds_IG[{z},{d.isoformat()}]" for z in data.zones]
+    return np.hstack(cols), np.asarray(zones, int), names
+
+
 def _per_row_and_zone(arr, data: ModelData, name: str) -> np.ndarray | None:
     """``arr`` as an (N, n_zones) float array with NaN as 0, or None; a clear error for
     another shape."""
@@ -667,7 +696,8 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
              shape_prior: tuple[float, float] = (1.0, 1.0),
              x0_gains: np.ndarray | None = None,
              x0_window: int | None = None,
-             x0_offset_sd: float | None = None) -> IdentificationResult:
+             x0_offset_sd: float | None = None,
+             day_scale_sd: float | None = None) -> IdentificationResult:
     """Identify the parameters of ``model`` (paper section 4-A).
 
     Parameters
@@ -730,6 +760,14 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         fitted on the training ones, applied to the validation ones in Table 2
         (``result.x0_offsets``; :func:`weekend_simulations` ``x0_offset``). The forecasts
         do not use this filter. Needs ``priors``.
+    day_scale_sd : float, optional
+        With ``gain_shape``: each weekend day of the training weekends also gets its own
+        deviation d_{day,z} of each zone's scale, prior N(0, ``day_scale_sd``) (bounds
+        -5..5), so f_IG = c_IG + (s_z + d_{day,z}) shape_z(t) on that day's rows: people
+        who come in at weekends do so on some days and not others, and one scale for all
+        days leaves each day's difference to the parameters. Validation weekends and the
+        x(0) filter's rows outside the training days take s_z alone
+        (``result.gain_day_scale``). Needs ``priors``.
     """
     t0 = time.perf_counter()
     rng = np.random.default_rng([seed, 11])
@@ -756,6 +794,22 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         if priors is not None:
             priors = {**priors, **{f"s_IG[{z}]": Prior(*shape_prior, "the gains shape's scale")
                                    for z in data.zones}}
+    shape_zones = None
+    day_names: list[str] = []
+    if day_scale_sd is not None:
+        if gain_shape is None or priors is None:
+            raise IdentificationError("day_scale_sd needs a gains shape (gain_shape) and a MAP "
+                                      "fit (priors): without a prior the days' scales trade "
+                                      "with the parameters")
+        if not day_scale_sd > 0:
+            raise IdentificationError(f"day_scale_sd must be > 0, got {day_scale_sd}")
+        gain_shape, shape_zones, day_names = _day_shapes(data, gain_shape, train_spans)
+        k = len(day_names)
+        lo, hi = np.r_[lo, np.full(k, -5.0)], np.r_[hi, np.full(k, 5.0)]
+        scale = np.r_[scale, np.ones(k)]
+        names = names + day_names
+        priors = {**priors, **{n: Prior(0.0, day_scale_sd, "a day's deviation of the gains "
+                                                           "shape's scale") for n in day_names}}
 
     n_shape = len(names) - n_model  # the gains shape's scales after the model's parameters
     x0_basis = None
@@ -782,6 +836,8 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         if gain_shape is None:
             return f_ig
         g = gain_shape * np.asarray(theta, float)[n_model:n_fit]
+        if shape_zones is not None:  # per-day columns add to their zones
+            g = g @ np.eye(len(data.zones))[shape_zones]
         return g if f_ig is None else f_ig + g
 
     def x0s(m, spans, theta):
@@ -817,12 +873,14 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     if start is not None:  # the given point first, the drawn ones after it
         thetas = [np.asarray(start, float)] + thetas[1:]
     if gain_shape is not None:
-        thetas = [t if len(t) >= n_fit else np.r_[t, np.full(n_fit - len(t), shape_prior[0])]
+        thetas = [t if len(t) >= n_fit else
+                  np.r_[t, np.full(n_shape - len(day_names) - max(len(t) - n_model, 0),
+                                   shape_prior[0]), np.zeros(len(day_names))]
                   for t in thetas]
     thetas = [t if len(t) == len(lo) else np.r_[t, np.zeros(len(lo) - len(t))] for t in thetas]
     thetas = [np.clip(t, lo, hi) for t in thetas]
     first = _Problem(model, data, train_spans, x0s(model, train_spans, thetas[0]), f_ig=f_ig,
-                     shape=gain_shape, x0_basis=x0_basis)
+                     shape=gain_shape, x0_basis=x0_basis, shape_zones=shape_zones)
     for i, theta0 in enumerate(thetas):
         progress(f"start {i + 1}/{len(thetas)}")
         sol = fit(first, theta0)
@@ -841,7 +899,7 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     progress("x(0) at the best start's parameters, refit")
     problem = _Problem(model, data, train_spans,
                        x0s(model.with_params(best[1].x[:n_model]), train_spans, best[1].x),
-                       f_ig=f_ig, shape=gain_shape, x0_basis=x0_basis)
+                       f_ig=f_ig, shape=gain_shape, x0_basis=x0_basis, shape_zones=shape_zones)
     sol = fit(problem, best[1].x)
     theta = sol.x
     cost = float(np.sum(sol.fun ** 2))
@@ -865,12 +923,12 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     # x_KF(0) plus the zones' fitted offsets of the slow states (the filter's bias)
     spans_x0 = x0s(fitted, train_spans + val_spans, theta)
     train_rms = _fit_rms(_Problem(model, data, train_spans, spans_x0[:len(train_spans)],
-                                  f_ig=f_ig, shape=gain_shape, x0_basis=x0_basis),
-                         theta, data.zones)
+                                  f_ig=f_ig, shape=gain_shape, x0_basis=x0_basis,
+                                  shape_zones=shape_zones), theta, data.zones)
     val_rms = None
     if val_spans:
         vp = _Problem(model, data, val_spans, spans_x0[len(train_spans):], f_ig=f_ig,
-                      shape=gain_shape, x0_basis=x0_basis)
+                      shape=gain_shape, x0_basis=x0_basis, shape_zones=shape_zones)
         val_rms = _fit_rms(vp, theta, data.zones)
     x0_offsets = None
     if x0_basis is not None:
@@ -879,10 +937,16 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         theta, se, corr = theta[:n_fit], se[:n_fit], corr[:n_fit, :n_fit]
         lo, hi, names = lo[:n_fit], hi[:n_fit], names[:n_fit]
         priors = {n: priors[n] for n in names}
-    gain_scale = None
+    gain_scale = gain_day_scale = None
     if gain_shape is not None:
         gain_scale = {z: {"value": float(theta[n_model + i]), "se": float(se[n_model + i])}
                       for i, z in enumerate(data.zones)}
+    if day_names:
+        k0 = n_model + len(data.zones)
+        gain_day_scale = {n[len("ds_IG["):-1]: {"value": float(theta[k0 + i]),
+                                                "se": float(se[k0 + i])}
+                          for i, n in enumerate(day_names)}
+    if gain_shape is not None:
         theta, se, corr = theta[:n_model], se[:n_model], corr[:n_model, :n_model]
         lo, hi = lo[:n_model], hi[:n_model]
         priors = None if priors is None else {n: priors[n] for n in names[:n_model]}
@@ -900,4 +964,4 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
         condition=condition, priors=dict(priors) if priors is not None else None,
         sigma_e=sigma_e if priors is not None else None, window=window, spans=used,
         gain_scale=gain_scale, x0_window=x0_window, x0_gains=x0_gains is not None,
-        x0_offsets=x0_offsets)
+        x0_offsets=x0_offsets, gain_day_scale=gain_day_scale)

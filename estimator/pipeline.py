@@ -218,7 +218,8 @@ class Pipeline:
                  gains_weeks: Sequence[int] | None = None,
                  agree_rtol: float = 1e-3, films: str | None = None,
                  x0_profile_days: int | None = None,
-                 x0_offset_sd: float | None = None) -> IdentificationResult:
+                 x0_offset_sd: float | None = None,
+                 day_scale_sd: float | None = None) -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -263,6 +264,11 @@ class Pipeline:
         weekends keep the mode's own gains); :attr:`x0_gains` keeps them for
         :func:`~.identify.weekend_simulations`.
 
+        ``day_scale_sd`` (an option, default off; with ``"daytime"``): each training
+        weekend day also fits its own deviation of every zone's daytime scale, prior 0 ±
+        this value (:func:`~.identify.identify`): a building whose people come in on some
+        weekend days and not others.
+
         ``x0_offset_sd`` [K] (an option, default off): every fit also estimates one offset
         per zone of the slow states' x(0), shared by the weekends, with a prior 0 ± this sd
         (:func:`~.identify.identify`); Table 2 and Fig. 1 start every weekend, the
@@ -294,6 +300,7 @@ class Pipeline:
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
                        seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,
                        window=window, agree_rtol=agree_rtol, x0_offset_sd=x0_offset_sd,
+                       day_scale_sd=day_scale_sd if weekend_gains == "daytime" else None,
                        start=start.values if convective else None,
                        gain_shape=(weekend_daytime_shape(data)
                                    if weekend_gains == "daytime" else None))
@@ -324,7 +331,8 @@ class Pipeline:
                            gain_shape=(weekend_daytime_shape(data)
                                        if weekend_gains == "daytime" else None),
                            x0_gains=x0_gains, x0_window=x0_profile_days * per_day,
-                           x0_offset_sd=x0_offset_sd)
+                           x0_offset_sd=x0_offset_sd,
+                           day_scale_sd=day_scale_sd if weekend_gains == "daytime" else None)
             self.x0_gains = x0_gains
         self.identification = res
         self.params = res.model.params

@@ -250,6 +250,11 @@ X0OffsetSd = Annotated[float | None, typer.Option(
                    "states' x(0) (walls, slabs, furniture) with the parameters, prior 0 +- "
                    "this value, applied to every weekend (the x(0) filter's bias; "
                    "docs/identification.md)")]
+DayScaleSd = Annotated[float | None, typer.Option(
+    min=1e-3, help="an option, off by default: with --weekend-gains daytime, each training "
+                   "weekend day also fits its own deviation of every zone's daytime scale, "
+                   "prior 0 +- this value (people in on some weekend days, not others; "
+                   "docs/identification.md)")]
 Films = Annotated[str | None, typer.Option(
     help="priors and starting values of the inside films: 'combined' (the handbook's "
          "convection + radiation films) or 'convective' (convection alone); default "
@@ -354,6 +359,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "at weekends; docs/identification.md)")] = "daytime",
                  x0_profile_days: X0ProfileDays = None,
                  x0_offset_sd: X0OffsetSd = None,
+                 day_scale_sd: DayScaleSd = None,
                  seed: Seed = 0) -> None:
     """Identify the 13 parameters from excitation weekends (paper section 4-A), estimate
     the weekly internal-gains profile, and write the model file used by forecasts and the
@@ -370,7 +376,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  interior_radiation=interior_radiation, films=films,
                                  internal_gains=internal_gains, window_angle=window_angle,
                                  x0_profile_days=x0_profile_days,
-                                 x0_offset_sd=x0_offset_sd,
+                                 x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -445,6 +451,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                            "--no-service leaves it out")] = True,
                   x0_profile_days: X0ProfileDays = None,
                   x0_offset_sd: X0OffsetSd = None,
+                  day_scale_sd: DayScaleSd = None,
                   infiltration: Annotated[str, typer.Option(
                       help="'idf' (the default): the IDF's infiltration as a fixed "
                            "outdoor-air conductance, or 'none' (the paper)")] = "idf",
@@ -485,7 +492,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 interior_radiation=interior_radiation, films=films,
                                 internal_gains=internal_gains, service=service,
                                 window_angle=window_angle,
-                                x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd)
+                                x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
+                                day_scale_sd=day_scale_sd)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

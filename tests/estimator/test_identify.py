@@ -347,6 +347,68 @@ def test_gain_shape_scales_are_exact_columns_and_recovered(five_zone):
         np.testing.assert_allclose(G[:, j], prob.residuals(t, L) - f0, rtol=0, atol=1e-12)
 
 
+def test_each_weekend_days_scale_is_fitted_and_its_columns_are_exact(five_zone):
+    """People in on Saturday (1.8 x the shape) and not on Sunday (0.2 x): one scale for
+    both days cannot follow them; with ``day_scale_sd`` each day's deviation is fitted (the
+    day columns exact, zero outside their day), Table 2 reaches the noise level and the
+    scales recover both days; the validation rows would take the zones' base scale."""
+    from zonecast.estimator.identify import _day_shapes
+    from zonecast.estimator.priors import building_priors
+
+    model, zones, boxes, rng, times, u, v, day = _model_and_inputs(five_zone, 8)
+    n = len(times)
+    true = model.params.start_params.copy()
+    truth = model.with_params(true)
+    shape = np.where(((day % 1) > 0.4) & ((day % 1) < 0.7), 10.0, 0.0)[:, None] \
+        * rng.uniform(0.5, 1.5, 5)
+    local = times.tz_convert("America/Los_Angeles")
+    per_day = np.where(np.asarray(local.day_of_week == 5), 1.8,
+                       np.where(np.asarray(local.day_of_week == 6), 0.2, 1.0))
+    sim = truth.simulate(truth.steady_state(u[0], v[0]), u, v, shape * per_day[:, None])
+    y = sim.y[:-1] + rng.normal(0.0, 0.05, (n, 5))
+    data = ModelData(times, u, v, y, list(zones), list(boxes),
+                     segments_of(times, pd.Timedelta("15min")), np.zeros(n, bool),
+                     "America/Los_Angeles")
+    spans = weekend_spans(data, ["2015-04-18"])
+    cols, zmap, names = _day_shapes(data, shape, spans)
+    assert cols.shape == (n, 15) and list(zmap) == [0, 1, 2, 3, 4] * 3
+    assert names[0] == "ds_IG[South,2015-04-18]" and names[5] == "ds_IG[South,2015-04-19]"
+    friday = np.asarray(local.day_of_week == 4)
+    assert not cols[friday, 5:].any()
+    np.testing.assert_allclose(cols[:, 5:10] + cols[:, 10:], np.where(friday[:, None], 0.0,
+                                                                      shape), rtol=0, atol=0)
+    priors = building_priors(model.params, five_zone)
+    with pytest.raises(IdentificationError, match="day_scale_sd needs a gains shape"):
+        identify(model, data, train=["2015-04-18"], day_scale_sd=1.0, priors=priors)
+    with pytest.raises(IdentificationError, match="day_scale_sd needs a gains shape"):
+        identify(model, data, train=["2015-04-18"], day_scale_sd=1.0, gain_shape=shape)
+    one = identify(model, data, train=["2015-04-18"], max_nfev=40, gain_shape=shape,
+                   priors=priors, sigma_e=0.05, start=true)
+    each = identify(model, data, train=["2015-04-18"], max_nfev=40, gain_shape=shape,
+                    priors=priors, sigma_e=0.05, start=true, day_scale_sd=1.0)
+    assert each.train_rms["mean"] < 0.08 < one.train_rms["mean"]
+    assert len(each.params) == len(true)                      # the scales are not the model's
+    sat = [each.gain_scale[z]["value"] + each.gain_day_scale[f"{z},2015-04-18"]["value"]
+           for z in zones]
+    sun = [each.gain_scale[z]["value"] + each.gain_day_scale[f"{z},2015-04-19"]["value"]
+           for z in zones]
+    np.testing.assert_allclose(sat, 1.8, atol=0.2)
+    np.testing.assert_allclose(sun, 0.2, atol=0.2)
+    assert each.to_dict()["gain_day_scale"]["South,2015-04-18"]["value"] == pytest.approx(
+        each.gain_day_scale["South,2015-04-18"]["value"])
+
+    prob = _Problem(model, data, spans, [np.full(model.n, 21.0)], shape=cols, shape_zones=zmap)
+    theta = np.r_[model.params.values, np.ones(5), rng.normal(0.0, 0.5, 10)]
+    L = 1.02 * prob.bound(theta)
+    f0 = prob.residuals(theta, L)
+    G = prob.gain_columns(theta, L)
+    assert G.shape == (len(f0), 20)
+    for j in range(20):
+        t = theta.copy()
+        t[prob.n_phys + j] += 1.0
+        np.testing.assert_allclose(G[:, j], prob.residuals(t, L) - f0, rtol=0, atol=1e-12)
+
+
 def test_the_x0_filter_told_the_days_gains_starts_the_weekend_right(five_zone):
     """Data simulated with office gains on the Friday before the weekend only: the x(0)
     filter with f_IG = 0 leaves the walls cooler than they are and the weekend misfits;

@@ -79,13 +79,14 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   internal_gains: str = "air", window_angle: str = "none",
                   progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
-                  x0_offset_sd: float | None = None) -> IdentifyOutcome:
+                  x0_offset_sd: float | None = None,
+                  day_scale_sd: float | None = None) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``, ``window_angle``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
-    ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``: as
+    ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``: as
     :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
     pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar,
                                                          infiltration=infiltration,
@@ -99,7 +100,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,
                         films=films, progress=lambda m: progress(f"identification: {m}"),
-                        x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd)
+                        x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
+                        day_scale_sd=day_scale_sd)
     if profile_weeks:
         pipe.weekly_profile(d, progress=lambda m: progress(f"weekly internal-gains profile: {m}"))
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -413,14 +413,14 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         interior_radiation: str = "none", films: str | None = None,
         internal_gains: str = "air", service: bool = True,
         x0_profile_days: int | None = None, x0_offset_sd: float | None = None,
-        window_angle: str = "none") -> Results:
+        window_angle: str = "none", day_scale_sd: float | None = None) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
     ``service``: also the service check (:func:`service_check`, Table 3's ``service*``
     rows and the calibrated coverage; most of the job's time on buildings whose boxes
     reheat); off, the report says it was left out; ``x0_profile_days``,
-    ``x0_offset_sd``: as :meth:`Pipeline.identify`;
+    ``x0_offset_sd``, ``day_scale_sd``: as :meth:`Pipeline.identify`;
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``, ``window_angle``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
@@ -453,7 +453,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                           gains_weeks=(week_split(data, seed)["train"]
                                        if weekend_gains not in (False, None, "none")
                                        or x0_profile_days else None),
-                          x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd)
+                          x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
+                          day_scale_sd=day_scale_sd)
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
     progress("identification with window solar on the room air (paper's placement)")

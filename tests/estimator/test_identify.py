@@ -316,6 +316,19 @@ def test_gain_columns_of_the_jacobian_are_exact(truth_and_data):
     np.testing.assert_array_equal(J[:, prob.n_phys:], G)
 
 
+def _assert_gain_columns_exact(prob, theta, m):
+    """The ``m`` gain columns of the Jacobian (c_IG and the shapes' scales) equal the
+    residuals' change for a unit change of each (the zone temperatures are affine in them)."""
+    L = 1.02 * prob.bound(theta)
+    f0 = prob.residuals(theta, L)
+    G = prob.gain_columns(theta, L)
+    assert G.shape == (len(f0), m)
+    for j in range(m):
+        t = theta.copy()
+        t[prob.n_phys + j] += 1.0
+        np.testing.assert_allclose(G[:, j], prob.residuals(t, L) - f0, rtol=0, atol=1e-12)
+
+
 def test_gain_shape_scales_are_exact_columns_and_recovered(five_zone):
     """Weekend gains 1.5 x a known per-zone shape in zones 0-2 and none in zones 3-4: the
     fit with the shape (``gain_shape``) finds those scales, a Table 2 at the noise level
@@ -337,14 +350,7 @@ def test_gain_shape_scales_are_exact_columns_and_recovered(five_zone):
     spans = weekend_spans(data, ["2015-04-18"])
     prob = _Problem(model, data, spans, [np.full(model.n, 21.0)], shape=shape)
     theta = np.r_[model.params.values, np.ones(5)]
-    L = 1.02 * prob.bound(theta)
-    f0 = prob.residuals(theta, L)
-    G = prob.gain_columns(theta, L)
-    assert G.shape == (len(f0), 10)
-    for j in range(10):
-        t = theta.copy()
-        t[prob.n_phys + j] += 1.0
-        np.testing.assert_allclose(G[:, j], prob.residuals(t, L) - f0, rtol=0, atol=1e-12)
+    _assert_gain_columns_exact(prob, theta, 10)
 
 
 def test_each_weekend_days_scale_is_fitted_and_its_columns_are_exact(five_zone):
@@ -399,14 +405,7 @@ def test_each_weekend_days_scale_is_fitted_and_its_columns_are_exact(five_zone):
 
     prob = _Problem(model, data, spans, [np.full(model.n, 21.0)], shape=cols, shape_zones=zmap)
     theta = np.r_[model.params.values, np.ones(5), rng.normal(0.0, 0.5, 10)]
-    L = 1.02 * prob.bound(theta)
-    f0 = prob.residuals(theta, L)
-    G = prob.gain_columns(theta, L)
-    assert G.shape == (len(f0), 20)
-    for j in range(20):
-        t = theta.copy()
-        t[prob.n_phys + j] += 1.0
-        np.testing.assert_allclose(G[:, j], prob.residuals(t, L) - f0, rtol=0, atol=1e-12)
+    _assert_gain_columns_exact(prob, theta, 20)
 
 
 def test_the_x0_filter_told_the_days_gains_starts_the_weekend_right(five_zone):

@@ -67,6 +67,30 @@ WEEKEND_DAY_GAIN = 2.5
 WEEKEND_DAY_HOURS = (8, 18)
 
 
+#: a zone's fitted weekend daytime scale above which its weekends look occupied: the shape
+#: is the rise an office shows with nobody in (:data:`WEEKEND_DAY_GAIN`); on the second family
+#: (seed 1, docs/benchmarks.md "A second family nobody chose anything on") a largest zone
+#: scale above 1 marked 8 of its 12 floors with weekend occupancy and none of its 7 without
+OCCUPIED_WEEKEND_SCALE = 1.0
+
+
+def weekend_occupancy_warning(gain_scale: Mapping | None,
+                              threshold: float = OCCUPIED_WEEKEND_SCALE) -> str | None:
+    """A warning when a ``daytime`` fit's scales (``result.gain_scale``: zone -> {"value",
+    ...}) say people work at weekends (some zone's scale above ``threshold``), else None. The paper identifies on unoccupied weekends; with
+    people in, the weekends' unknown gains cost Table 2 and the forecasts about 0.1 K
+    (docs/benchmarks.md), and weekends without people are the better data."""
+    high = {z: v["value"] for z, v in (gain_scale or {}).items() if v["value"] > threshold}
+    if not high:
+        return None
+    zones = ", ".join(f"{z} {s:.1f}" for z, s in high.items())
+    return (f"the weekends look occupied: zones {zones} fitted a weekend daytime rise of more "
+            f"than {threshold:g} x an empty office's ({WEEKEND_DAY_GAIN} W/m2). The "
+            "identification assumes weekends without people (paper section 2-B); with people in, "
+            "expect Table 2 and the 24-h forecasts about 0.1 K worse, and excite on weekends "
+            "when nobody works if you can (docs/identification.md)")
+
+
 def weekend_daytime_shape(data: ModelData) -> np.ndarray:
     """(N, n_zones) [W/m2]: :data:`WEEKEND_DAY_GAIN` on Saturday and Sunday rows whose local
     hour is in :data:`WEEKEND_DAY_HOURS`, else 0 (a shape for ``identify(gain_shape=...)``)."""

@@ -16,6 +16,7 @@ import typer
 from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from threadpoolctl import threadpool_limits
 
+from zonecast.estimator.pipeline import weekend_occupancy_warning
 from zonecast.estimator.site_draft import draft_site
 from zonecast.jobs import diagnosis, reproduce
 from zonecast.jobs.pipelines import build_model, check_site, forecast_at, identify_site
@@ -396,6 +397,10 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     if pinned:
         typer.secho(f"warning: at a bound (not determined by the data): {', '.join(pinned)}",
                     fg=typer.colors.YELLOW)
+    occupied = (weekend_occupancy_warning(res.gain_scale) if weekend_gains == "daytime"
+                else None)
+    if occupied:
+        typer.secho(f"warning: {occupied}", fg=typer.colors.YELLOW)
     if used:
         typer.echo(f"weekly internal-gains profile from {len(used)} weeks ({used[0]} ... "
                    f"{used[-1]})")
@@ -498,6 +503,10 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
         _fail(exc)
     t2, t3 = res.table2, res.table3
     _warn_bounds(res)
+    occupied = (weekend_occupancy_warning((res.identification or {}).get("gain_scale"))
+                if weekend_gains == "daytime" else None)
+    if occupied:
+        typer.secho(f"warning: {occupied}", fg=typer.colors.YELLOW)
     typer.echo(f"Table 2 mean RMS: training {t2['training']['mean']:.3f}, validation "
                f"{t2['validation']['mean']:.3f} (paper 0.333, 0.413)")
     typer.echo("Table 3 mean RMS: " + ", ".join(f"{k} {v['mean']:.3f}" for k, v in t3.items())

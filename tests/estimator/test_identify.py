@@ -510,3 +510,18 @@ def test_the_x0_filters_bias_in_the_slow_states_is_fitted(five_zone):
         identify(model, data, train=["2015-04-18"], x0_offset_sd=1.0)
     with pytest.raises(IdentificationError, match="must be > 0 K"):
         identify(model, data, train=["2015-04-18"], priors=priors, x0_offset_sd=0.0)
+
+
+def test_weekend_occupancy_warning_names_the_zones_above_an_empty_office():
+    """A daytime fit whose scales exceed an empty office's rise (1) says the weekends look
+    occupied, naming those zones; scales at or below it, or none, say nothing."""
+    from zonecast.estimator.pipeline import OCCUPIED_WEEKEND_SCALE, weekend_occupancy_warning
+
+    assert OCCUPIED_WEEKEND_SCALE == 1.0
+    assert weekend_occupancy_warning(None) is None
+    assert weekend_occupancy_warning({"N": {"value": 0.4, "se": 0.1},
+                                      "C": {"value": 1.0, "se": 0.2}}) is None
+    msg = weekend_occupancy_warning({"N": {"value": 0.4, "se": 0.1},
+                                     "C": {"value": 2.4, "se": 0.2}})
+    assert msg.startswith("the weekends look occupied: zones C 2.4 fitted")
+    assert "N 0.4" not in msg and "weekends without people" in msg

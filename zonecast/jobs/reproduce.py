@@ -29,6 +29,7 @@ from zonecast.estimator.pipeline import (
     WEEKEND_DAY_HOURS,
     Pipeline,
     weekend_daytime_shape,
+    weekend_occupancy_warning,
 )
 from zonecast.estimator.rc.network import ModelOptions
 from zonecast.estimator.streaming import has_discharge
@@ -144,6 +145,9 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                    "`none` gives the paper's f_IG = 0), so Table 2 and Fig. 1 are the model with "
                    "those gains. Scales: "
                    + _scales(scale) + "."), ""]
+        occupied = weekend_occupancy_warning(scale)
+        if occupied:
+            lines += [f"**Warning:** {occupied}.", ""]
     elif mode == "scaled":
         scale = (results.identification or {}).get("gain_scale") or {}
         lines += [("Fitted with the weekly internal-gains profile of the training weeks without "

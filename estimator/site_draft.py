@@ -406,7 +406,7 @@ def draft_site(idf: str | os.PathLike, *, out: str | os.PathLike | None = None,
     notes += tnotes
     if thermostat is not None:
         doc["thermostat"] = thermostat
-    if not _objects(data, "Site:Location") or float(loc.get("latitude", 0.0)) == 0.0:
+    if float(loc.get("latitude", 0.0)) == 0.0:
         notes.append("check the location: Site:Location reads latitude 0")
     site = Site.model_validate({**doc, "base_dir": target.resolve().parent})
     return SiteDraft(site, doc, notes)

@@ -872,7 +872,8 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
     thetas = _starts(model.params, n_starts, rng)
     if start is not None:  # the given point first, the drawn ones after it
         thetas = [np.asarray(start, float)] + thetas[1:]
-    if gain_shape is not None:
+    if gain_shape is not None:  # a start holds the model's values and at most the base scales
+        thetas = [t[:n_model + len(data.zones)] for t in thetas]
         thetas = [t if len(t) >= n_fit else
                   np.r_[t, np.full(n_shape - len(day_names) - max(len(t) - n_model, 0),
                                    shape_prior[0]), np.zeros(len(day_names))]

@@ -75,12 +75,20 @@ OCCUPIED_WEEKEND_SCALE = 1.0
 
 
 def weekend_occupancy_warning(gain_scale: Mapping | None,
-                              threshold: float = OCCUPIED_WEEKEND_SCALE) -> str | None:
+                              threshold: float = OCCUPIED_WEEKEND_SCALE,
+                              day_scale: Mapping | None = None) -> str | None:
     """A warning when a ``daytime`` fit's scales (``result.gain_scale``: zone -> {"value",
-    ...}) say people work at weekends (some zone's scale above ``threshold``), else None. The paper identifies on unoccupied weekends; with
+    ...}) say people work at weekends (some zone's scale above ``threshold``), else None.
+    With per-day deviations (``result.gain_day_scale``: "zone,date" -> {"value", ...}) a
+    zone's largest day (s_z + d_day,z) counts. The paper identifies on unoccupied weekends; with
     people in, the weekends' unknown gains cost Table 2 and the forecasts about 0.1 K
     (docs/benchmarks.md), and weekends without people are the better data."""
-    high = {z: v["value"] for z, v in (gain_scale or {}).items() if v["value"] > threshold}
+    best = {z: v["value"] for z, v in (gain_scale or {}).items()}
+    for key, d in (day_scale or {}).items():
+        z = key.rsplit(",", 1)[0]
+        if z in best:
+            best[z] = max(best[z], (gain_scale or {})[z]["value"] + d["value"])
+    high = {z: v for z, v in best.items() if v > threshold}
     if not high:
         return None
     zones = ", ".join(f"{z} {s:.1f}" for z, s in high.items())

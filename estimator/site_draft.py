@@ -36,9 +36,10 @@ from typing import Any
 from zoneinfo import ZoneInfo
 
 import yaml
+from pydantic import ValidationError
 from zonecast.estimator.idf import load_epjson
 from zonecast.estimator.schedules import CompactSchedule, ScheduleError
-from zonecast.estimator.site import Site
+from zonecast.estimator.site import Site, Thermostat
 
 __all__ = ["DraftError", "SiteDraft", "TerminalLink", "draft_site", "draft_thermostat",
            "local_timezone", "point_names", "zone_terminals"]
@@ -52,7 +53,7 @@ HEATING_WEEK = dt.date(2015, 1, 12)
 COOLING_WEEK = dt.date(2015, 7, 13)
 #: thermostat objects of a ZoneControl:Thermostat, in the order they are preferred
 _SETPOINT_TYPES = ("ThermostatSetpoint:DualSetpoint", "ThermostatSetpoint:SingleHeating",
-                   "ThermostatSetpoint:SingleCooling", "ThermostatSetpoint:SingleHeatingOrCooling")
+                   "ThermostatSetpoint:SingleCooling")
 
 
 class DraftError(ValueError):
@@ -174,9 +175,18 @@ def point_names(zones: list[str], boxes: list[str]) -> dict:
     """Telemetry column names of the convention: ``T_<zone>``, ``<box>_flow``,
     ``<box>_DAT``, ``AHU_SAT``, ``OAT``, ``GHI``, ``DNI``, ``DHI`` (characters other than
     letters, digits, ``_``, ``.`` and ``-`` become ``_``)."""
-    return {"temp": {z: f"T_{_safe(z)}" for z in zones},
-            "flow": {b: f"{_safe(b)}_flow" for b in boxes},
-            "discharge": {b: f"{_safe(b)}_DAT" for b in boxes},
+    used: set[str] = {"AHU_SAT", "OAT", "GHI", "DNI", "DHI"}
+
+    def unique(name: str) -> str:  # "A 1" and "A_1" must not share a column
+        out, i = name, 2
+        while out.upper() in used:
+            out, i = f"{name}_{i}", i + 1
+        used.add(out.upper())
+        return out
+
+    return {"temp": {z: unique(f"T_{_safe(z)}") for z in zones},
+            "flow": {b: unique(f"{_safe(b)}_flow") for b in boxes},
+            "discharge": {b: unique(f"{_safe(b)}_DAT") for b in boxes},
             "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI"}
 
 
@@ -233,17 +243,24 @@ def _week(sched: CompactSchedule | float, monday: dt.date) -> list[list[tuple[fl
 def _two_levels(week: list[list[tuple[float, float, float]]], high: bool
                 ) -> tuple[float, float, tuple[float, float], list[int], list[str]]:
     """Occupied / unoccupied levels, occupied hours and working days of a week of set
-    points: occupied is the level the working days reach (the highest heating, the lowest
-    cooling set point), unoccupied the level at 03:00 on a Sunday."""
+    points: unoccupied is the setback (the lowest heating, the highest cooling set point of
+    the week), occupied the other level held longest (a warm-up boost or a ramp step is
+    shorter); the occupied hours span that level's first start to its last end on the days
+    it occurs."""
     notes: list[str] = []
-    values = [v for day in week for (_, _, v) in day]
-    occ = max(values) if high else min(values)
-    unocc = next(v for (a, b, v) in week[6] if a <= 3.0 < b)
-    days = [i for i, day in enumerate(week) if any(v == occ for (_, _, v) in day)]
+    held: Counter = Counter()
+    for day in week:
+        for a, b, v in day:
+            held[v] += b - a
+    levels = sorted(held)
+    unocc = levels[0] if high else levels[-1]
+    others = [v for v in levels if v != unocc]
+    occ = max(others, key=lambda v: (held[v], v if high else -v)) if others else unocc
+    days = [i for i, day in enumerate(week) if any(v == occ for (_, _, v) in day)] \
+        if others else []
     starts = [a for i in days for (a, _, v) in week[i] if v == occ]
     ends = [b for i in days for (_, b, v) in week[i] if v == occ]
     hours = (min(starts), max(ends)) if days else (0.0, 24.0)
-    levels = sorted(set(values))
     if len(levels) > 2:
         notes.append(f"{len(levels)} set point levels {levels} read as two ({occ} occupied, "
                      f"{unocc} unoccupied)")
@@ -300,11 +317,15 @@ def draft_thermostat(data: Mapping, zones: list[str]) -> tuple[dict | None, list
     if hs is None:
         return None, [*notes, (f"thermostat not drafted: heating set point schedule {heat} "
                                "is not a Schedule:Compact or Schedule:Constant")]
-    h_occ, h_unocc, hours, days, n1 = _two_levels(_week(hs, HEATING_WEEK), high=True)
+    try:
+        h_occ, h_unocc, hours, days, n1 = _two_levels(_week(hs, HEATING_WEEK), high=True)
+        cool_levels = None if cs is None else _two_levels(_week(cs, COOLING_WEEK), high=False)
+    except ScheduleError as exc:
+        return None, [*notes, f"thermostat not drafted: {exc}"]
     notes += [f"heating: {n}" for n in n1]
     out: dict = {"heating_occupied": h_occ, "heating_unoccupied": h_unocc}
-    if cs is not None:
-        c_occ, c_unocc, c_hours, c_days, n2 = _two_levels(_week(cs, COOLING_WEEK), high=False)
+    if cool_levels is not None:
+        c_occ, c_unocc, c_hours, c_days, n2 = cool_levels
         notes += [f"cooling: {n}" for n in n2]
         out.update(cooling_occupied=c_occ, cooling_unoccupied=c_unocc)
         if h_occ == h_unocc:          # no heating setback: the cooling schedule tells the hours
@@ -314,7 +335,26 @@ def draft_thermostat(data: Mapping, zones: list[str]) -> tuple[dict | None, list
                      "default")
         return out, notes
     out.update(occupied_hours=[float(hours[0]), float(hours[1])], working_days=days)
-    return out, notes
+    return _valid_thermostat(out, notes)
+
+
+def _valid_thermostat(out: dict, notes: list[str]) -> tuple[dict | None, list[str]]:
+    """``out`` if it is a valid thermostat section; else without its cooling set points
+    (files often write 99 degC for "cooling off"), else None; with a note either way."""
+    try:
+        Thermostat.model_validate(out)
+        return out, notes
+    except ValidationError as exc:
+        why = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+    heating = {k: v for k, v in out.items() if not k.startswith("cooling")}
+    if len(heating) < len(out):
+        try:
+            Thermostat.model_validate(heating)
+            return heating, [*notes, (f"cooling set points left out ({why}; a sentinel such as "
+                                     "99 degC reads as 'cooling off')")]
+        except ValidationError:
+            pass
+    return None, [*notes, f"thermostat not drafted: the set points read are out of range ({why})"]
 
 
 def draft_site(idf: str | os.PathLike, *, out: str | os.PathLike | None = None,

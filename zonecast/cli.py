@@ -397,8 +397,8 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     if pinned:
         typer.secho(f"warning: at a bound (not determined by the data): {', '.join(pinned)}",
                     fg=typer.colors.YELLOW)
-    occupied = (weekend_occupancy_warning(res.gain_scale) if weekend_gains == "daytime"
-                else None)
+    occupied = (weekend_occupancy_warning(res.gain_scale, day_scale=res.gain_day_scale)
+                if weekend_gains == "daytime" else None)
     if occupied:
         typer.secho(f"warning: {occupied}", fg=typer.colors.YELLOW)
     if used:
@@ -503,7 +503,9 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
         _fail(exc)
     t2, t3 = res.table2, res.table3
     _warn_bounds(res)
-    occupied = (weekend_occupancy_warning((res.identification or {}).get("gain_scale"))
+    ident = res.identification or {}
+    occupied = (weekend_occupancy_warning(ident.get("gain_scale"),
+                                          day_scale=ident.get("gain_day_scale"))
                 if weekend_gains == "daytime" else None)
     if occupied:
         typer.secho(f"warning: {occupied}", fg=typer.colors.YELLOW)

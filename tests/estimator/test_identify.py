@@ -525,3 +525,14 @@ def test_weekend_occupancy_warning_names_the_zones_above_an_empty_office():
                                      "C": {"value": 2.4, "se": 0.2}})
     assert msg.startswith("the weekends look occupied: zones C 2.4 fitted")
     assert "N 0.4" not in msg and "weekends without people" in msg
+
+
+def test_the_warning_counts_a_weekend_days_own_scale():
+    """With per-day deviations a zone's busiest day counts: a base scale of 0.8 with a
+    Saturday 0.6 above it is a weekend with people."""
+    from zonecast.estimator.pipeline import weekend_occupancy_warning
+
+    base = {"N": {"value": 0.8, "se": 0.1}}
+    assert weekend_occupancy_warning(base) is None
+    days = {"N,2015-04-18": {"value": 0.6, "se": 0.2}, "N,2015-04-19": {"value": -0.5, "se": 0.2}}
+    assert "zones N 1.4" in weekend_occupancy_warning(base, day_scale=days)

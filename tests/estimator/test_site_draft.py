@@ -162,3 +162,42 @@ def test_nrel_five_zone_draft_matches_what_energyplus_ran(tmp_path):
     assert (t.heating_occupied, t.heating_unoccupied) == (22.2, 16.7)
     assert (t.cooling_occupied, t.cooling_unoccupied) == (23.9, 29.4)
     assert t.occupied_hours == (6.0, 20.0) and t.working_days == [0, 1, 2, 3, 4]
+
+
+def test_thermostat_schedules_that_are_read_wrongly_or_not_at_all_say_so():
+    """A warm-up boost is not the occupied level; a 99 degC cooling sentinel reads as
+    cooling off; a -60 degC heating sentinel, or a schedule without a Sunday rule, leaves the
+    thermostat out with a note instead of failing the draft."""
+    data = _building()
+    data["Schedule:Compact"]["HTG"] = _compact(
+        "Through: 12/31", "For: Weekdays", "Until: 05:00", 15.0, "Until: 07:00", 23.0,
+        "Until: 18:00", 21.0, "Until: 24:00", 15.0, "For: AllOtherDays", "Until: 24:00", 15.0)
+    t, notes = draft_thermostat(data, ["A", "B"])
+    assert (t["heating_occupied"], t["heating_unoccupied"]) == (21.0, 15.0)
+    assert t["occupied_hours"] == [7.0, 18.0] and any("3 set point levels" in n for n in notes)
+    data["Schedule:Compact"]["CLG"] = _compact(
+        "Through: 12/31", "For: Weekdays", "Until: 07:00", 99.0, "Until: 18:00", 24.0,
+        "Until: 24:00", 99.0, "For: AllOtherDays", "Until: 24:00", 99.0)
+    t, notes = draft_thermostat(data, ["A", "B"])
+    assert "cooling_occupied" not in t and t["heating_occupied"] == 21.0
+    assert any(n.startswith("cooling set points left out") for n in notes)
+    data["Schedule:Compact"]["HTG"] = _compact(
+        "Through: 12/31", "For: Weekdays", "Until: 07:00", -60.0, "Until: 18:00", 21.0,
+        "Until: 24:00", -60.0, "For: AllOtherDays", "Until: 24:00", -60.0)
+    t, notes = draft_thermostat(data, ["A", "B"])
+    assert t is None and any("out of range" in n for n in notes)
+    data["Schedule:Compact"]["HTG"] = _compact(
+        "Through: 12/31", "For: Weekdays", "Until: 24:00", 21.0,
+        "For: Saturday", "Until: 24:00", 15.0)
+    t, notes = draft_thermostat(data, ["A", "B"])
+    assert t is None and any("no values for a sunday" in n for n in notes)
+
+
+def test_point_names_stay_distinct_when_names_differ_only_in_spaces(tmp_path):
+    data = _building()
+    data["Zone"] = {"A 1": {}, "A_1": {}}
+    data["ZoneList"]["Offices"]["zones"] = [{"zone_name": "A 1"}, {"zone_name": "A_1"}]
+    data["ZoneHVAC:EquipmentConnections"]["A c"]["zone_name"] = "A 1"
+    data["ZoneHVAC:EquipmentConnections"]["B c"]["zone_name"] = "A_1"
+    s = draft_site(tmp_path / "b.idf", data=data, timezone="UTC").site
+    assert [p[0].point for p in s.points.zone_temperature.values()] == ["T_A_1", "T_A_1_2"]

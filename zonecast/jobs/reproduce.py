@@ -7,6 +7,7 @@ below), figures (PNG) and ``report.md`` with Tables 1-3 beside the paper's numbe
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import time
 from dataclasses import replace
@@ -145,7 +146,8 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                    "`none` gives the paper's f_IG = 0), so Table 2 and Fig. 1 are the model with "
                    "those gains. Scales: "
                    + _scales(scale) + "."), ""]
-        occupied = weekend_occupancy_warning(scale)
+        occupied = weekend_occupancy_warning(
+            scale, day_scale=(results.identification or {}).get("gain_day_scale"))
         if occupied:
             lines += [f"**Warning:** {occupied}.", ""]
     elif mode == "scaled":
@@ -240,7 +242,16 @@ def _daytime_gains(mode, ident, data) -> np.ndarray | None:
     scale = ident.gain_scale if mode == "daytime" else None
     if not scale:
         return None
-    return weekend_daytime_shape(data) * np.array([scale[z]["value"] for z in data.zones])
+    shape = weekend_daytime_shape(data)
+    gains = shape * np.array([scale[z]["value"] for z in data.zones])
+    # each training day's own deviation (identify(day_scale_sd=)), as Table 2 scored it
+    dates = np.asarray(data.local_times().date)
+    for key, d in (ident.gain_day_scale or {}).items():
+        zone, day = key.rsplit(",", 1)
+        j = data.zones.index(zone)
+        on = dates == dt.date.fromisoformat(day)
+        gains[on, j] += shape[on, j] * d["value"]
+    return gains
 
 
 def plot_weekends(sims: list[dict], roles: dict[str, str], zones: list[str], path: Path,

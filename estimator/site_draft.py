@@ -42,7 +42,8 @@ from zonecast.estimator.schedules import CompactSchedule, ScheduleError
 from zonecast.estimator.site import Site, Thermostat
 
 __all__ = ["DraftError", "SiteDraft", "TerminalLink", "draft_site", "draft_thermostat",
-           "local_timezone", "point_names", "zone_terminals"]
+           "epjson_objects", "find_name", "local_timezone", "point_names", "safe_name",
+           "zone_terminals"]
 
 #: IANA zone of a US standard UTC offset [h], for files that observe daylight saving time
 US_ZONES = {-5.0: "America/New_York", -6.0: "America/Chicago", -7.0: "America/Denver",
@@ -98,11 +99,12 @@ class SiteDraft:
         return "\n".join(head) + "\n" + body
 
 
-def _objects(data: Mapping, kind: str) -> dict[str, dict]:
+def epjson_objects(data: Mapping, kind: str) -> dict[str, dict]:
+    """The objects of type ``kind`` in epJSON ``data`` (name -> fields), {} if none."""
     return data.get(kind) or {}
 
 
-def _find(table: Mapping[str, Any], name: str) -> str | None:
+def find_name(table: Mapping[str, Any], name: str) -> str | None:
     """The key of ``table`` equal to ``name`` ignoring case (EnergyPlus names are)."""
     up = str(name).upper()
     return next((k for k in table if k.upper() == up), None)
@@ -110,8 +112,8 @@ def _find(table: Mapping[str, Any], name: str) -> str | None:
 
 def _zone_list(data: Mapping, name: str) -> list[str]:
     """The zones a ``Zone`` or ``ZoneList`` name stands for (upper case)."""
-    lists = _objects(data, "ZoneList")
-    key = _find(lists, name)
+    lists = epjson_objects(data, "ZoneList")
+    key = find_name(lists, name)
     if key is None:
         return [str(name).upper()]
     return [str(z.get("zone_name", "")).upper() for z in lists[key].get("zones", [])]
@@ -128,17 +130,17 @@ def zone_terminals(data: Mapping) -> tuple[list[TerminalLink], list[str]]:
         Zones with a thermostat but no air terminal, and equipment that is not an air
         distribution unit (baseboards, fan coils ...), each with the reason.
     """
-    adus = _objects(data, "ZoneHVAC:AirDistributionUnit")
-    lists = _objects(data, "ZoneHVAC:EquipmentList")
-    zones = _objects(data, "Zone")
-    controlled = {z for f in _objects(data, "ZoneControl:Thermostat").values()
+    adus = epjson_objects(data, "ZoneHVAC:AirDistributionUnit")
+    lists = epjson_objects(data, "ZoneHVAC:EquipmentList")
+    zones = epjson_objects(data, "Zone")
+    controlled = {z for f in epjson_objects(data, "ZoneControl:Thermostat").values()
                   for z in _zone_list(data, f.get("zone_or_zonelist_name", ""))}
     out: list[TerminalLink] = []
     skipped: list[str] = []
     served = set()
-    for conn in _objects(data, "ZoneHVAC:EquipmentConnections").values():
-        zone = _find(zones, conn.get("zone_name", ""))
-        lst = _find(lists, conn.get("zone_conditioning_equipment_list_name", ""))
+    for conn in epjson_objects(data, "ZoneHVAC:EquipmentConnections").values():
+        zone = find_name(zones, conn.get("zone_name", ""))
+        lst = find_name(lists, conn.get("zone_conditioning_equipment_list_name", ""))
         if zone is None or lst is None or zone.upper() not in controlled:
             continue
         for eq in lists[lst].get("equipment", []):
@@ -147,7 +149,7 @@ def zone_terminals(data: Mapping) -> tuple[list[TerminalLink], list[str]]:
                 skipped.append(f"{zone}: {etype} {eq.get('zone_equipment_name', '')} is not an "
                                "air terminal (its heat is not a model input)")
                 continue
-            key = _find(adus, eq.get("zone_equipment_name", ""))
+            key = find_name(adus, eq.get("zone_equipment_name", ""))
             if key is None:
                 skipped.append(f"{zone}: air distribution unit {eq.get('zone_equipment_name')} "
                                "is not defined")
@@ -155,19 +157,20 @@ def zone_terminals(data: Mapping) -> tuple[list[TerminalLink], list[str]]:
             adu = adus[key]
             kind = str(adu.get("air_terminal_object_type", ""))
             kind = next((k for k in data if k.upper() == kind.upper()), kind)
-            tkey = _find(_objects(data, kind), adu.get("air_terminal_name", ""))
-            fields = _objects(data, kind).get(tkey, {}) if tkey else {}
+            tkey = find_name(epjson_objects(data, kind), adu.get("air_terminal_name", ""))
+            fields = epjson_objects(data, kind).get(tkey, {}) if tkey else {}
             name = tkey or str(adu.get("air_terminal_name", ""))
             out.append(TerminalLink(zone, kind, name, fields.get("reheat_coil_name")))
             served.add(zone.upper())
     for z in sorted(controlled):
-        if z not in served and _find(zones, z) is not None:
-            skipped.append(f"{_find(zones, z)}: thermostat but no air terminal (not a model "
+        if z not in served and find_name(zones, z) is not None:
+            skipped.append(f"{find_name(zones, z)}: thermostat but no air terminal (not a model "
                            "zone: the model's HVAC input is the boxes' airflow)")
     return out, skipped
 
 
-def _safe(name: str) -> str:
+def safe_name(name: str) -> str:
+    """``name`` with characters other than letters, digits, ``_``, ``.`` and ``-`` as ``_``."""
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
@@ -184,9 +187,9 @@ def point_names(zones: list[str], boxes: list[str]) -> dict:
         used.add(out.upper())
         return out
 
-    return {"temp": {z: unique(f"T_{_safe(z)}") for z in zones},
-            "flow": {b: unique(f"{_safe(b)}_flow") for b in boxes},
-            "discharge": {b: unique(f"{_safe(b)}_DAT") for b in boxes},
+    return {"temp": {z: unique(f"T_{safe_name(z)}") for z in zones},
+            "flow": {b: unique(f"{safe_name(b)}_flow") for b in boxes},
+            "discharge": {b: unique(f"{safe_name(b)}_DAT") for b in boxes},
             "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI"}
 
 
@@ -204,7 +207,7 @@ def local_timezone(data: Mapping, utc_offset: float, timezone: str | None = None
     if timezone is not None:
         ZoneInfo(timezone)
         return timezone
-    if _objects(data, "RunPeriodControl:DaylightSavingTime"):
+    if epjson_objects(data, "RunPeriodControl:DaylightSavingTime"):
         if utc_offset not in US_ZONES:
             raise DraftError(f"daylight saving time at UTC{utc_offset:+g}: give the site's IANA "
                              "time zone (--timezone, e.g. Europe/Berlin)")
@@ -217,12 +220,12 @@ def local_timezone(data: Mapping, utc_offset: float, timezone: str | None = None
 def _schedule(data: Mapping, name: str) -> CompactSchedule | float | None:
     """A set point schedule: a constant, a parsed compact schedule, or None if its type is
     not read here."""
-    key = _find(_objects(data, "Schedule:Constant"), name)
+    key = find_name(epjson_objects(data, "Schedule:Constant"), name)
     if key is not None:
-        return float(_objects(data, "Schedule:Constant")[key].get("hourly_value", 0.0))
-    key = _find(_objects(data, "Schedule:Compact"), name)
+        return float(epjson_objects(data, "Schedule:Constant")[key].get("hourly_value", 0.0))
+    key = find_name(epjson_objects(data, "Schedule:Compact"), name)
     if key is not None:
-        return CompactSchedule.from_epjson(key, _objects(data, "Schedule:Compact")[key])
+        return CompactSchedule.from_epjson(key, epjson_objects(data, "Schedule:Compact")[key])
     return None
 
 
@@ -273,7 +276,7 @@ def _two_levels(week: list[list[tuple[float, float, float]]], high: bool
 def draft_thermostat(data: Mapping, zones: list[str]) -> tuple[dict | None, list[str]]:
     """The site's ``thermostat`` section from the set point schedules of ``zones``' thermostats
     (the set most zones use), or None with the reason in the notes."""
-    controls = _objects(data, "ZoneControl:Thermostat")
+    controls = epjson_objects(data, "ZoneControl:Thermostat")
     upper = {z.upper() for z in zones}
     pairs: Counter = Counter()
     for f in controls.values():
@@ -287,15 +290,15 @@ def draft_thermostat(data: Mapping, zones: list[str]) -> tuple[dict | None, list
         heat = cool = None
         dual_key = "THERMOSTATSETPOINT:DUALSETPOINT"
         if dual_key in objs:
-            table = _objects(data, "ThermostatSetpoint:DualSetpoint")
-            d = table.get(_find(table, objs[dual_key]) or "", {})
+            table = epjson_objects(data, "ThermostatSetpoint:DualSetpoint")
+            d = table.get(find_name(table, objs[dual_key]) or "", {})
             heat = d.get("heating_setpoint_temperature_schedule_name")
             cool = d.get("cooling_setpoint_temperature_schedule_name")
         for kind, attr in (("ThermostatSetpoint:SingleHeating", "heat"),
                            ("ThermostatSetpoint:SingleCooling", "cool")):
             if kind.upper() in objs and (heat if attr == "heat" else cool) is None:
-                table = _objects(data, kind)
-                d = table.get(_find(table, objs[kind.upper()]) or "", {})
+                table = epjson_objects(data, kind)
+                d = table.get(find_name(table, objs[kind.upper()]) or "", {})
                 name = d.get("setpoint_temperature_schedule_name")
                 heat, cool = (name, cool) if attr == "heat" else (heat, name)
         pairs[(heat, cool)] += 1
@@ -390,7 +393,7 @@ def draft_site(idf: str | os.PathLike, *, out: str | os.PathLike | None = None,
                          "(ZoneHVAC:EquipmentConnections -> ZoneHVAC:EquipmentList -> "
                          "ZoneHVAC:AirDistributionUnit); the model's HVAC input is the boxes' "
                          "airflow. " + "; ".join(notes))
-    sites = list(_objects(data, "Site:Location").values())
+    sites = list(epjson_objects(data, "Site:Location").values())
     if not sites:
         raise DraftError(f"{idf.name} has no Site:Location: add one (latitude, longitude, "
                          "time zone, elevation) or write the site's location by hand")
@@ -414,7 +417,7 @@ def draft_site(idf: str | os.PathLike, *, out: str | os.PathLike | None = None,
     except ValueError:  # another drive
         rel = str(idf.resolve())
     doc: dict[str, Any] = {
-        "building": _safe(idf.stem).replace(".", "-"),
+        "building": safe_name(idf.stem).replace(".", "-"),
         "idf": rel,
         "timezone": tz,
         "location": {"latitude": float(loc.get("latitude", 0.0)),
@@ -437,7 +440,7 @@ def draft_site(idf: str | os.PathLike, *, out: str | os.PathLike | None = None,
                       "direct_normal": {"point": names["dni"], "unit": "W/m2"},
                       "diffuse_horizontal": {"point": names["dhi"], "unit": "W/m2"}}},
     }
-    loops = _objects(data, "AirLoopHVAC")
+    loops = epjson_objects(data, "AirLoopHVAC")
     if len(loops) > 1:
         notes.append(f"{len(loops)} air loops ({', '.join(loops)}): `supply_air_temperature` is "
                      "one point; map it to the loop serving most boxes or to the boxes' flow-"

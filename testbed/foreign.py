@@ -44,14 +44,20 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 from zoneinfo import ZoneInfo
 
 import numpy as np
 import pandas as pd
 from zonecast.estimator.idf import find_energyplus, load_epjson
 from zonecast.estimator.site import Site
-from zonecast.estimator.site_draft import DraftError, local_timezone, zone_terminals
+from zonecast.estimator.site_draft import (
+    DraftError,
+    epjson_objects,
+    find_name,
+    local_timezone,
+    safe_name,
+    zone_terminals,
+)
 from zonecast.estimator.site_draft import point_names as draft_point_names
 from zonecast.testbed.config import load_config
 from zonecast.testbed.effects import Effects
@@ -160,26 +166,16 @@ class Layout:
     override_schedules: dict[str, str] = field(default_factory=dict)
 
 
-def _objects(data: dict, kind: str) -> dict[str, dict]:
-    return data.get(kind) or {}
-
-
-def _find(table: dict[str, Any], name: str) -> str | None:
-    """The key of ``table`` equal to ``name`` ignoring case (EnergyPlus names are)."""
-    up = name.upper()
-    return next((k for k in table if k.upper() == up), None)
-
-
 def _schedule_type(data: dict, name: str) -> str | None:
     for kind in SCHEDULE_TYPES:
-        if _find(_objects(data, kind), name) is not None:
+        if find_name(epjson_objects(data, kind), name) is not None:
             return kind
     return None
 
 
 def _schedule_uses(data: dict) -> dict[str, set[tuple[str, str]]]:
     """Schedule name (upper case) -> {(object type, field)} of every reference to it."""
-    names = {n.upper() for kind in SCHEDULE_TYPES for n in _objects(data, kind)}
+    names = {n.upper() for kind in SCHEDULE_TYPES for n in epjson_objects(data, kind)}
     uses: dict[str, set[tuple[str, str]]] = {}
 
     def walk(kind, value, key):
@@ -231,9 +227,9 @@ def describe(data: dict) -> Layout:
     # air loops: supply outlet node, and the terminal inlet nodes their splitters feed
     loops: dict[str, str] = {}
     feeds: dict[str, str] = {}  # terminal inlet node (upper) -> loop
-    paths = _objects(data, "AirLoopHVAC:SupplyPath")
-    splitters = _objects(data, "AirLoopHVAC:ZoneSplitter")
-    for name, loop in _objects(data, "AirLoopHVAC").items():
+    paths = epjson_objects(data, "AirLoopHVAC:SupplyPath")
+    splitters = epjson_objects(data, "AirLoopHVAC:ZoneSplitter")
+    for name, loop in epjson_objects(data, "AirLoopHVAC").items():
         loops[name] = loop["supply_side_outlet_node_names"]
         inlet = str(loop.get("demand_side_inlet_node_names", "")).upper()
         for path in paths.values():
@@ -241,12 +237,12 @@ def describe(data: dict) -> Layout:
                 continue
             for comp in path.get("components", []):
                 if comp.get("component_object_type", "").upper() == "AIRLOOPHVAC:ZONESPLITTER":
-                    sp = splitters[_find(splitters, comp["component_name"])]
+                    sp = splitters[find_name(splitters, comp["component_name"])]
                     for n in sp.get("nodes", []):
                         feeds[n["outlet_node_name"].upper()] = name
     terminals = []
     for zone, kind, tname in found:
-        t = _objects(data, kind)[_find(_objects(data, kind), tname)]
+        t = epjson_objects(data, kind)[find_name(epjson_objects(data, kind), tname)]
         loop = feeds.get(t["air_inlet_node_name"].upper())
         if loop is None and len(loops) == 1:
             loop = next(iter(loops))
@@ -268,12 +264,12 @@ def describe(data: dict) -> Layout:
     # neighbours through interior surfaces; windows by the zone of their base surface
     surf_zone = {}
     for kind in SURFACE_TYPES:
-        for name, f in _objects(data, kind).items():
+        for name, f in epjson_objects(data, kind).items():
             surf_zone[name.upper()] = f.get("zone_name", "")
     zset = {z.upper(): z for z in zones}
     neighbours: dict[str, set[str]] = {z: set() for z in zones}
     for kind in SURFACE_TYPES:
-        for name, f in _objects(data, kind).items():
+        for name, f in epjson_objects(data, kind).items():
             other = f.get("outside_boundary_condition_object")
             if f.get("outside_boundary_condition", "").upper() != "SURFACE" or not other:
                 continue
@@ -284,7 +280,7 @@ def describe(data: dict) -> Layout:
                 neighbours[b].add(a)
     windows: dict[str, list[str]] = {z: [] for z in zones}
     for kind in WINDOW_TYPES:
-        for name, f in _objects(data, kind).items():
+        for name, f in epjson_objects(data, kind).items():
             z = zset.get(surf_zone.get(f.get("building_surface_name", "").upper(), "").upper())
             if z:
                 windows[z].append(name)
@@ -293,7 +289,7 @@ def describe(data: dict) -> Layout:
     for sched, uses in _schedule_uses(data).items():
         if uses and all(_is_availability(k, key) for k, key in uses):
             kind = _schedule_type(data, sched)
-            name = next(n for n in _objects(data, kind) if n.upper() == sched)
+            name = next(n for n in epjson_objects(data, kind) if n.upper() == sched)
             override[name] = kind
     return Layout(zones, terminals, loops, neighbours, windows, override)
 
@@ -328,7 +324,7 @@ def patch_epjson(data: dict, layout: Layout, periods: list[tuple[dt.date, dt.dat
     out = copy.deepcopy(data)
     changes = []
     version = ".".join(str(v) for v in find_energyplus().version)
-    for name in _objects(out, "Version"):
+    for name in epjson_objects(out, "Version"):
         if out["Version"][name].get("version_identifier") != version:
             changes.append(f"Version: {out['Version'][name].get('version_identifier')} -> {version} "
                            "(read and validated with this version's schema)")
@@ -342,14 +338,14 @@ def patch_epjson(data: dict, layout: Layout, periods: list[tuple[dt.date, dt.dat
             "use_weather_file_rain_indicators": "Yes", "use_weather_file_snow_indicators": "Yes"}
         for i, (a, b) in enumerate(periods)}
     changes.append(f"RunPeriod: replaced by {len(periods)} campaign periods")
-    for name in _objects(out, "SimulationControl"):
+    for name in epjson_objects(out, "SimulationControl"):
         out["SimulationControl"][name].update(run_simulation_for_sizing_periods="No",
                                               run_simulation_for_weather_file_run_periods="Yes")
         changes.append("SimulationControl: run the weather-file periods, not the design days")
     n = timesteps_per_hour(out)
     if n % 4:
         m = next(k for k in (4, 12, 20, 60) if k >= n)
-        for name in _objects(out, "Timestep"):
+        for name in epjson_objects(out, "Timestep"):
             out["Timestep"][name]["number_of_timesteps_per_hour"] = m
         changes.append(f"Timestep: {n} -> {m} per hour (15-min telemetry)")
     for kind in REPORTING:
@@ -370,7 +366,7 @@ def patch_epjson(data: dict, layout: Layout, periods: list[tuple[dt.date, dt.dat
     changes.append(f"Schedule:File: {len(cols)} columns of {schedule_file} added")
     for t in layout.terminals:
         if t.vav:
-            f = out[t.kind][_find(out[t.kind], t.name)]
+            f = out[t.kind][find_name(out[t.kind], t.name)]
             f["zone_minimum_air_flow_input_method"] = "Scheduled"
             f["minimum_air_flow_fraction_schedule_name"] = fraction_schedule(t)
             changes.append(f"{t.kind} {t.name}: zone_minimum_air_flow_input_method Scheduled, "
@@ -441,7 +437,7 @@ def patch_epjson(data: dict, layout: Layout, periods: list[tuple[dt.date, dt.dat
 
 def timesteps_per_hour(data: dict) -> int:
     """The file's zone time steps per hour (EnergyPlus's default 6 if absent)."""
-    ts = list(_objects(data, "Timestep").values())
+    ts = list(epjson_objects(data, "Timestep").values())
     return int(ts[0].get("number_of_timesteps_per_hour", 6)) if ts else 6
 
 
@@ -525,7 +521,7 @@ def find_weather(data: dict, weather: str | Path | None = None) -> Path:
             raise ForeignBuildingError(f"weather file {weather} not found (give a path or one of "
                                        f"{sorted(q.name for q in wdir.glob('*.epw'))})")
         return p
-    sites = list(_objects(data, "Site:Location").values())
+    sites = list(epjson_objects(data, "Site:Location").values())
     if not sites:
         raise ForeignBuildingError("the input has no Site:Location; pass weather=PATH.epw")
     lat, lon = float(sites[0].get("latitude", 0)), float(sites[0].get("longitude", 0))
@@ -536,10 +532,6 @@ def find_weather(data: dict, weather: str | Path | None = None) -> Path:
         raise ForeignBuildingError(f"no shipped weather file within 1 degree of the file's site "
                                    f"({lat}, {lon}); pass weather=PATH.epw")
     return best
-
-
-def _safe(name: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
 def point_names(layout: Layout) -> dict:
@@ -608,7 +600,7 @@ def to_records(layout: Layout, wide: pd.DataFrame, per_hour: int, keep: list, st
         weighted = sum(flows[k] * temps[k] for k in temps) / np.where(total > 0, total, 1.0)
         tel[names["sat"]] = np.where(total > 1e-6, weighted, mean)
         for loop, v in temps.items():
-            tel[f"AHU_SAT_{_safe(loop)}"] = v
+            tel[f"AHU_SAT_{safe_name(loop)}"] = v
     w = weather_columns(iv)
     tel[names["oat"]] = w["oat"]
     tel[names["ghi"]], tel[names["dni"]], tel[names["dhi"]] = w["ghi"], w["dni"], w["dhi"]
@@ -777,7 +769,7 @@ def run_foreign(idf: str | Path, out: str | Path, weeks: list[dt.date] | None = 
     thermostat = infer_thermostat(tru, layout.zones, tzname, in_exp)
     names = point_names(layout)
     site = Site.model_validate({
-        "building": _safe(idf.stem).replace(".", "-"), "idf": model.name, "timezone": tzname,
+        "building": safe_name(idf.stem).replace(".", "-"), "idf": model.name, "timezone": tzname,
         "location": {"latitude": loc["latitude"], "longitude": loc["longitude"],
                      "elevation": loc["elevation"]},
         "step": "15min", "zones": {z: [z] for z in layout.zones},

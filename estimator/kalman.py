@@ -38,6 +38,7 @@ __all__ = [
     "Innovation",
     "KalmanInputError",
     "SteadyStateFilter",
+    "YoungFilter",
     "ZoneStateFilter",
     "air_wall_covariance",
     "default_initial_covariance",
@@ -47,6 +48,7 @@ __all__ = [
     "initial_state_from_measurement",
     "run_filter",
     "steady_state_covariance",
+    "young_filter",
 ]
 
 StepFn = Callable[[int], tuple[np.ndarray, np.ndarray | None]]
@@ -356,6 +358,97 @@ class SteadyStateFilter:
         K = self._pattern(np.ones(self.H.shape[0], bool))[0]
         P = self.P - K @ self._PHt.T
         return 0.5 * (P + P.T)
+
+
+@dataclass(frozen=True)
+class YoungFilter:
+    """Gains of the time-invariant Kalman filter in its first steps after a start.
+
+    Step j (1..``steps``) of the filter started from ``P0`` and updated with every output
+    at the start and at each step: ``P_j- = F P_(j-1)+ F' + Q``,
+    ``K_j = P_j- H' S_j^-1`` with ``S_j = H P_j- H' + R``, ``P_j+ = (I - K_j H) P_j-``.
+    They depend on j only, not on the data, so they are computed once per model; the
+    steady-state filter (:class:`SteadyStateFilter`) is their limit.
+
+    Attributes
+    ----------
+    gains : ndarray (steps, n, m)
+        ``K_j`` at index j - 1 [-].
+    S : ndarray (steps, m, m)
+        Innovation covariances ``S_j`` [K²]; ``S_inv`` their inverses [1/K²].
+    output_var : ndarray (steps + 1, m)
+        ``diag(H P_j+ H')`` for j = 0..steps [K²].
+    horizon_at : ndarray of int
+        Steps j at which ``horizon_var`` was evaluated (0, 1, 2, 4, ...).
+    horizon_var : ndarray (len(horizon_at), horizon, m)
+        :func:`horizon_output_variances` from ``P_j+`` [K²].
+    """
+
+    gains: np.ndarray
+    S: np.ndarray
+    S_inv: np.ndarray
+    output_var: np.ndarray
+    horizon_at: np.ndarray
+    horizon_var: np.ndarray
+
+    @property
+    def steps(self) -> int:
+        return len(self.gains)
+
+    def horizon_variance(self, j: int) -> np.ndarray:
+        """Forecast output variances (horizon, m) [K²] after step j: those of the latest
+        evaluated step at or before j (never narrower than the filter's at j, since
+        ``P_j+`` shrinks with j)."""
+        i = int(np.searchsorted(self.horizon_at, j, side="right")) - 1
+        return self.horizon_var[max(i, 0)]
+
+
+def young_filter(F, H, Q, R, P0, steps: int, horizon: int, *,
+                 rtol: float = 1e-3) -> YoungFilter:
+    """The time-varying gains of the filter from ``P0`` for up to ``steps`` steps
+    (:class:`YoungFilter`), ending early once the gain is within ``rtol`` (relative to
+    its largest entry) of the steady-state gain.
+
+    Parameters
+    ----------
+    F : (n, n) [-]; H : (m, n) [-]; Q : (n, n) or (n,) [K²]; R : (m, m) or (m,) [K²];
+    P0 : (n, n) or (n,) covariance at the start, before its measurement [K²];
+    steps : int, steps to compute at most; horizon : int, forecast steps.
+    """
+    F = np.asarray(F, dtype=float)
+    n = F.shape[0]
+    H = np.asarray(H, dtype=float)
+    Q, R, P = _square("Q", Q, n), _square("R", R, H.shape[0]), _square("P0", P0, n)
+    K_ss = SteadyStateFilter(steady_state_covariance(F, H, Q, R), H, R)._pattern(
+        np.ones(H.shape[0], bool))[0]
+    scale = max(float(np.abs(K_ss).max()), 1e-12)
+
+    def update(P):
+        S = H @ P @ H.T + R
+        S = 0.5 * (S + S.T)
+        S_inv = np.linalg.inv(S)
+        K = P @ H.T @ S_inv
+        P = P - K @ (H @ P)
+        return 0.5 * (P + P.T), K, S, S_inv
+
+    P = update(P)[0]
+    gains, Ss, Sis, out_var, at, hv = [], [], [], [np.diag(H @ P @ H.T)], [0], []
+    hv.append(horizon_output_variances(F, P, Q, H, horizon))
+    for j in range(1, steps + 1):
+        P, K, S, S_inv = update(F @ P @ F.T + Q)
+        gains.append(K)
+        Ss.append(S)
+        Sis.append(S_inv)
+        out_var.append(np.diag(H @ P @ H.T))
+        if j & (j - 1) == 0:  # powers of two
+            at.append(j)
+            hv.append(horizon_output_variances(F, P, Q, H, horizon))
+        if np.abs(K - K_ss).max() <= rtol * scale:
+            break
+    m = H.shape[0]
+    return YoungFilter(np.array(gains).reshape(-1, n, m), np.array(Ss).reshape(-1, m, m),
+                       np.array(Sis).reshape(-1, m, m), np.array(out_var),
+                       np.array(at, dtype=int), np.array(hv))
 
 
 @dataclass(frozen=True)

@@ -297,3 +297,46 @@ def test_update_equals_filterpys_joseph_update(seed, n, m, p_missing):
     scale = max(1.0, np.abs(P0).max())
     np.testing.assert_allclose(f.x, ref.x, rtol=1e-9, atol=1e-9 * scale)
     np.testing.assert_allclose(f.P, 0.5 * (ref.P + ref.P.T), rtol=1e-8, atol=1e-9 * scale)
+
+
+def test_young_filter_is_the_time_varying_filter_from_its_start():
+    """The young filter's gains, innovation covariances and output variances are those of
+    the time-varying filter started from P0 with every output measured; they end once
+    the gain is within rtol of the steady-state gain; its forecast variances are those
+    propagated from the posterior of the latest evaluated step (never narrower)."""
+    rng = np.random.default_rng(33)
+    n, m = 6, 2
+    F, H, Q, R = random_system(rng, n, m)
+    P0 = np.diag(rng.uniform(1.0, 4.0, n))
+    yf = K.young_filter(F, H, Q, R, P0, steps=300, horizon=5, rtol=1e-6)
+    f = K.ZoneStateFilter(np.zeros(n), P0, H, Q, R)
+    f.update(np.zeros(m))
+    np.testing.assert_allclose(yf.output_var[0], np.diag(H @ f.P @ H.T), rtol=1e-10)
+    posts = [f.P]
+    for j in range(yf.steps):
+        f.predict(F)
+        prior = f.P
+        inn = f.update(np.zeros(m))
+        S = H @ prior @ H.T + R
+        np.testing.assert_allclose(yf.S[j], S, rtol=1e-9)
+        np.testing.assert_allclose(yf.gains[j], prior @ H.T @ np.linalg.inv(S), rtol=1e-8,
+                                   atol=1e-12)
+        np.testing.assert_allclose(yf.S_inv[j] @ yf.S[j], np.eye(m), atol=1e-9)
+        np.testing.assert_allclose(yf.output_var[j + 1], np.diag(H @ f.P @ H.T), rtol=1e-8)
+        assert inn.dof == m
+        posts.append(f.P)
+    # ended early, at the steady gain
+    assert 1 < yf.steps < 300
+    P_ss = K.steady_state_covariance(F, H, Q, R)
+    K_ss = P_ss @ H.T @ np.linalg.inv(H @ P_ss @ H.T + R)
+    assert np.abs(yf.gains[-1] - K_ss).max() <= 1e-6 * np.abs(K_ss).max()
+    assert np.abs(yf.gains[0] - K_ss).max() > 1e-3 * np.abs(K_ss).max()
+    # forecast variances: from the latest power-of-two step at or before j
+    assert list(yf.horizon_at[:4]) == [0, 1, 2, 4]
+    for j in (0, 3, 5):
+        at = max(a for a in yf.horizon_at if a <= j)
+        np.testing.assert_allclose(yf.horizon_variance(j),
+                                   K.horizon_output_variances(F, posts[at], Q, H, 5),
+                                   rtol=1e-10)
+    # a cap shorter than the convergence keeps exactly that many steps
+    assert K.young_filter(F, H, Q, R, P0, steps=3, horizon=5).steps == 3

@@ -93,7 +93,9 @@ class IntervalCalibrator:
         self.n_bins = (int(lead_class.max()) + 1) * self.tod_bins
         self.hist = np.zeros((self.n_bins, self.nz, len(_EDGES) + 1))
         self.level = np.full(self.nz, self.target)
-        self.pending: deque[tuple[int, np.ndarray]] = deque(maxlen=horizon // cadence + 1)
+        # (issue step, mean, std or None: the std given to resolve)
+        self.pending: deque[tuple[int, np.ndarray, np.ndarray | None]] = deque(
+            maxlen=horizon // cadence + 1)
         self._q: np.ndarray | None = None
 
     def bins(self, step_index: int, leads: np.ndarray) -> np.ndarray:
@@ -108,23 +110,29 @@ class IntervalCalibrator:
         """Whether a calibration forecast is due at grid step number ``step_index``."""
         return step_index % self.cadence == 0
 
-    def add_forecast(self, step_index: int, mean: np.ndarray) -> None:
-        """Keep a forecast issued at step ``step_index`` (mean (horizon, n_zones) [degC])."""
-        self.pending.append((int(step_index), np.array(mean, dtype=float)))
+    def add_forecast(self, step_index: int, mean: np.ndarray,
+                     std: np.ndarray | None = None) -> None:
+        """Keep a forecast issued at step ``step_index`` (mean (horizon, n_zones) [degC]);
+        ``std`` (horizon, n_zones) [K] the model std it was issued with (default: the std
+        :meth:`resolve` is given)."""
+        self.pending.append((int(step_index), np.array(mean, dtype=float),
+                             None if std is None else np.array(std, dtype=float)))
 
     def resolve(self, step_index: int, y: np.ndarray, std: np.ndarray) -> int:
         """Score the kept forecasts against y at step ``step_index`` (decays the histograms
-        once); ``std`` (horizon, n_zones) the model std [K]. Returns the scores added."""
+        once); ``std`` (horizon, n_zones) the model std [K] of forecasts kept without
+        their own. Returns the scores added."""
         y = np.asarray(y, float)
         ok = np.isfinite(y)
         added = 0
         if ok.any():
             zones = np.flatnonzero(ok)
             q = self.quantiles()
-            for k0, mean in self.pending:
+            for k0, mean, own in self.pending:
                 h = step_index - k0
                 if 1 <= h <= self.horizon:
-                    s = np.abs(y[zones] - mean[h - 1, zones]) / np.maximum(std[h - 1, zones], 1e-9)
+                    sd = std if own is None else own
+                    s = np.abs(y[zones] - mean[h - 1, zones]) / np.maximum(sd[h - 1, zones], 1e-9)
                     b = int(self.bins(k0, [h])[0])
                     self.hist[b, zones, np.searchsorted(_EDGES, s)] += 1.0
                     if self.gamma > 0:
@@ -168,10 +176,13 @@ class IntervalCalibrator:
 
     # --- state ------------------------------------------------------------------------
     def state_arrays(self, prefix: str = "cal_") -> dict[str, np.ndarray]:
-        steps = np.array([k for k, _ in self.pending], dtype=np.int64)
-        means = np.array([m for _, m in self.pending]).reshape(-1, self.horizon, self.nz)
+        steps = np.array([k for k, _, _ in self.pending], dtype=np.int64)
+        means = np.array([m for _, m, _ in self.pending]).reshape(-1, self.horizon, self.nz)
+        nan = np.full((self.horizon, self.nz), np.nan)
+        stds = np.array([nan if s is None else s for _, _, s in self.pending]).reshape(
+            -1, self.horizon, self.nz)
         return {f"{prefix}hist": self.hist, f"{prefix}level": self.level,
-                f"{prefix}steps": steps, f"{prefix}means": means}
+                f"{prefix}steps": steps, f"{prefix}means": means, f"{prefix}stds": stds}
 
     def load_state_arrays(self, arrays: Mapping[str, np.ndarray], prefix: str = "cal_") -> bool:
         if f"{prefix}hist" not in arrays or np.shape(arrays[f"{prefix}hist"]) != self.hist.shape:
@@ -180,7 +191,9 @@ class IntervalCalibrator:
         if f"{prefix}level" in arrays:
             self.level = np.array(arrays[f"{prefix}level"], float)
         self.pending.clear()
-        for k, m in zip(arrays[f"{prefix}steps"], arrays[f"{prefix}means"]):
-            self.pending.append((int(k), np.array(m, float)))
+        stds = arrays.get(f"{prefix}stds")  # absent in checkpoints before it
+        for i, (k, m) in enumerate(zip(arrays[f"{prefix}steps"], arrays[f"{prefix}means"])):
+            sd = None if stds is None or np.isnan(stds[i]).all() else np.array(stds[i], float)
+            self.pending.append((int(k), np.array(m, float), sd))
         self._q = None
         return True

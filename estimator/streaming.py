@@ -28,7 +28,14 @@ The Kalman filter is the *steady-state* filter
 of the Riccati equation at the model's nominal airflows, computed once per model, so a
 step costs O(n) model products instead of the O(n³) covariance propagation of the
 time-varying filter (761 ms -> about 1 ms per step for the 381-state virtual building;
-docs/benchmarks.md has the accuracy comparison).
+docs/benchmarks.md has the accuracy comparison). After each start (the first
+measurement, and after every gap longer than ``max_gap``) the first :data:`YOUNG_STEPS`
+steps use the time-varying gains of the same filter started from the initial covariance
+(:func:`~zonecast.estimator.kalman.young_filter`: the walls and slabs, started at their
+zone's air temperature, are uncertain by kelvins, so the young filter corrects them
+faster than the steady gain does; the gains depend on the step count only, computed once
+per model), as long as every zone is measured at every step; a step with a zone missing
+hands over to the steady-state filter (:data:`YOUNG_FILTER`).
 
 A forecast issued at t starts from the filtered x(t|t) and runs the model 96 steps with
 the internal gains of :class:`~zonecast.estimator.gains.DayAheadGains` (weekly profile
@@ -100,12 +107,15 @@ from zonecast.estimator.inputs_forecast import (
 )
 from zonecast.estimator.integrate import StepperLadder
 from zonecast.estimator.kalman import (
+    Innovation,
     SteadyStateFilter,
+    YoungFilter,
     air_wall_covariance,
     default_measurement_noise,
     horizon_output_variances,
     initial_state_from_measurement,
     steady_state_covariance,
+    young_filter,
 )
 from zonecast.estimator.rc.network import SOLAR_COLUMNS
 from zonecast.estimator.shading import sun_vectors
@@ -130,6 +140,18 @@ HOLD_RECOVERY_H = 0.25
 #: family's training members, docs/forecasts.md "Reheat as the thermostat's answer"); the
 #: default of :attr:`OnlineEstimator.reheat_control`
 REHEAT_CONTROL = True
+#: steps after a start that use the time-varying gains of the filter from its initial
+#: covariance (two days: on office6 two days and a week gave the same served forecasts;
+#: docs/forecasts.md "The filter after a restart"); the default of
+#: :attr:`OnlineEstimator.young_filter`
+YOUNG_FILTER = True
+YOUNG_STEPS = 192
+#: the forecast std (and so the calibrated interval) of a young filter's forecast from the
+#: young filter's covariance; False (the default): from the steady-state filter's, as
+#: before the young filter (the young filter's lowered the calibrated coverage on every
+#: training member; docs/forecasts.md "The filter after a restart"). The state's std is
+#: the young filter's either way.
+YOUNG_STD = False
 #: forecast the cooling of every VAV box as its room's thermostat does: the heat removal
 #: that holds each room's air at the cooling set point, none below it, wherever the
 #: reheat controller runs (chosen on the family's training members, docs/forecasts.md
@@ -223,12 +245,16 @@ def _input_names(bundle: ModelBundle) -> list[str]:
     return names
 
 
-@dataclass(frozen=True)
+@dataclass
 class _SteadyParts:
     """What the steady-state filter of a model needs, computed once per model."""
 
     filt: SteadyStateFilter
     horizon_var: np.ndarray  # (HORIZON, n_zones) [K²]
+    phi: np.ndarray  # the nominal transition matrix the filter was solved for
+    Q: np.ndarray
+    R: np.ndarray
+    young: YoungFilter | None = field(default=None, compare=False)
 
 
 _STEADY: dict[str, _SteadyParts] = {}
@@ -245,11 +271,23 @@ def _steady_parts(bundle: ModelBundle, Q: np.ndarray, R: np.ndarray) -> _SteadyP
     if hit is None:
         filt = SteadyStateFilter(steady_state_covariance(phi, m.C, Q, R), m.C, R)
         var = horizon_output_variances(phi, filt.posterior(), Q, m.C, HORIZON)
-        hit = _SteadyParts(filt, var)
+        hit = _SteadyParts(filt, var, phi, Q, R)
         if len(_STEADY) >= 16:
             _STEADY.pop(next(iter(_STEADY)))
         _STEADY[key] = hit
     return hit
+
+
+def _young_parts(bundle: ModelBundle, steady: _SteadyParts) -> YoungFilter:
+    """The young filter's gains for ``bundle``'s model (computed at the first start and
+    kept with the steady-state parts: a few seconds for the 381-state virtual building)."""
+    if steady.young is None:
+        m, ns = bundle.model, bundle.noise
+        P0 = air_wall_covariance(m.n, m.structure.air_states(), ns.p0_sigma_air,
+                                 ns.p0_sigma_wall)
+        steady.young = young_filter(steady.phi, m.C, steady.Q, steady.R, P0, YOUNG_STEPS,
+                                    HORIZON)
+    return steady.young
 
 
 def _solve_square(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -306,6 +344,9 @@ class OnlineEstimator:
         self._gig_cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         self._names = _input_names(bundle)
         self._init_input_forecasts()
+        #: the young filter after each start (:data:`YOUNG_FILTER`)
+        self.young_filter = YOUNG_FILTER
+        self.young_std = YOUNG_STD
         self.reset()
         self.steps = 0
         self.resets = 0
@@ -321,6 +362,8 @@ class OnlineEstimator:
         self._held = np.full(self._nin, np.nan)  # last finite value of each input
         self._online = np.zeros(self._nz)  # f_IG used for the next prediction [W/m2]
         self._since = 0  # steps since the last measurement update
+        self._young: int | None = None  # steps of the young filter done (None: steady)
+        self._young_seen: int | None = None  # the same at the last measurement update
         self._observed = np.ones(self._nz, bool)  # zones observed in that update
         self._gains: deque[tuple[pd.Timestamp, np.ndarray]] = deque(maxlen=8)
         self._inputs: deque[tuple[pd.Timestamp, np.ndarray]] = deque(maxlen=HORIZON)
@@ -344,14 +387,17 @@ class OnlineEstimator:
     def zone_estimate(self) -> tuple[np.ndarray, np.ndarray]:
         """Filtered zone temperatures C x [degC] and their standard deviations [K].
 
-        The deviation is the steady-state filter's posterior one for the zones observed
-        at the last update; after steps without any measurement it is the forecast
-        deviation of that many steps.
+        The deviation is the filter's posterior one at the last update: the young
+        filter's (all zones observed) during its steps after a start, else the
+        steady-state filter's for the zones observed; after steps without any measurement
+        it is that filter's prediction deviation of that many steps.
         """
-        if self._since == 0:
+        if self._since == 0 and self._young_seen is not None:
+            var = self._steady.young.output_var[self._young_seen]
+        elif self._since == 0:
             var = np.diag(self._steady.filt.output_covariance(self._observed))
         else:
-            var = self._steady.horizon_var[min(self._since, HORIZON) - 1]
+            var = self._horizon_var(own=True)[min(self._since, HORIZON) - 1]
         return self.bundle.model.C @ self._x, np.sqrt(np.maximum(var, 0.0))
 
     def _start(self, t: pd.Timestamp, y: np.ndarray) -> None:
@@ -360,6 +406,11 @@ class OnlineEstimator:
         self._online = np.zeros(self._nz)
         self._since = 0
         self._observed = np.isfinite(y)
+        # the young filter's gains assume every zone measured at the start and each step
+        self._young = self._young_seen = None
+        if self.young_filter and self._observed.all():
+            _young_parts(self.bundle, self._steady)
+            self._young = self._young_seen = 0
 
     # --- one row ---------------------------------------------------------------------
     def advance(self, t, u, v, y, reheat=None) -> StepReport | None:
@@ -449,7 +500,18 @@ class OnlineEstimator:
         except RankDeficientError:
             f = np.full(self._nz, np.nan)
         x_prior = x_tilde + gig @ self._online      # eq:online_ig
-        self._x, inn = self._steady.filt.update(x_prior, y)
+        if self._young is not None and np.isfinite(y).all():
+            yf, j = self._steady.young, self._young
+            nu = y - m.C @ x_prior
+            self._x = x_prior + yf.gains[j] @ nu
+            inn = Innovation(nu, yf.S[j], float(nu @ yf.S_inv[j] @ nu), np.ones(self._nz, bool))
+            self._young_seen = j + 1
+            self._young = j + 1 if j + 1 < yf.steps else None
+        else:
+            self._young = None  # a zone not measured, or old enough: the steady filter
+            self._x, inn = self._steady.filt.update(x_prior, y)
+            if inn.dof:
+                self._young_seen = None
         self._innovation = np.full(self._nz, np.nan)
         self._innovation[inn.observed] = inn.innovation
         if inn.dof:
@@ -515,7 +577,7 @@ class OnlineEstimator:
                                  "u per box, then Ta, Ts, solE, solS, solW, solN per interval"
                                  + (", then the discharge-air rise per box" if self._rh else ""))
         mean = self._run_forecast(ins, f_ig, control=control)
-        std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
+        std = self._forecast_std()
         times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
         return Forecast(t, times, mean, std, f_ig, self.bundle.zones, self.bundle.version,
                         halfwidth=self.calibrator.halfwidth(t.value // STEP.value, std))
@@ -780,13 +842,27 @@ class OnlineEstimator:
             tod = int(self.calendar.slots([tn])[0]) % self.calendar.per_day
             self.weather_fb.update(tod, inputs[nb], inputs[nb + 2:nb + NV])
         k = tn // STEP.value
-        std = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
-        self.calibrator.resolve(k, y if operating else np.full(self._nz, np.nan), std)
+        steady = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
+        self.calibrator.resolve(k, y if operating else np.full(self._nz, np.nan), steady)
         if operating and self.started and self.time == t and self.calibrator.due(k):
             ins = self.forecast_inputs()
             if np.isfinite(ins).all():
                 self.calibrator.add_forecast(k, self._run_forecast(
-                    ins, self.dayahead_gains(), control=self.reheat_control))
+                    ins, self.dayahead_gains(), control=self.reheat_control),
+                    self._forecast_std())
+
+    def _horizon_var(self, own: bool = False) -> np.ndarray:
+        """Output variances (HORIZON, n_zones) [K²] after 1..HORIZON predictions from the
+        last measurement update: the young filter's if it made that update (and, unless
+        ``own``, :attr:`young_std` is set), else the steady-state filter's. ``own``: the
+        filter's own variances, those of the state's std."""
+        if self._young_seen is None or not (own or self.young_std):
+            return self._steady.horizon_var
+        return self._steady.young.horizon_variance(self._young_seen)
+
+    def _forecast_std(self) -> np.ndarray:
+        """Standard deviations (HORIZON, n_zones) [K] of a forecast from the current state."""
+        return np.sqrt(np.maximum(self._horizon_var(), 0.0))
 
     def set_weather_forecast(self, wf: WeatherForecast | None) -> None:
         """Use ``wf`` for forecasts issued at or after ``wf.issued`` (until it is older
@@ -939,7 +1015,9 @@ class OnlineEstimator:
         meta = {"time": None if self.time is None else self.time.isoformat(),
                 "started": self.started, "steps": self.steps, "resets": self.resets,
                 "nis_sum": self.nis_sum, "dof_sum": self.dof_sum,
-                "version": self.bundle.version, "since": self._since, "extra": extra or {}}
+                "version": self.bundle.version, "since": self._since, "young": self._young,
+                "young_seen": self._young_seen,
+                "extra": extra or {}}
         arrays = {"pending": self._pending, "held": self._held, "online": self._online,
                   "last_y": self.last_y, "last_f": self.last_f, "observed": self._observed,
                   "gain_times": np.array([s.value for s, _ in self._gains], dtype=np.int64),
@@ -1000,6 +1078,12 @@ class OnlineEstimator:
         self._gains.extend(zip(gain_times, arr["gains"]))
         self._inputs.extend(zip(input_times, arr["inputs"]))
         self._since = int(meta.get("since", 0))
+        # absent before the young filter: steady
+        young, seen = meta.get("young"), meta.get("young_seen")
+        if self.young_filter and (young is not None or seen is not None):
+            steps = _young_parts(self.bundle, self._steady).steps
+            self._young = None if young is None else min(int(young), steps - 1)
+            self._young_seen = None if seen is None else min(int(seen), steps)
         if "observed" in arr:
             self._observed = arr["observed"].astype(bool)
         if meta["started"]:

@@ -177,7 +177,7 @@ def test_calibrated_intervals_cover_on_stationary_errors():
     for k in range(96 * 40):
         y = truth + sigma * rng.standard_normal(nz)
         if k > 96 * 20:
-            for k0, mean in cal.pending:
+            for k0, mean, _ in cal.pending:
                 h = k - k0
                 if 1 <= h <= H:
                     hw = cal.halfwidth(k0, std)[h - 1]
@@ -202,6 +202,25 @@ def test_adaptive_level_widens_after_misses():
     cal.add_forecast(0, np.zeros((96, 1)))
     cal.resolve(1, np.array([100.0]), std)  # far outside: a miss
     assert cal.level[0] > before[0]
+
+
+def test_a_forecast_is_scored_with_the_std_it_was_issued_with():
+    """A forecast kept with its own std (the young filter's, wider) is scored with it, one
+    kept without it with the std resolve is given; both survive a checkpoint."""
+    from zonecast.estimator.calibration import _EDGES
+
+    def scored(own):
+        cal = IntervalCalibrator(1, 96, 96, gamma=0.0)
+        cal.add_forecast(0, np.zeros((96, 1)), own)
+        other = IntervalCalibrator(1, 96, 96, gamma=0.0)
+        assert other.load_state_arrays(cal.state_arrays())
+        for c in (cal, other):
+            c.resolve(1, np.array([1.0]), np.ones((96, 1)))
+        assert np.array_equal(cal.hist, other.hist)
+        return int(np.flatnonzero(cal.hist.sum(axis=(0, 1)))[0])
+
+    assert scored(None) == np.searchsorted(_EDGES, 1.0)
+    assert scored(np.full((96, 1), 2.0)) == np.searchsorted(_EDGES, 0.5)
 
 
 

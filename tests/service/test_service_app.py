@@ -208,8 +208,10 @@ def test_checkpoint_round_trip_is_exact(bundle, telemetry):
 
 def test_step_report_innovation_is_the_one_the_filter_scored(bundle, telemetry):
     """The innovation a step reports (the /health RMS) is the filter's: its NIS with the
-    steady-state innovation covariance H P H' + R of the observed zones is the step's NIS,
-    and it is NaN exactly for the zones without a measurement."""
+    innovation covariance of the filter that scored it is the step's NIS (the young
+    filter's S_j while every zone is measured since the start, then the steady-state
+    filter's H P H' + R of the observed zones), and it is NaN exactly for the zones
+    without a measurement."""
     from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
 
     frame = telemetry_si(bundle, telemetry.iloc[:40])
@@ -225,8 +227,12 @@ def test_step_report_innovation_is_the_one_the_filter_scored(bundle, telemetry):
         obs = np.isfinite(y[k])
         assert (np.isfinite(rep.innovation) == obs).all()
         nu = rep.innovation[obs]
-        S = filt.H[obs] @ filt.P @ filt.H[obs].T + filt.R[np.ix_(obs, obs)]
+        if k < 20:  # the young filter's step k (its gains computed at the start)
+            S = est._steady.young.S[k - 1]
+        else:  # zone 1 missing at row 20 handed over to the steady-state filter
+            S = filt.H[obs] @ filt.P @ filt.H[obs].T + filt.R[np.ix_(obs, obs)]
         assert nu @ np.linalg.solve(S, nu) == pytest.approx(rep.nis, rel=1e-9)
+    assert est._steady.young.steps >= 20 and est._young is None
 
 
 def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemetry):
@@ -236,6 +242,7 @@ def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemet
 
     tt, u, v, y = rows_from_frame(bundle, telemetry_si(bundle, telemetry.iloc[:14]))
     est = OnlineEstimator(bundle)
+    est.young_filter = False  # the steady-state filter's (the young one's: the next test)
     for k in range(10):
         est.advance(tt[k], u[k], v[k], y[k])
     fc = est.forecast()
@@ -250,6 +257,59 @@ def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemet
     std = est.zone_estimate()[1]
     # the unobserved zone is less certain; the others lose a little of the cross-information
     assert std[0] > std0[0] and std[0] > std[1:].max() and (std[1:] >= std0[1:] - 1e-12).all()
+
+
+def test_young_filter_after_a_start_then_the_steady_one(bundle, telemetry):
+    """After a start the filter takes the young gains (the time-varying filter from the
+    initial covariance, all zones measured): its state differs from the steady filter's,
+    its zone std shrinks towards the steady filter's and stays above it; with
+    ``young_std`` its forecast std is at least the steady one (without it, the steady one,
+    the state's std unchanged); steps without a measurement follow the young forecast's
+    std; a missing zone hands over to the steady filter; a checkpoint in the middle of
+    the young steps continues bitwise."""
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    tt, u, v, y = rows_from_frame(bundle, telemetry_si(bundle, telemetry.iloc[:40]))
+    est = OnlineEstimator(bundle)
+    est.young_std = True  # the young filter's forecast std too (not the default)
+    steady = OnlineEstimator(bundle)
+    steady.young_filter = False
+    est.advance(tt[0], u[0], v[0], y[0])
+    steady.advance(tt[0], u[0], v[0], y[0])
+    yf = est._steady.young
+    assert yf is not None and yf.steps > 12
+    ss_zone = np.sqrt(np.diag(est._steady.filt.output_covariance()))
+    ss_fc = np.sqrt(est._steady.horizon_var)
+    stds = []
+    for k in range(1, 10):
+        est.advance(tt[k], u[k], v[k], y[k])
+        steady.advance(tt[k], u[k], v[k], y[k])
+        assert est._young == k
+        stds.append(est.zone_estimate()[1])
+        assert (stds[-1] >= ss_zone - 1e-9).all()
+        assert not np.array_equal(est.x, steady.x)  # the gains differ
+    assert (stds[-1] < stds[0]).all()  # converging towards the steady filter's
+    mid = OnlineEstimator(bundle)
+    mid.load_bytes(est.to_bytes())
+    fc = est.forecast()
+    assert (fc.std >= ss_fc - 1e-9).all() and (fc.std > ss_fc + 1e-6).any()
+    mid.young_std = False  # the steady filter's forecast std with the young gains
+    assert np.array_equal(mid.forecast().std, ss_fc) and np.array_equal(mid.x, est.x)
+    # the state's std is the young filter's either way
+    np.testing.assert_array_equal(mid.zone_estimate()[1], stds[-1])
+    mid.young_std = True
+    for k in range(10, 13):  # no measurement: predictions from the young update
+        est.advance(tt[k], u[k], v[k], np.full_like(y[k], np.nan))
+        np.testing.assert_array_equal(est.zone_estimate()[1], fc.std[k - 10])
+    partial = y[13].copy()
+    partial[0] = np.nan
+    est.advance(tt[13], u[13], v[13], partial)
+    assert est._young is None and est._young_seen is None  # steady from here on
+    # the checkpoint taken at step 9 continues exactly as the original did
+    for k in range(10, 14):
+        mid.advance(tt[k], u[k], v[k], y[k] if k < 10 else (
+            np.full_like(y[k], np.nan) if k < 13 else partial))
+    assert np.array_equal(mid.x, est.x)
 
 
 def test_forecast_with_supplied_inputs(bundle, telemetry, tmp_path):

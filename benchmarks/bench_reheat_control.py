@@ -1,4 +1,5 @@
-"""The served forecast with and without the thermostat's reheat, or its cooling (issue 15).
+"""The served forecast with and without the thermostat's reheat, its cooling, or the young
+filter after restarts (issue 15).
 
 For each member: the served forecasts (``Pipeline.forecast`` of the member's ``zonecast
 reproduce`` model, the testbed's weather forecasts as designed, seed 0) at the 18
@@ -8,11 +9,17 @@ prints the RMS per zone, the ratio to the known-input forecast of the member's r
 the calibrated 90 % coverage. docs/forecasts.md "Reheat as the thermostat's answer".
 
     python benchmarks/bench_reheat_control.py --reports DIR --family DIR [--extra CAMPAIGN ...]
-                                              [--only NAME ...] [--side reheat|cooling]
+                                              [--only NAME ...] [--side reheat|cooling|young]
 
 ``--side cooling``: both runs with the reheat controller, the second also with the
 cooling controller (``streaming.COOLING_CONTROL``; docs/forecasts.md "Cooling as the
-thermostat's answer").
+thermostat's answer"). ``--side young``: both runs with both controllers, the first with
+the steady-state filter from every start, the second with the young filter's gains after
+each start (``streaming.YOUNG_FILTER``; docs/forecasts.md "The filter after a restart").
+``--side young-std``: both runs with both controllers and the young filter, the first
+with the steady filter's forecast std for every forecast, the second with the young
+filter's while it runs (``streaming.YOUNG_STD``). Every other side runs with the library's
+defaults for the young filter.
 
 ``--reports`` is a ``bench_family.py --out`` folder (``<name>/model.json``,
 ``<name>/results.json``); campaigns are ``--family/<name>`` or the ``--extra`` folders.
@@ -46,27 +53,35 @@ from zonecast.jobs.reproduce import _interval_coverage, validation_issues
 def served(campaign: Path, model: Path, control: bool,
            side: str = "reheat") -> tuple[dict, dict, float]:
     """RMS per zone, coverage and seconds of the served forecasts with the controller
-    ``control`` on or off: the reheat (``side`` "reheat") or, with the reheat on, the
-    cooling ("cooling")."""
+    ``control`` on or off: the reheat (``side`` "reheat"), with the reheat on the cooling
+    ("cooling"), or with both on the young filter ("young")."""
     site = load_site(campaign / "site.yaml")
     frame = load_telemetry(campaign / "telemetry.csv", site).frame
     data = Pipeline.from_site(campaign / "site.yaml").data(campaign / "telemetry.csv")
     weather = [parse_weather_forecast(b) for b in weather_forecasts(site, frame, seed=0)]
     issues = validation_issues(data, 0)
     nz = len(data.zones)
-    before = streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL
+    before = (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
+              streaming.YOUNG_STD)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
-    else:
+    elif side == "cooling":
         streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL = True, control
+    elif side == "young":
+        streaming.REHEAT_CONTROL = streaming.COOLING_CONTROL = True
+        streaming.YOUNG_FILTER = control
+    else:
+        streaming.REHEAT_CONTROL = streaming.COOLING_CONTROL = streaming.YOUNG_FILTER = True
+        streaming.YOUNG_STD = control
     try:
         t0 = time.perf_counter()
         fcs = Pipeline.from_model_file(model).forecast(
             campaign / "telemetry.csv", [data.times[r] for r, _ in issues], weather=weather)
         seconds = time.perf_counter() - t0
     finally:
-        streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL = before
+        (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
+         streaming.YOUNG_STD) = before
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
     for k, (r, stop) in enumerate(issues):
         fc = fcs[data.times[r]]
@@ -94,9 +109,12 @@ def main() -> None:
     ap.add_argument("--family", type=Path)
     ap.add_argument("--extra", type=Path, nargs="*", default=[])
     ap.add_argument("--only", nargs="*")
-    ap.add_argument("--side", choices=("reheat", "cooling"), default="reheat",
-                    help="the controller compared off and on: the reheat (the cooling off), "
-                         "or the cooling (the reheat on in both)")
+    ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std"),
+                    default="reheat",
+                    help="what is compared off and on: the reheat controller (the cooling "
+                         "off), the cooling controller (the reheat on in both), or the young "
+                         "filter after restarts (both controllers on), or its forecast "
+                         "std (the young filter on)")
     args = ap.parse_args()
     campaigns = {p.name: p for p in args.extra}
     if args.family is not None:
@@ -107,8 +125,10 @@ def main() -> None:
     if not names:
         raise SystemExit(f"no member of {sorted(campaigns)} has a report in {args.reports}")
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores", flush=True)
-    head = (("learned rise", "thermostat's reheat") if args.side == "reheat"
-            else ("reheat, cooling off", "reheat and cooling"))
+    head = {"reheat": ("learned rise", "thermostat's reheat"),
+            "cooling": ("reheat, cooling off", "reheat and cooling"),
+            "young": ("steady filter", "young filter"),
+            "young-std": ("young filter, steady std", "young filter and std")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| seconds off / on |")
     print("|---|---|---|---|---|---|")
@@ -121,9 +141,10 @@ def main() -> None:
             else None
         ratio = (f"{off['mean'] / known['mean']:.3f} → {on['mean'] / known['mean']:.3f}"
                  if known else "–")
-        zc = [cov_on[z] for z in cov_on if z != "all"]
+        zones = [f"{min(c[z] for z in c if z != 'all'):.3f}–"
+                 f"{max(c[z] for z in c if z != 'all'):.3f}" for c in (cov_off, cov_on)]
         print(f"| {name} | {off['mean']:.3f} | **{on['mean']:.3f}** | {ratio} | "
-              f"{cov_off['all']:.3f} → {cov_on['all']:.3f} ({min(zc):.3f}–{max(zc):.3f}) | "
+              f"{cov_off['all']:.3f} ({zones[0]}) → {cov_on['all']:.3f} ({zones[1]}) | "
               f"{s_off:.0f} / {s_on:.0f} |", flush=True)
 
 

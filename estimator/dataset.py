@@ -50,6 +50,9 @@ class ModelData:
     reheat : (N, n_boxes) discharge-air temperature above the supply air [K], the rise
         reheat coils add (:meth:`~.telemetry.Telemetry.discharge_rise`); zero for boxes
         without a discharge-air point and where a box is shut. Default: zeros.
+    power : (N, n_zones) metered electric power of each zone's lights and plug loads [W]
+        (:meth:`~.telemetry.Telemetry.power`), NaN where not metered; None when the site
+        has no meter.
     """
 
     times: pd.DatetimeIndex
@@ -62,6 +65,7 @@ class ModelData:
     excitation: np.ndarray
     timezone: str
     reheat: np.ndarray | None = None
+    power: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.reheat is None:
@@ -69,6 +73,9 @@ class ModelData:
         elif self.reheat.shape != self.u.shape:
             raise ValueError(f"reheat has shape {self.reheat.shape}; expected {self.u.shape} "
                              "(one discharge-air rise per box and step)")
+        if self.power is not None and self.power.shape != self.y.shape:
+            raise ValueError(f"power has shape {self.power.shape}; expected {self.y.shape} "
+                             "(one metered power per zone and step)")
 
     def __len__(self) -> int:
         return len(self.times)
@@ -80,7 +87,8 @@ class ModelData:
         step = (self.times[1] - self.times[0]) if len(self.times) > 1 else STEP
         return ModelData(times, self.u[idx], self.v[idx], self.y[idx], self.zones, self.boxes,
                          segments_of(times, step.to_pytimedelta()), self.excitation[idx],
-                         self.timezone, self.reheat[idx])
+                         self.timezone, self.reheat[idx],
+                         None if self.power is None else self.power[idx])
 
     def local_times(self) -> pd.DatetimeIndex:
         return self.times.tz_convert(self.timezone)
@@ -230,4 +238,4 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
     u, rise = with_scheduled(scheduled, tel.times, site, u, v, rise)
     return ModelData(tel.times, u, v, tel.zone_temperature(zone_weights(site, room_volume)),
                      list(site.zones), list(site.boxes) + list(scheduled), list(tel.segments),
-                     exc, site.timezone, rise)
+                     exc, site.timezone, rise, tel.power())

@@ -69,6 +69,11 @@ class IrradiancePoint(_QuantityPoint):
     unit: str = "W/m2"
 
 
+class PowerPoint(_QuantityPoint):
+    quantity: ClassVar[str] = "power"
+    unit: str = "W"
+
+
 class Box(_Strict):
     """A VAV box: the room (EnergyPlus zone) it serves, its airflow point and, optionally,
     its discharge-air temperature point (the air leaving the box, after any reheat coil).
@@ -104,32 +109,50 @@ class Solar(_Strict):
         return _point(v, "W/m2")
 
 
+def _zone_points(v, field: str, what: str, unit: str) -> dict:
+    """A map of model zones to one point or a list of points (short forms in ``unit``)."""
+    if not isinstance(v, dict):
+        # pydantic turns only ValueError into a ValidationError with the field's location
+        msg = f"{field} must map each model zone to a point or a list of points"
+        raise ValueError(msg)  # noqa: TRY004
+    out = {}
+    for zone, pts in v.items():
+        pts = pts if isinstance(pts, list) else [pts]
+        if not pts:
+            raise ValueError(f"{field}[{zone}] lists no {what}")
+        out[zone] = [_point(p, unit) for p in pts]
+    return out
+
+
 class ZoneSensor(TemperaturePoint):
     """A temperature sensor of a model zone, optionally naming the room it sits in."""
     room: str | None = None
 
 
 class Points(_Strict):
-    """Telemetry columns by role. Zone temperature: one or more sensors per model zone."""
+    """Telemetry columns by role. Zone temperature: one or more sensors per model zone.
+
+    ``power`` (optional): model zone -> electricity meters [W] of the lights and plug loads
+    of the zone's rooms (sub-meters of the lighting and receptacle panels); a zone's
+    meters are summed. Electric power in a room ends as heat in it, so where the site has
+    them the identification takes the weekends' metered rise as the shape of their
+    internal gains (docs/identification.md "Metered weekend gains").
+    """
     zone_temperature: dict[str, list[ZoneSensor]]
     supply_air_temperature: TemperaturePoint
     outdoor_air_temperature: TemperaturePoint
     solar: Solar
+    power: dict[str, list[PowerPoint]] = Field(default_factory=dict)
+
+    @field_validator("power", mode="before")
+    @classmethod
+    def _power(cls, v):
+        return {} if v is None else _zone_points(v, "power", "meter", "W")
 
     @field_validator("zone_temperature", mode="before")
     @classmethod
     def _zones(cls, v):
-        if not isinstance(v, dict):
-            # pydantic turns only ValueError into a ValidationError with the field's location
-            msg = "zone_temperature must map each model zone to a point or a list of points"
-            raise ValueError(msg)  # noqa: TRY004
-        out = {}
-        for zone, pts in v.items():
-            pts = pts if isinstance(pts, list) else [pts]
-            if not pts:
-                raise ValueError(f"zone_temperature[{zone}] lists no sensor")
-            out[zone] = [_point(p, "degC") for p in pts]
-        return out
+        return _zone_points(v, "zone_temperature", "sensor", "degC")
 
     @field_validator("supply_air_temperature", "outdoor_air_temperature", mode="before")
     @classmethod
@@ -304,6 +327,10 @@ class Site(_Strict):
         if tz_zones != set(self.zones):
             raise ValueError("points.zone_temperature must name exactly the model zones "
                              f"{sorted(self.zones)}; it names {sorted(tz_zones)}")
+        extra = sorted(set(self.points.power) - set(self.zones))
+        if extra:
+            raise ValueError(f"points.power names {extra}, which are not model zones "
+                             f"{sorted(self.zones)}")
         for zone, sensors in self.points.zone_temperature.items():
             for s in sensors:
                 if s.room is not None and rooms.get(s.room.upper()) != zone:
@@ -324,6 +351,7 @@ class Site(_Strict):
         pts += [b.airflow for b in self.boxes.values()]
         pts += [b.discharge_temperature for b in self.boxes.values()
                 if b.discharge_temperature is not None]
+        pts += [m for ms in p.power.values() for m in ms]
         return pts
 
     def point_units(self) -> dict[str, str]:

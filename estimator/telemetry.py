@@ -129,6 +129,20 @@ class Telemetry:
                 out[:, j] = self.frame[b.discharge_temperature.point].to_numpy() - ts
         return out
 
+    def power(self) -> np.ndarray | None:
+        """Metered electric power of each model zone's lights and plug loads (N, n_zones)
+        [W], zones in site order: the sum of the zone's meters (``points.power``); NaN
+        where one of them did not report or the zone has none. None when the site maps no
+        meter."""
+        meters = self.site.points.power
+        if not meters:
+            return None
+        out = np.full((len(self.frame), len(self.site.zones)), np.nan)
+        for j, zone in enumerate(self.site.zones):
+            if zone in meters:
+                out[:, j] = self.frame[[m.point for m in meters[zone]]].to_numpy().sum(axis=1)
+        return out
+
     def weather(self) -> pd.DataFrame:
         """Outdoor air [degC], supply air [degC] and GHI, DNI, DHI [W/m2]."""
         p = self.site.points

@@ -1,4 +1,4 @@
-"""Units accepted in a site's point map and their conversion to SI (degC, kg/s, W/m2)."""
+"""Units accepted in a site's point map and their conversion to SI (degC, kg/s, W/m2, W)."""
 
 from __future__ import annotations
 
@@ -18,13 +18,15 @@ _CONVERSIONS = {
     "cfm": ("airflow", lambda a: a * 0.3048**3 / 60.0 * STANDARD_AIR_DENSITY),
     "W/m2": ("irradiance", lambda a: a),
     "kW/m2": ("irradiance", lambda a: a * 1e3),
+    "W": ("power", lambda a: a),
+    "kW": ("power", lambda a: a * 1e3),
 }
 
-SI_UNIT = {"temperature": "degC", "airflow": "kg/s", "irradiance": "W/m2"}
+SI_UNIT = {"temperature": "degC", "airflow": "kg/s", "irradiance": "W/m2", "power": "W"}
 
 
 def units_for(quantity: str) -> list[str]:
-    """Units accepted for a quantity (temperature, airflow, irradiance)."""
+    """Units accepted for a quantity (temperature, airflow, irradiance, power)."""
     return [u for u, (q, _) in _CONVERSIONS.items() if q == quantity]
 
 

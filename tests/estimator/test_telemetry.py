@@ -108,3 +108,43 @@ def test_discharge_air_point_is_a_temperature(tmp_path, site_dict):
     site_dict["boxes"]["VAV-B"]["discharge_temperature"] = "SAT"
     with pytest.raises(SiteError, match="more than one role"):
         load_site(write_site(tmp_path, site_dict))
+
+
+def test_power_meters_sum_per_zone_in_watts(tmp_path, site_dict, telemetry_csv):
+    """points.power: a zone's meters (W or kW, short form W) are summed; NaN where one of
+    them did not report or the zone has none; ModelData carries them; no meter -> None."""
+    from zonecast.estimator.dataset import model_data
+    assert load_telemetry(telemetry_csv(), load_site(write_site(tmp_path, site_dict))).power() \
+        is None
+    site_dict["points"]["power"] = {"A": ["PA lights", {"point": "PA plugs", "unit": "kW"}]}
+    site = load_site(write_site(tmp_path, site_dict))
+    assert site.point_units()["PA lights"] == "W" and site.point_units()["PA plugs"] == "kW"
+    df = telemetry_frame()
+    df["PA lights"] = 800.0
+    df["PA plugs"] = 1.5
+    df = df.astype({"PA plugs": object})
+    df.loc[2, "PA plugs"] = ""
+    tel = load_telemetry(telemetry_csv(df), site)
+    p = tel.power()
+    assert p.shape == (8, 2) and np.isnan(p[:, 1]).all()
+    np.testing.assert_allclose(p[[0, 1, 3], 0], 2300.0)
+    assert np.isnan(p[2, 0])
+    data = model_data(tel)
+    np.testing.assert_array_equal(data.power, p)
+    np.testing.assert_array_equal(data.rows(slice(1, 4)).power, p[1:4])
+
+
+def test_power_meters_name_model_zones_and_measure_power(tmp_path, site_dict):
+    from zonecast.estimator.site import SiteError
+    site_dict["points"]["power"] = {"Z": "PZ"}
+    with pytest.raises(SiteError, match=r"points.power names \['Z'\], which are not model zones"):
+        load_site(write_site(tmp_path, site_dict))
+    site_dict["points"]["power"] = {"A": {"point": "PA", "unit": "degC"}}
+    with pytest.raises(SiteError, match="not a power unit"):
+        load_site(write_site(tmp_path, site_dict))
+    site_dict["points"]["power"] = {"A": "OAT"}
+    with pytest.raises(SiteError, match="more than one role"):
+        load_site(write_site(tmp_path, site_dict))
+    site_dict["points"]["power"] = {"A": []}
+    with pytest.raises(SiteError, match=r"power\[A\] lists no meter"):
+        load_site(write_site(tmp_path, site_dict))

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pydantic import BaseModel, ConfigDict, Field
 
 EFFECTS = ("reheat", "infiltration", "gains", "window_solar", "sensor_noise", "sensor_bias",
-           "supply_offset", "discharge_sensors")
+           "supply_offset", "discharge_sensors", "power_meters")
 
 
 class Effects(BaseModel):
@@ -33,6 +33,8 @@ class Effects(BaseModel):
     discharge_sensors : the VAV boxes report their discharge-air temperature (a telemetry
         point per box in the site description); False: a BMS without them, where reheat
         is an effect the model does not see.
+    power_meters : each model zone's lights and plug loads are sub-metered (a telemetry
+        point ``P_<zone>`` [W] per zone under ``points.power`` of the site description).
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -48,6 +50,7 @@ class Effects(BaseModel):
     mass: dict[str, float] = Field(default_factory=dict)
     mixing: dict[str, float] = Field(default_factory=dict)
     discharge_sensors: bool = True
+    power_meters: bool = True
 
     def gain_scale(self, zone: str) -> float:
         return self.gains.get(zone, 1.0)
@@ -98,6 +101,8 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
             data["supply_offset"] = 0.0
         elif item == "discharge_sensors":
             data["discharge_sensors"] = False
+        elif item == "power_meters":
+            data["power_meters"] = False
         else:
             raise ValueError(f"--disable {item}: unknown effect; choose from {list(EFFECTS)} "
                              f"or gains.ZONE")

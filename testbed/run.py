@@ -277,12 +277,15 @@ def point_names(cfg: BuildingConfig) -> dict:
     return {"room_temp": {r: f"T_{r}" for r in cfg.rooms},
             "flow": {b: f"{b}_flow" for b in boxes},
             "discharge": {b: f"{b}_DAT" for b in boxes},
+            "power": {z: f"P_{z}" for z in cfg.zones},
             "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI"}
 
 
 def make_site(cfg: BuildingConfig, experiments: list[tuple[dt.datetime, dt.datetime]],
-              discharge_sensors: bool = True) -> Site:
+              discharge_sensors: bool = True, power_meters: bool = True) -> Site:
     names = point_names(cfg)
+    power = ({z: [{"point": names["power"][z], "unit": "W"}] for z in cfg.zones}
+             if power_meters else {})
     dat = {b: {"discharge_temperature": {"point": names["discharge"][b], "unit": "degC"}}
            if discharge_sensors else {} for b in names["discharge"]}
     return Site.model_validate({
@@ -298,7 +301,8 @@ def make_site(cfg: BuildingConfig, experiments: list[tuple[dt.datetime, dt.datet
             "supply_air_temperature": {"point": names["sat"], "unit": "degC"},
             "outdoor_air_temperature": {"point": names["oat"], "unit": "degC"},
             "solar": {"global_horizontal": names["ghi"], "direct_normal": names["dni"],
-                      "diffuse_horizontal": names["dhi"]}},
+                      "diffuse_horizontal": names["dhi"]},
+            "power": power},
         "experiments": [{"start": s, "end": e} for s, e in experiments],
         "thermostat": {"heating_occupied": cfg.hvac.heating.occupied,
                        "heating_unoccupied": cfg.hvac.heating.unoccupied,
@@ -413,6 +417,16 @@ def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Time
             tru[f"{q}:zone:{z}"] = sum(tru[f"{q}:{r}"] for r in rooms)
         tru[f"reheat:zone:{z}"] = sum(tru[f"reheat:{b}"] for r in rooms
                                       for _, b, _ in room_boxes(cfg, r))
+    if effects.power_meters:
+        # sub-meters of each zone's lighting and receptacle panels: the lights' and
+        # equipment's electricity (their total heat: no equipment heat is lost here), 0.5 %
+        # meter noise, 1 W resolution; a generator of their own leaves every other reading
+        # as it was
+        meters = rng_for(seed, "meters")
+        for z in cfg.zones:
+            watts = tru[f"lights:zone:{z}"] + tru[f"equipment:zone:{z}"]
+            tel[names["power"][z]] = np.round(
+                watts * (1 + meters.normal(0.0, 0.005, len(watts))))
     tel_df = pd.DataFrame(tel, index=index)
     tru_df = pd.DataFrame(tru, index=index)
     return tel_df, tru_df
@@ -493,7 +507,7 @@ def run_weeks(weeks: list[dt.date], out: Path, seed: int = 0, effects: Effects |
         day_blocks = [b for b in blocks if b.start.date() == d]
         experiments.append((min(b.start for b in day_blocks).replace(tzinfo=tz),
                             max(b.end for b in day_blocks).replace(tzinfo=tz)))
-    site = make_site(cfg, experiments, effects.discharge_sensors)
+    site = make_site(cfg, experiments, effects.discharge_sensors, effects.power_meters)
     progress("writing files")
     write_csv(tel, out / "telemetry.csv", cfg.location.timezone)
     write_csv(tru, out / "truth.csv", cfg.location.timezone)

@@ -22,7 +22,7 @@ STEP = dt.timedelta(minutes=15)
 
 def rng_for(seed: int, purpose: str) -> np.random.Generator:
     """Independent generator per purpose, so a change in one never shifts another."""
-    tag = {"occupancy": 1, "excitation": 2, "noise": 3}[purpose]
+    tag = {"occupancy": 1, "excitation": 2, "noise": 3, "meters": 4}[purpose]
     return np.random.default_rng([int(seed), tag])
 
 

@@ -144,6 +144,28 @@ def test_sensor_switches(base):
     assert 0.09 < sd < 0.12                      # sqrt(0.1^2 + 0.1^2/12) = 0.104
 
 
+def test_zone_power_meters_read_the_lights_and_plug_loads(base):
+    """P_<zone>: the zone's lights' and equipment's electricity (EnergyPlus's total heat of
+    both) with 0.5 % meter noise at 1 W resolution, mapped under points.power; switching
+    the meters off drops them and leaves every other reading as it was."""
+    site = load_site(base.out / "site.yaml")
+    assert {z: [m.point for m in ms] for z, ms in site.points.power.items()} == \
+        {z: [f"P_{z}"] for z in CFG.zones}
+    tel = load_telemetry(base.out / "telemetry.csv", site)
+    p = tel.power()
+    for j, z in enumerate(site.zones):
+        true = (base.truth[f"lights:zone:{z}"] + base.truth[f"equipment:zone:{z}"]).to_numpy()
+        assert true.min() > 0 and true.max() > 1.3 * true.min()  # the schedules move them
+        np.testing.assert_array_equal(p[:, j], np.round(p[:, j]))
+        rel = (p[:, j] - true) / true
+        assert np.abs(rel).max() < 0.005 * 5 + 0.5 / true.min()
+        assert 0.003 < np.std(rel) < 0.007
+    off, _ = to_records(CFG, base.raw, base.keep, Effects(power_meters=False), seed=7)
+    on, _ = to_records(CFG, base.raw, base.keep, Effects(), seed=7)
+    assert not [c for c in off.columns if c.startswith("P_")]
+    pd.testing.assert_frame_equal(off, on.drop(columns=[f"P_{z}" for z in CFG.zones]))
+
+
 def test_same_seed_same_telemetry_other_seed_differs(base, tmp_path):
     again = run_weeks([WEEK], tmp_path / "again", seed=7, excitation_weekends=[SATURDAY], config=CFG)
     assert (again.out / "telemetry.csv").read_bytes() == (base.out / "telemetry.csv").read_bytes()

@@ -109,6 +109,37 @@ def weekend_daytime_shape(data: ModelData) -> np.ndarray:
                      len(data.zones), axis=1)
 
 
+#: local hours [start, end) of the weekend nights whose median metered power is a zone's
+#: base load (night lighting, standby plug loads), which c_IG carries
+METERED_BASE_HOURS = (0, 6)
+
+
+def weekend_metered_gains(data: ModelData, zone_area) -> np.ndarray:
+    """(N, n_zones) [W/m2]: on Saturday and Sunday rows, each zone's metered electric power
+    of lights and plug loads (``data.power``) above its base load, per m2 of the zone's
+    floor (``zone_area`` [m2], zones in ``data.zones`` order); 0 on working days, for zones
+    without a meter and on rows where a zone's meter did not report. The base load is the
+    median of the zone's weekend readings between :data:`METERED_BASE_HOURS` local time
+    (the constant part of the gains is c_IG's). Electricity used in a room becomes heat in
+    it, so this part of the weekends' gains is known, day by day."""
+    out = np.zeros((len(data.times), len(data.zones)))
+    if data.power is None:
+        return out
+    local = data.local_times()
+    weekend = np.asarray(local.day_of_week >= 5)
+    night = weekend & np.asarray((local.hour >= METERED_BASE_HOURS[0])
+                                 & (local.hour < METERED_BASE_HOURS[1]))
+    area = np.asarray(zone_area, float)
+    for j in range(len(data.zones)):
+        p = data.power[:, j]
+        base = p[night & np.isfinite(p)]
+        if not len(base) or not area[j] > 0:
+            continue
+        ok = weekend & np.isfinite(p)
+        out[ok, j] = np.maximum(p[ok] - np.median(base), 0.0) / area[j]
+    return out
+
+
 class Pipeline:
     """One building's way from its description to forecasts.
 
@@ -286,7 +317,11 @@ class Pipeline:
         rise by s_z x :data:`WEEKEND_DAY_GAIN` between 08 and 18 h local time on Saturdays
         and Sundays (:func:`weekend_daytime_shape`), s_z fitted with the parameters (prior
         1 +- 1, bounds 0-5): the weekend daytime lighting and equipment of an
-        "unoccupied" office, whatever the weekday profile says.
+        "unoccupied" office, whatever the weekday profile says. ``"metered"``: the same
+        fit with, in addition, each zone's metered electric power of lights and plug loads
+        above its weekend night base as known gains on the weekends
+        (:func:`weekend_metered_gains`; the site's ``points.power``): electricity used in
+        a room is heat in it, day by day, where the daytime shape can only guess.
 
         ``x0_profile_days`` (an option, default off; docs/identification.md "The slow
         states' x(0)"): after the fit, the weekly internal-gains profile of the whole
@@ -308,11 +343,13 @@ class Pipeline:
         this filter.
         """
         modes = {False: None, "none": None, True: "known", "known": "known",
-                 "scaled": "scaled", "daytime": "daytime"}
+                 "scaled": "scaled", "daytime": "daytime", "metered": "metered"}
         if weekend_gains not in modes:
             raise PipelineError(f"weekend_gains={weekend_gains!r}: use 'none', 'known', "
-                                "'scaled' or 'daytime'")
+                                "'scaled', 'daytime' or 'metered'")
         weekend_gains = modes[weekend_gains]
+        if weekend_gains == "metered":
+            self._need_meters(data)
         if films is None:
             films = "convective" if self.options.interior_radiation == "star" else "combined"
         if films not in ("combined", "convective"):
@@ -332,10 +369,11 @@ class Pipeline:
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
                        seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,
                        window=window, agree_rtol=agree_rtol, x0_offset_sd=x0_offset_sd,
-                       day_scale_sd=day_scale_sd if weekend_gains == "daytime" else None,
+                       day_scale_sd=(day_scale_sd if weekend_gains in ("daytime", "metered")
+                                     else None),
                        start=start.values if convective else None,
-                       gain_shape=(weekend_daytime_shape(data)
-                                   if weekend_gains == "daytime" else None))
+                       f_ig=self.weekend_known_gains(data, weekend_gains),
+                       gain_shape=self.weekend_shape(data, weekend_gains))
         if weekend_gains in ("known", "scaled"):
             self.params = res.model.params
             progress("weekly internal-gains profile for the weekends' gains")
@@ -360,16 +398,45 @@ class Pipeline:
             res = identify(self.model(res.model.params), data, train, validation,
                            seed=seed, progress=progress, priors=priors or None,
                            sigma_e=sigma_e, window=window, start=res.model.params.values,
-                           gain_shape=(weekend_daytime_shape(data)
-                                       if weekend_gains == "daytime" else None),
+                           f_ig=self.weekend_known_gains(data, weekend_gains),
+                           gain_shape=self.weekend_shape(data, weekend_gains),
                            x0_gains=x0_gains, x0_window=x0_profile_days * per_day,
                            x0_offset_sd=x0_offset_sd,
-                           day_scale_sd=day_scale_sd if weekend_gains == "daytime" else None)
+                           day_scale_sd=(day_scale_sd if weekend_gains in ("daytime", "metered")
+                                     else None))
             self.x0_gains = x0_gains
         self.identification = res
         self.params = res.model.params
         self._bundle = None
         return res
+
+    def zone_floor_areas(self) -> np.ndarray:
+        """Floor area [m2] of each model zone (its rooms' floors), site zone order: the
+        a_floor of the paper's internal gains (eq:q_ig)."""
+        rooms = {k.upper(): v for k, v in self.building().zones.items()}
+        return np.array([sum(rooms[r.upper()].floor_area for r in members)
+                         for members in self.site.zones.values()])
+
+    def weekend_shape(self, data: ModelData, mode: str | None) -> np.ndarray | None:
+        """The weekend gains shape [W/m2] (N, n_zones) a ``weekend_gains`` mode fits a
+        per-zone scale of: :func:`weekend_daytime_shape` for ``"daytime"`` and
+        ``"metered"``; None for the other modes."""
+        return weekend_daytime_shape(data) if mode in ("daytime", "metered") else None
+
+    def weekend_known_gains(self, data: ModelData, mode: str | None) -> np.ndarray | None:
+        """The weekends' known gains [W/m2] (N, n_zones) of a ``weekend_gains`` mode: the
+        metered rise (:func:`weekend_metered_gains`) for ``"metered"``, else None."""
+        if mode != "metered":
+            return None
+        self._need_meters(data)
+        return weekend_metered_gains(data, self.zone_floor_areas())
+
+    @staticmethod
+    def _need_meters(data: ModelData) -> None:
+        if data.power is None:
+            raise PipelineError("weekend_gains='metered' needs electricity meters: map each "
+                                "zone's lights and plug-load meters under points.power in the "
+                                "site description (docs/data.md)")
 
     def _quiet_weeks_gains(self, data: ModelData, gains_weeks: Sequence[int] | None
                            ) -> np.ndarray | None:

@@ -357,7 +357,9 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "identify again with the weekly gains profile of the weeks without "
                           "experiments as known f_IG; 'scaled': the profile as a per-zone "
                           "shape whose scale is fitted with the parameters (buildings occupied "
-                          "at weekends; docs/identification.md)")] = "daytime",
+                          "at weekends; docs/identification.md); 'metered': the daytime fit "
+                          "with each zone's metered lights and plug loads (points.power) as "
+                          "known weekend gains")] = "daytime",
                  x0_profile_days: X0ProfileDays = None,
                  x0_offset_sd: X0OffsetSd = None,
                  day_scale_sd: DayScaleSd = None,
@@ -479,8 +481,10 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                       help="'daytime' (the default since 2026-11-25: a weekend 08-18 h "
                            "rise per zone fitted with the parameters), 'none' (the paper), "
                            "'known' (identify again with the weekly gains profile of the "
-                           "training weeks as known f_IG) or 'scaled' (the profile's per-zone "
-                           "scale fitted with the parameters)")] = "daytime"
+                           "training weeks as known f_IG), 'scaled' (the profile's per-zone "
+                           "scale fitted with the parameters) or 'metered' (the daytime fit "
+                           "with the zones' metered lights and plug loads as known weekend "
+                           "gains)")] = "daytime"
                   ) -> None:
     """The paper's tables and figures on the virtual building: campaign, identification,
     internal gains, forecasts; writes results.json, figures and report.md."""

@@ -167,7 +167,7 @@ def test_structure_file_errors_say_what_to_fix(vb, tmp_path):
 
 def test_pipeline_rejects_an_unknown_weekend_gains_mode(vb):
     pipe = Pipeline.from_site(vb / "site.yaml")
-    with pytest.raises(PipelineError, match="use 'none', 'known', 'scaled' or 'daytime'"):
+    with pytest.raises(PipelineError, match="use 'none', 'known', 'scaled', 'daytime' or 'metered'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), weekend_gains="sometimes")
     with pytest.raises(PipelineError, match="films='radiant': use 'combined' or 'convective'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), films="radiant")
@@ -188,6 +188,73 @@ def test_weekend_daytime_shape_marks_weekend_days_between_8_and_18_local(vb):
     # every weekend row in those hours is marked (4 rows an hour, 10 hours a day)
     weekend_days = len({d for d, w in zip(local.date, local.day_of_week) if w >= 5})
     assert on.sum() <= weekend_days * 40 and on.sum() >= (weekend_days - 2) * 40
+
+
+def test_weekend_metered_gains_are_the_weekend_rise_above_the_night_base_per_floor_area(vb):
+    """The virtual building's zone meters (lights + plug loads) on Saturday and Sunday
+    rows, less the median of the weekend readings between 00 and 06 h local, per m2 of
+    the zone's floor; 0 on working days, on a weekend row whose meter did not report and
+    for a zone without a meter; 'metered' without meters is refused."""
+    import dataclasses
+
+    from zonecast.estimator.pipeline import weekend_metered_gains
+
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    data = pipe.data(pipe.telemetry(vb))
+    assert data.power is not None and np.isfinite(data.power).all()
+    area = pipe.zone_floor_areas()
+    b = pipe.building()
+    assert area.sum() == pytest.approx(sum(b.zones[r].floor_area for rs in pipe.site.zones.values()
+                                           for r in rs))
+    local = data.local_times()
+    weekend = np.asarray(local.day_of_week >= 5)
+    night = weekend & np.asarray(local.hour < 6)
+    known = weekend_metered_gains(data, area)
+    np.testing.assert_array_equal(pipe.weekend_known_gains(data, "metered"), known)
+    assert pipe.weekend_known_gains(data, "daytime") is None
+    assert np.all(known[~weekend] == 0)
+    for j in range(len(data.zones)):
+        base = np.median(data.power[night, j])
+        np.testing.assert_allclose(known[weekend, j],
+                                   np.maximum(data.power[weekend, j] - base, 0) / area[j])
+    assert known[weekend].max() > 0.5  # the weekend days' lights and plugs rise at times
+    power = data.power.copy()
+    k = int(np.flatnonzero(weekend & np.asarray(local.hour == 12))[0])
+    power[k, 0] = np.nan
+    power[:, 1] = np.nan
+    alt = weekend_metered_gains(dataclasses.replace(data, power=power), area)
+    assert alt[k, 0] == 0 and np.all(alt[:, 1] == 0)
+    np.testing.assert_array_equal(np.delete(alt[:, 0], k), np.delete(known[:, 0], k))
+    np.testing.assert_array_equal(alt[:, 2:], known[:, 2:])
+    with pytest.raises(PipelineError, match="needs electricity meters: map .*points.power"):
+        pipe.identify(dataclasses.replace(data, power=None), weekend_gains="metered")
+
+
+def test_metered_mode_fits_the_daytime_scale_with_the_metered_gains_known(vb, monkeypatch):
+    """Pipeline.identify(weekend_gains="metered") hands identify the metered gains as known
+    f_IG and the daytime shape to scale; "daytime" the shape alone."""
+    import zonecast.estimator.pipeline as pl
+
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    data = pipe.data(pipe.telemetry(vb))
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake(*args, **kwargs):
+        seen.append(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(pl, "identify", fake)
+    for mode in ("metered", "daytime"):
+        with pytest.raises(Stop):
+            pipe.identify(data, train=["2015-04-18"], validation=[], weekend_gains=mode)
+    np.testing.assert_array_equal(seen[0]["f_ig"], pipe.weekend_known_gains(data, "metered"))
+    assert seen[0]["f_ig"].any()
+    for kw in seen:
+        np.testing.assert_array_equal(kw["gain_shape"], pl.weekend_daytime_shape(data))
+    assert seen[1]["f_ig"] is None
 
 
 def test_structure_files_without_the_horizontal_column_still_load(vb, bundle, tmp_path):

@@ -150,6 +150,15 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
             scale, day_scale=(results.identification or {}).get("gain_day_scale"))
         if occupied:
             lines += [f"**Warning:** {occupied}.", ""]
+    elif mode == "metered":
+        scale = (results.identification or {}).get("gain_scale") or {}
+        lines += [("Fitted with each zone's metered lights and plug loads above its weekend "
+                   "night base, per m² of floor, as known weekend gains, and the weekend "
+                   f"daytime rise s_z × {WEEKEND_DAY_GAIN} W/m² between "
+                   f"{WEEKEND_DAY_HOURS[0]:02d} and {WEEKEND_DAY_HOURS[1]:02d} h local with its "
+                   "per-zone scale fitted with the parameters (`--weekend-gains metered`), so "
+                   "Table 2 and Fig. 1 are the model with those gains. Scales: "
+                   + _scales(scale) + "."), ""]
     elif mode == "scaled":
         scale = (results.identification or {}).get("gain_scale") or {}
         lines += [("Fitted with the weekly internal-gains profile of the training weeks without "
@@ -237,9 +246,11 @@ def _scales(scale: dict) -> str:
     return ", ".join(f"{z} {v['value']:.2f} ± {v['se']:.2f}" for z, v in scale.items())
 
 
-def _daytime_gains(mode, ident, data) -> np.ndarray | None:
-    """The fitted weekend daytime rise s_z x shape [W/m2] of a ``daytime`` fit, else None."""
-    scale = ident.gain_scale if mode == "daytime" else None
+def _daytime_gains(mode, ident, data, pipe=None) -> np.ndarray | None:
+    """The weekend gains [W/m2] a ``daytime`` or ``metered`` fit knew: the fitted rise
+    s_z x shape (with each training day's own deviation) plus, for ``metered`` (with the
+    pipeline ``pipe``), the metered gains; else None."""
+    scale = ident.gain_scale if mode in ("daytime", "metered") else None
     if not scale:
         return None
     shape = weekend_daytime_shape(data)
@@ -251,7 +262,8 @@ def _daytime_gains(mode, ident, data) -> np.ndarray | None:
         j = data.zones.index(zone)
         on = dates == dt.date.fromisoformat(day)
         gains[on, j] += shape[on, j] * d["value"]
-    return gains
+    known = pipe.weekend_known_gains(data, mode) if pipe is not None else None
+    return gains if known is None else gains + known
 
 
 def plot_weekends(sims: list[dict], roles: dict[str, str], zones: list[str], path: Path,
@@ -529,13 +541,13 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     figures = []
     sims = weekend_simulations(fitted, data, ident.train_weekends + ident.validation_weekends,
                                window=ident.window,
-                               f_ig=_daytime_gains(weekend_gains, ident, data),
+                               f_ig=_daytime_gains(weekend_gains, ident, data, pipe),
                                x0_gains=pipe.x0_gains, x0_window=ident.x0_window,
                                x0_offset=ident.x0_offset())
     roles = {**{d: "training" for d in ident.train_weekends},
              **{d: "validation" for d in ident.validation_weekends}}
     plot_weekends(sims, roles, list(site.zones), out / "fig1_identification.png",
-                  gains=("the fitted weekend daytime gains" if weekend_gains == "daytime"
+                  gains=("the fitted weekend gains" if weekend_gains in ("daytime", "metered")
                          else "f_IG = 0"))
     figures.append("fig1_identification.png")
     plot_gains(figs["fig2"], list(site.zones), out / "fig2_internal_gains.png")

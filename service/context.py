@@ -42,7 +42,8 @@ def catalogue_for_site(site: Site) -> Catalogue:
     kind's plausible range converted to that unit; the site's step as the time grid and,
     if the site lists experiments, one year before the first as the earliest plausible
     reading time (else the ingest default, 1970)."""
-    kinds = {"temperature": "temperature", "airflow": "airflow", "irradiance": "irradiance"}
+    kinds = {"temperature": "temperature", "airflow": "airflow", "irradiance": "irradiance",
+             "power": "power"}
     starts = [e.start for e in getattr(site, "experiments", None) or ()]
     earliest = min(starts) - PLAUSIBLE_BEFORE if starts else None
     out = Catalogue(earliest=earliest, step=getattr(site, "step", None))

@@ -119,20 +119,24 @@ class PointKind(str, Enum):
     TEMPERATURE = "temperature"
     AIRFLOW = "airflow"
     IRRADIANCE = "irradiance"
+    POWER = "power"
     OTHER = "other"
 
 
-#: Default plausible range per kind, in the kind's SI unit (degC, kg/s, W/m2).
+#: Default plausible range per kind, in the kind's SI unit (degC, kg/s, W/m2, W; a meter
+#: of a floor's lights and plug loads reads well below 100 MW).
 DEFAULT_RANGES: dict[PointKind, tuple[float, float]] = {
     PointKind.TEMPERATURE: (-50.0, 80.0),
     PointKind.AIRFLOW: (0.0, 100.0),
     PointKind.IRRADIANCE: (0.0, 1500.0),
+    PointKind.POWER: (0.0, 1e8),
     PointKind.OTHER: (-1e12, 1e12),
 }
 _DEFAULT_UNITS = {
     PointKind.TEMPERATURE: "degC",
     PointKind.AIRFLOW: "kg/s",
     PointKind.IRRADIANCE: "W/m2",
+    PointKind.POWER: "W",
     PointKind.OTHER: "",
 }
 
@@ -144,7 +148,7 @@ class PointSpec:
     Parameters
     ----------
     kind : PointKind or str
-        ``temperature``, ``airflow``, ``irradiance`` or ``other``.
+        ``temperature``, ``airflow``, ``irradiance``, ``power`` or ``other``.
     unit : str, optional
         Unit of the values on the wire (documentation only; no conversion
         happens at ingest). Defaults to the kind's SI unit.

@@ -101,7 +101,7 @@ def test_catalogue_converts_plausible_ranges_to_the_wire_unit():
 
     class Site:  # catalogue_for_site only needs the point -> unit map
         def point_units(self):
-            return {"T1": "degF", "T2": "degC", "F1": "L/s", "G": "kW/m2"}
+            return {"T1": "degF", "T2": "degC", "F1": "L/s", "G": "kW/m2", "P": "kW", "PW": "W"}
 
     cat = catalogue_for_site(Site())
     assert cat["T1"].unit == "degF" and cat["T1"].kind.value == "temperature"
@@ -109,6 +109,8 @@ def test_catalogue_converts_plausible_ranges_to_the_wire_unit():
     assert (cat["T2"].low, cat["T2"].high) == (-50, 80)
     assert cat["F1"].high == pytest.approx(100 / 1.2e-3)
     assert cat["G"].high == pytest.approx(1.5)
+    assert cat["P"].kind.value == "power" and (cat["P"].low, cat["P"].high) == (0, 1e5)
+    assert cat["PW"].unit == "W" and cat["PW"].high == 1e8
 
 
 # --------------------------------------------------------------------------- runner semantics

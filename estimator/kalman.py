@@ -35,6 +35,7 @@ from scipy.linalg import solve_discrete_are
 
 __all__ = [
     "FilterResult",
+    "HorizonRows",
     "Innovation",
     "KalmanInputError",
     "SteadyStateFilter",
@@ -272,23 +273,45 @@ def horizon_output_variances(F, P0, Q, H, steps: int) -> np.ndarray:
 
     ``P_h = F^h P0 F^h' + sum_{j<h} F^j Q F^j'`` is never formed: only the rows
     ``G_h = H F^h`` are propagated (m x n each), so the cost is O(steps m n²) instead of
-    O(steps n³).
+    O(steps n³) (:class:`HorizonRows`, which serves several ``P0`` of the same system).
 
     Returns
     -------
     ndarray (steps, m)
     """
     F = np.asarray(F, dtype=float)
-    n = F.shape[0]
-    P0, Q = _square("P0", P0, n), _square("Q", Q, n)
-    G = np.asarray(H, dtype=float).copy()
-    acc = np.zeros(G.shape[0])  # sum_{j<h} diag(G_j Q G_j')
-    out = np.empty((steps, G.shape[0]))
-    for h in range(steps):
-        acc += np.einsum("ij,jk,ik->i", G, Q, G)
-        G = G @ F
-        out[h] = np.einsum("ij,jk,ik->i", G, P0, G) + acc
-    return out
+    return HorizonRows(F, _square("Q", Q, F.shape[0]), H, steps).variances(P0)
+
+
+class HorizonRows:
+    """The rows ``G_h = H F^h`` (h = 1..steps) of a system and the process noise's part of
+    the forecast output variances, ``sum_{j<h} diag(G_j Q G_j')`` (G_0 = H): what
+    :func:`horizon_output_variances` needs besides the initial covariance, computed once.
+
+    Parameters
+    ----------
+    F : (n, n) [-]; Q : (n, n) [K²]; H : (m, n) [-]; steps : int
+    """
+
+    def __init__(self, F, Q, H, steps: int):
+        F = np.asarray(F, dtype=float)
+        G = np.asarray(H, dtype=float)
+        m, n = G.shape
+        rows = np.empty((steps + 1, m, n))
+        rows[0] = G
+        for h in range(steps):
+            rows[h + 1] = rows[h] @ F
+        flat = rows.reshape(-1, n)
+        q = ((flat @ np.asarray(Q, float)) * flat).sum(axis=1).reshape(steps + 1, m)
+        self.n = n
+        self.rows = rows[1:]
+        self.noise = np.cumsum(q[:-1], axis=0)
+
+    def variances(self, P0) -> np.ndarray:
+        """(steps, m) forecast output variances [K²] from the covariance ``P0``."""
+        P0 = _square("P0", P0, self.n)
+        flat = self.rows.reshape(-1, self.n)
+        return ((flat @ P0) * flat).sum(axis=1).reshape(self.rows.shape[:2]) + self.noise
 
 
 class SteadyStateFilter:
@@ -404,7 +427,7 @@ class YoungFilter:
 
 
 def young_filter(F, H, Q, R, P0, steps: int, horizon: int, *,
-                 rtol: float = 1e-3) -> YoungFilter:
+                 rtol: float = 1e-3, steady: SteadyStateFilter | None = None) -> YoungFilter:
     """The time-varying gains of the filter from ``P0`` for up to ``steps`` steps
     (:class:`YoungFilter`), ending early once the gain is within ``rtol`` (relative to
     its largest entry) of the steady-state gain.
@@ -414,13 +437,16 @@ def young_filter(F, H, Q, R, P0, steps: int, horizon: int, *,
     F : (n, n) [-]; H : (m, n) [-]; Q : (n, n) or (n,) [K²]; R : (m, m) or (m,) [K²];
     P0 : (n, n) or (n,) covariance at the start, before its measurement [K²];
     steps : int, steps to compute at most; horizon : int, forecast steps.
+    steady : the steady-state filter of the same F, H, Q, R, if at hand (its gain ends the
+        recursion; without it the Riccati equation is solved again).
     """
     F = np.asarray(F, dtype=float)
     n = F.shape[0]
     H = np.asarray(H, dtype=float)
     Q, R, P = _square("Q", Q, n), _square("R", R, H.shape[0]), _square("P0", P0, n)
-    K_ss = SteadyStateFilter(steady_state_covariance(F, H, Q, R), H, R)._pattern(
-        np.ones(H.shape[0], bool))[0]
+    if steady is None:
+        steady = SteadyStateFilter(steady_state_covariance(F, H, Q, R), H, R)
+    K_ss = steady._pattern(np.ones(H.shape[0], bool))[0]
     scale = max(float(np.abs(K_ss).max()), 1e-12)
 
     def update(P):
@@ -432,8 +458,9 @@ def young_filter(F, H, Q, R, P0, steps: int, horizon: int, *,
         return 0.5 * (P + P.T), K, S, S_inv
 
     P = update(P)[0]
+    rows = HorizonRows(F, Q, H, horizon)
     gains, Ss, Sis, out_var, at, hv = [], [], [], [np.diag(H @ P @ H.T)], [0], []
-    hv.append(horizon_output_variances(F, P, Q, H, horizon))
+    hv.append(rows.variances(P))
     for j in range(1, steps + 1):
         P, K, S, S_inv = update(F @ P @ F.T + Q)
         gains.append(K)
@@ -442,7 +469,7 @@ def young_filter(F, H, Q, R, P0, steps: int, horizon: int, *,
         out_var.append(np.diag(H @ P @ H.T))
         if j & (j - 1) == 0:  # powers of two
             at.append(j)
-            hv.append(horizon_output_variances(F, P, Q, H, horizon))
+            hv.append(rows.variances(P))
         if np.abs(K - K_ss).max() <= rtol * scale:
             break
     m = H.shape[0]

@@ -286,7 +286,7 @@ def _young_parts(bundle: ModelBundle, steady: _SteadyParts) -> YoungFilter:
         P0 = air_wall_covariance(m.n, m.structure.air_states(), ns.p0_sigma_air,
                                  ns.p0_sigma_wall)
         steady.young = young_filter(steady.phi, m.C, steady.Q, steady.R, P0, YOUNG_STEPS,
-                                    HORIZON)
+                                    HORIZON, steady=steady.filt)
     return steady.young
 
 

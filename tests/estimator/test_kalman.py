@@ -338,5 +338,10 @@ def test_young_filter_is_the_time_varying_filter_from_its_start():
         np.testing.assert_allclose(yf.horizon_variance(j),
                                    K.horizon_output_variances(F, posts[at], Q, H, 5),
                                    rtol=1e-10)
+    # the steady-state filter at hand gives the same gains without solving the DARE again
+    ss = K.SteadyStateFilter(P_ss, H, R)
+    again = K.young_filter(F, H, Q, R, P0, steps=300, horizon=5, rtol=1e-6, steady=ss)
+    assert again.steps == yf.steps
+    np.testing.assert_allclose(again.gains, yf.gains, rtol=1e-9, atol=1e-12)
     # a cap shorter than the convergence keeps exactly that many steps
     assert K.young_filter(F, H, Q, R, P0, steps=3, horizon=5).steps == 3

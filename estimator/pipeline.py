@@ -76,13 +76,16 @@ OCCUPIED_WEEKEND_SCALE = 1.0
 
 def weekend_occupancy_warning(gain_scale: Mapping | None,
                               threshold: float = OCCUPIED_WEEKEND_SCALE,
-                              day_scale: Mapping | None = None) -> str | None:
+                              day_scale: Mapping | None = None,
+                              metered: bool = False) -> str | None:
     """A warning when a ``daytime`` fit's scales (``result.gain_scale``: zone -> {"value",
     ...}) say people work at weekends (some zone's scale above ``threshold``), else None.
     With per-day deviations (``result.gain_day_scale``: "zone,date" -> {"value", ...}) a
     zone's largest day (s_z + d_day,z) counts. The paper identifies on unoccupied weekends; with
     people in, the weekends' unknown gains cost Table 2 and the forecasts about 0.1 K
-    (docs/benchmarks.md), and weekends without people are the better data."""
+    (docs/benchmarks.md), and weekends without people are the better data. ``metered``:
+    the site has lights and plug-load meters, and the warning names the option that uses
+    them."""
     best = {z: v["value"] for z, v in (gain_scale or {}).items()}
     for key, d in (day_scale or {}).items():
         z = key.rsplit(",", 1)[0]
@@ -96,7 +99,10 @@ def weekend_occupancy_warning(gain_scale: Mapping | None,
             f"than {threshold:g} x an empty office's ({WEEKEND_DAY_GAIN} W/m2). The "
             "identification assumes weekends without people (paper section 2-B); with people in, "
             "expect Table 2 and the 24-h forecasts about 0.1 K worse, and excite on weekends "
-            "when nobody works if you can (docs/identification.md)")
+            "when nobody works if you can (docs/identification.md)"
+            + ("; the site has lights and plug-load meters: --weekend-gains metered takes "
+               "their weekend rise as known gains (docs/identification.md \"Metered weekend "
+               "gains\")" if metered else ""))
 
 
 def weekend_daytime_shape(data: ModelData) -> np.ndarray:

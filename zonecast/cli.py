@@ -399,7 +399,8 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     if pinned:
         typer.secho(f"warning: at a bound (not determined by the data): {', '.join(pinned)}",
                     fg=typer.colors.YELLOW)
-    occupied = (weekend_occupancy_warning(res.gain_scale, day_scale=res.gain_day_scale)
+    occupied = (weekend_occupancy_warning(res.gain_scale, day_scale=res.gain_day_scale,
+                                          metered=done.metered)
                 if weekend_gains == "daytime" else None)
     if occupied:
         typer.secho(f"warning: {occupied}", fg=typer.colors.YELLOW)
@@ -509,7 +510,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
     _warn_bounds(res)
     ident = res.identification or {}
     occupied = (weekend_occupancy_warning(ident.get("gain_scale"),
-                                          day_scale=ident.get("gain_day_scale"))
+                                          day_scale=ident.get("gain_day_scale"),
+                                          metered=bool(ident.get("site_meters")))
                 if weekend_gains == "daytime" else None)
     if occupied:
         typer.secho(f"warning: {occupied}", fg=typer.colors.YELLOW)

@@ -525,6 +525,9 @@ def test_weekend_occupancy_warning_names_the_zones_above_an_empty_office():
                                      "C": {"value": 2.4, "se": 0.2}})
     assert msg.startswith("the weekends look occupied: zones C 2.4 fitted")
     assert "N 0.4" not in msg and "weekends without people" in msg
+    assert "--weekend-gains metered" not in msg
+    scales = {"C": {"value": 2.4, "se": 0.2}}
+    assert "meters: --weekend-gains metered" in weekend_occupancy_warning(scales, metered=True)
 
 
 def test_the_warning_counts_a_weekend_days_own_scale():

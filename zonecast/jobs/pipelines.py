@@ -66,6 +66,8 @@ class IdentifyOutcome:
     result: IdentificationResult
     model_file: Path
     profile_weeks: list[str] = field(default_factory=list)
+    #: the site maps lights and plug-load meters (``points.power``)
+    metered: bool = False
 
 
 def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None = None,
@@ -106,7 +108,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
         pipe.weekly_profile(d, progress=lambda m: progress(f"weekly internal-gains profile: {m}"))
     out.parent.mkdir(parents=True, exist_ok=True)
     path = pipe.write_model_file(out, extra={"profile_weeks": pipe.profile_weeks})
-    return IdentifyOutcome(res, path, pipe.profile_weeks)
+    return IdentifyOutcome(res, path, pipe.profile_weeks, bool(pipe.site.points.power))
 
 
 def forecast_at(model: Path, data: Path, at: str, horizon: str = "24h"

@@ -147,7 +147,8 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                    "those gains. Scales: "
                    + _scales(scale) + "."), ""]
         occupied = weekend_occupancy_warning(
-            scale, day_scale=(results.identification or {}).get("gain_day_scale"))
+            scale, day_scale=(results.identification or {}).get("gain_day_scale"),
+            metered=bool((results.identification or {}).get("site_meters")))
         if occupied:
             lines += [f"**Warning:** {occupied}.", ""]
     elif mode == "metered":
@@ -524,7 +525,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                   "bounds": bd, "at_bound": n in pinned}
                               for n, v, u, s, bd in zip(ident.param_names, ident.params,
                                                         ident.units, ident.stderr, ident.bounds)},
-                  identification={**ident.to_dict(), "weekend_gains": weekend_gains},
+                  identification={**ident.to_dict(), "weekend_gains": weekend_gains,
+                                  "site_meters": bool(site.points.power)},
                   table2={"training": ident.train_rms, "validation": ident.validation_rms},
                   table2_window_solar_air=None if ident_air is None else
                   {"training": ident_air.train_rms, "validation": ident_air.validation_rms},

@@ -427,7 +427,8 @@ class YoungFilter:
 
 
 def young_filter(F, H, Q, R, P0, steps: int, horizon: int, *,
-                 rtol: float = 1e-3, steady: SteadyStateFilter | None = None) -> YoungFilter:
+                 rtol: float = 1e-3, steady: SteadyStateFilter | None = None,
+                 rows: HorizonRows | None = None) -> YoungFilter:
     """The time-varying gains of the filter from ``P0`` for up to ``steps`` steps
     (:class:`YoungFilter`), ending early once the gain is within ``rtol`` (relative to
     its largest entry) of the steady-state gain.
@@ -439,6 +440,7 @@ def young_filter(F, H, Q, R, P0, steps: int, horizon: int, *,
     steps : int, steps to compute at most; horizon : int, forecast steps.
     steady : the steady-state filter of the same F, H, Q, R, if at hand (its gain ends the
         recursion; without it the Riccati equation is solved again).
+    rows : the :class:`HorizonRows` of the same F, Q, H and ``horizon``, if at hand.
     """
     F = np.asarray(F, dtype=float)
     n = F.shape[0]
@@ -458,7 +460,7 @@ def young_filter(F, H, Q, R, P0, steps: int, horizon: int, *,
         return 0.5 * (P + P.T), K, S, S_inv
 
     P = update(P)[0]
-    rows = HorizonRows(F, Q, H, horizon)
+    rows = HorizonRows(F, Q, H, horizon) if rows is None else rows
     gains, Ss, Sis, out_var, at, hv = [], [], [], [np.diag(H @ P @ H.T)], [0], []
     hv.append(rows.variances(P))
     for j in range(1, steps + 1):

@@ -107,12 +107,12 @@ from zonecast.estimator.inputs_forecast import (
 )
 from zonecast.estimator.integrate import StepperLadder
 from zonecast.estimator.kalman import (
+    HorizonRows,
     Innovation,
     SteadyStateFilter,
     YoungFilter,
     air_wall_covariance,
     default_measurement_noise,
-    horizon_output_variances,
     initial_state_from_measurement,
     steady_state_covariance,
     young_filter,
@@ -254,6 +254,7 @@ class _SteadyParts:
     phi: np.ndarray  # the nominal transition matrix the filter was solved for
     Q: np.ndarray
     R: np.ndarray
+    rows: HorizonRows | None = field(default=None, compare=False)
     young: YoungFilter | None = field(default=None, compare=False)
 
 
@@ -270,8 +271,8 @@ def _steady_parts(bundle: ModelBundle, Q: np.ndarray, R: np.ndarray) -> _SteadyP
     hit = _STEADY.get(key)
     if hit is None:
         filt = SteadyStateFilter(steady_state_covariance(phi, m.C, Q, R), m.C, R)
-        var = horizon_output_variances(phi, filt.posterior(), Q, m.C, HORIZON)
-        hit = _SteadyParts(filt, var, phi, Q, R)
+        rows = HorizonRows(phi, Q, m.C, HORIZON)
+        hit = _SteadyParts(filt, rows.variances(filt.posterior()), phi, Q, R, rows)
         if len(_STEADY) >= 16:
             _STEADY.pop(next(iter(_STEADY)))
         _STEADY[key] = hit
@@ -286,7 +287,7 @@ def _young_parts(bundle: ModelBundle, steady: _SteadyParts) -> YoungFilter:
         P0 = air_wall_covariance(m.n, m.structure.air_states(), ns.p0_sigma_air,
                                  ns.p0_sigma_wall)
         steady.young = young_filter(steady.phi, m.C, steady.Q, steady.R, P0, YOUNG_STEPS,
-                                    HORIZON, steady=steady.filt)
+                                    HORIZON, steady=steady.filt, rows=steady.rows)
     return steady.young
 
 

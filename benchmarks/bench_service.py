@@ -138,7 +138,7 @@ def bench_steps(data: Path, work: Path, days: int) -> dict:
     for k, t in enumerate(live.index[:48]):
         t0 = time.perf_counter()
         store.reading_bounds(bundle.building, t)
-        times, values = store.readings_matrix(bundle.building, t, t + STEP, runner.points)
+        times, values = store.readings_matrix(bundle.building, t, t + STEP, conv.points)
         read.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
         conv.convert(times, values)

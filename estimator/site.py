@@ -358,6 +358,11 @@ class Site(_Strict):
         """Every telemetry column the site needs -> its unit."""
         return {p.point: p.unit for p in self._all_points()}
 
+    def meter_points(self) -> list[str]:
+        """The lights and plug-load meters' columns (``points.power``): used by the
+        identification, not by the state estimator."""
+        return [m.point for ms in self.points.power.values() for m in ms]
+
     @property
     def zone_names(self) -> list[str]:
         return list(self.zones)

@@ -255,7 +255,8 @@ class _SteadyParts:
     Q: np.ndarray
     R: np.ndarray
     rows: HorizonRows | None = field(default=None, compare=False)
-    young: YoungFilter | None = field(default=None, compare=False)
+    #: young filters by (initial air and wall deviations, steps): they depend on those too
+    young: dict = field(default_factory=dict, compare=False)
 
 
 _STEADY: dict[str, _SteadyParts] = {}
@@ -282,13 +283,15 @@ def _steady_parts(bundle: ModelBundle, Q: np.ndarray, R: np.ndarray) -> _SteadyP
 def _young_parts(bundle: ModelBundle, steady: _SteadyParts) -> YoungFilter:
     """The young filter's gains for ``bundle``'s model (computed at the first start and
     kept with the steady-state parts: a few seconds for the 381-state virtual building)."""
-    if steady.young is None:
-        m, ns = bundle.model, bundle.noise
+    m, ns = bundle.model, bundle.noise
+    key = (float(ns.p0_sigma_air), float(ns.p0_sigma_wall), int(YOUNG_STEPS))
+    if key not in steady.young:
         P0 = air_wall_covariance(m.n, m.structure.air_states(), ns.p0_sigma_air,
                                  ns.p0_sigma_wall)
-        steady.young = young_filter(steady.phi, m.C, steady.Q, steady.R, P0, YOUNG_STEPS,
-                                    HORIZON, steady=steady.filt, rows=steady.rows)
-    return steady.young
+        steady.young[key] = young_filter(steady.phi, m.C, steady.Q, steady.R, P0,
+                                         YOUNG_STEPS, HORIZON, steady=steady.filt,
+                                         rows=steady.rows)
+    return steady.young[key]
 
 
 def _solve_square(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -365,6 +368,7 @@ class OnlineEstimator:
         self._since = 0  # steps since the last measurement update
         self._young: int | None = None  # steps of the young filter done (None: steady)
         self._young_seen: int | None = None  # the same at the last measurement update
+        self._yf: YoungFilter | None = None  # the young filter of the current start
         self._observed = np.ones(self._nz, bool)  # zones observed in that update
         self._gains: deque[tuple[pd.Timestamp, np.ndarray]] = deque(maxlen=8)
         self._inputs: deque[tuple[pd.Timestamp, np.ndarray]] = deque(maxlen=HORIZON)
@@ -394,7 +398,7 @@ class OnlineEstimator:
         it is that filter's prediction deviation of that many steps.
         """
         if self._since == 0 and self._young_seen is not None:
-            var = self._steady.young.output_var[self._young_seen]
+            var = self._yf.output_var[self._young_seen]
         elif self._since == 0:
             var = np.diag(self._steady.filt.output_covariance(self._observed))
         else:
@@ -410,8 +414,9 @@ class OnlineEstimator:
         # the young filter's gains assume every zone measured at the start and each step
         self._young = self._young_seen = None
         if self.young_filter and self._observed.all():
-            _young_parts(self.bundle, self._steady)
-            self._young = self._young_seen = 0
+            self._yf = _young_parts(self.bundle, self._steady)
+            if self._yf.steps > 0:
+                self._young = self._young_seen = 0
 
     # --- one row ---------------------------------------------------------------------
     def advance(self, t, u, v, y, reheat=None) -> StepReport | None:
@@ -502,7 +507,7 @@ class OnlineEstimator:
             f = np.full(self._nz, np.nan)
         x_prior = x_tilde + gig @ self._online      # eq:online_ig
         if self._young is not None and np.isfinite(y).all():
-            yf, j = self._steady.young, self._young
+            yf, j = self._yf, self._young
             nu = y - m.C @ x_prior
             self._x = x_prior + yf.gains[j] @ nu
             inn = Innovation(nu, yf.S[j], float(nu @ yf.S_inv[j] @ nu), np.ones(self._nz, bool))
@@ -859,7 +864,7 @@ class OnlineEstimator:
         filter's own variances, those of the state's std."""
         if self._young_seen is None or not (own or self.young_std):
             return self._steady.horizon_var
-        return self._steady.young.horizon_variance(self._young_seen)
+        return self._yf.horizon_variance(self._young_seen)
 
     def _forecast_std(self) -> np.ndarray:
         """Standard deviations (HORIZON, n_zones) [K] of a forecast from the current state."""
@@ -1082,8 +1087,10 @@ class OnlineEstimator:
         # absent before the young filter: steady
         young, seen = meta.get("young"), meta.get("young_seen")
         if self.young_filter and (young is not None or seen is not None):
-            steps = _young_parts(self.bundle, self._steady).steps
-            self._young = None if young is None else min(int(young), steps - 1)
+            self._yf = _young_parts(self.bundle, self._steady)
+            steps = self._yf.steps
+            # a checkpoint of a longer young filter than this one: past its end, steady
+            self._young = None if young is None or int(young) >= steps else int(young)
             self._young_seen = None if seen is None else min(int(seen), steps)
         if "observed" in arr:
             self._observed = arr["observed"].astype(bool)
@@ -1140,7 +1147,10 @@ class RowConverter:
         if sky_model not in SKY_MODELS:
             raise ValueError(f"sky_model must be one of {SKY_MODELS}, got {sky_model!r}")
         site = bundle.site
-        self.units = site.point_units()
+        # the points a row of the state estimator is made of: not the lights and plug-load
+        # meters, which only the identification uses (a runner must not wait for them)
+        meters = set(site.meter_points())
+        self.units = {p: u for p, u in site.point_units().items() if p not in meters}
         self.points = list(self.units)
         col = {p: i for i, p in enumerate(self.points)}
         by_unit: dict[str, list[int]] = {}

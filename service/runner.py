@@ -106,7 +106,12 @@ class Runner:
         self.publish = publish
         self.units = bundle.site.point_units()
         self.convert = RowConverter(bundle)
-        self.points = self.convert.points
+        #: every point of the site (gaps, never-received): the estimator's and the lights
+        #: and plug-load meters, which are stored for the identification but which no row
+        #: waits for and which alone do not make a row (``_est``: the estimator's columns)
+        self.points = list(self.units)
+        col = {p: i for i, p in enumerate(self.points)}
+        self._est = np.array([col[p] for p in self.convert.points], dtype=int)
         self.est = OnlineEstimator(bundle, max_gap=pd.Timedelta(seconds=settings.max_gap))
         self.est.reheat_control = settings.thermostat_forecast
         self.next_time: pd.Timestamp | None = None
@@ -290,23 +295,25 @@ class Runner:
         while t < end:
             row = rows.get(t.value)
             present = None if row is None else np.isfinite(row)
-            complete = present is not None and bool(present.all())
+            complete = present is not None and bool(present[self._est].all())
             closable = (complete or (support is not None and support >= t + STEP + self._grace)
                         or (idle and now >= t + STEP + self._grace))
             if not closable:
                 return done, False
             self.next_time = t + STEP
             self.gaps.observe(t, present)
-            if present is not None and present.any():
+            if present is not None and present[self._est].any():
                 self.unseen &= ~present
-                self._process(t, row)
+                self._process(t, row[self._est])
                 done += 1
+            elif present is not None:
+                self.unseen &= ~present
             t += STEP
         return done, end <= last
 
     def _process(self, t: pd.Timestamp, row: np.ndarray) -> None:
-        """One row: ``row`` holds the readings of :attr:`points` at ``t`` in their wire
-        units (NaN = none)."""
+        """One row: ``row`` holds the readings of the estimator's points
+        (``convert.points``) at ``t`` in their wire units (NaN = none)."""
         t0 = _time.perf_counter()
         u, v, y, rh = self.convert.convert_rows(np.array([t.value], dtype=np.int64),
                                                 row[None, :])

@@ -145,7 +145,9 @@ def test_runner_waits_for_late_points_then_closes_by_watermark_or_idle(bundle, t
     clock = FakeClock("2015-04-13T08:00:00Z")
     runner = Runner(bundle, store, RunnerSettings(grace=300, idle_timeout=1800,
                                                   forecast_every=4), clock=clock)
-    put(rows.iloc[0])
+    meters = bundle.site.meter_points()
+    assert meters
+    put(rows.iloc[0], drop=meters)  # the meters are no part of a complete row
     put(rows.iloc[1], drop=[late])  # row 1 incomplete: its OAT comes late
     assert runner.poll() == 1  # row 0 complete; row 1 waits
     put(rows.iloc[2])  # watermark = row 2 < row 1 + 15 min + 5 min: still waiting
@@ -230,11 +232,11 @@ def test_step_report_innovation_is_the_one_the_filter_scored(bundle, telemetry):
         assert (np.isfinite(rep.innovation) == obs).all()
         nu = rep.innovation[obs]
         if k < 20:  # the young filter's step k (its gains computed at the start)
-            S = est._steady.young.S[k - 1]
+            S = est._yf.S[k - 1]
         else:  # zone 1 missing at row 20 handed over to the steady-state filter
             S = filt.H[obs] @ filt.P @ filt.H[obs].T + filt.R[np.ix_(obs, obs)]
         assert nu @ np.linalg.solve(S, nu) == pytest.approx(rep.nis, rel=1e-9)
-    assert est._steady.young.steps >= 20 and est._young is None
+    assert est._yf.steps >= 20 and est._young is None
 
 
 def test_state_std_without_measurements_follows_the_forecast_std(bundle, telemetry):
@@ -278,7 +280,7 @@ def test_young_filter_after_a_start_then_the_steady_one(bundle, telemetry):
     steady.young_filter = False
     est.advance(tt[0], u[0], v[0], y[0])
     steady.advance(tt[0], u[0], v[0], y[0])
-    yf = est._steady.young
+    yf = est._yf
     assert yf is not None and yf.steps > 12
     ss_zone = np.sqrt(np.diag(est._steady.filt.output_covariance()))
     ss_fc = np.sqrt(est._steady.horizon_var)

@@ -32,7 +32,7 @@ def test_row_converter_equals_rows_from_frame_on_every_row(bundle, telemetry):
     _, u, v, y = rows_from_frame(bundle, frame)
     conv = RowConverter(bundle)
     ns = frame.index.as_unit("ns").asi8
-    values = frame.to_numpy()
+    values = frame[conv.points].to_numpy()
     # all rows at once, and one row at a time as the runner converts them
     U, V, Y = conv.convert(ns, values)
     one = [conv.convert(ns[k:k + 1], values[k:k + 1]) for k in range(len(frame))]
@@ -241,3 +241,42 @@ def test_thermostat_band_is_open_where_nothing_is_declared():
     heat, cool = t2.band(times, "America/Los_Angeles", exp)
     np.testing.assert_array_equal(heat, [17, -np.inf, 17, 17, 17, 17])  # a holiday
     np.testing.assert_array_equal(cool, [28, np.inf, 28, 28, 28, 28])
+
+
+def test_the_row_converter_and_runner_do_not_wait_for_the_meters(bundle):
+    """The lights and plug-load meters (points.power) are ingested (the catalogue has them)
+    and tracked for gaps, but the estimator's rows are made of its own points: a row never
+    waits for a meter, and a row of meter readings alone is not processed (the runner's
+    own behaviour: tests/service/test_service_app.py)."""
+    from zonecast.estimator.streaming import RowConverter
+    from zonecast.service.context import catalogue_for_site
+
+    meters = bundle.site.meter_points()
+    assert meters and set(meters) <= set(catalogue_for_site(bundle.site))
+    conv = RowConverter(bundle)
+    assert not set(meters) & set(conv.points)
+    assert set(conv.points) | set(meters) == set(bundle.site.point_units())
+
+
+def test_young_checkpoints_past_the_filters_end_and_a_zero_length_young_filter(
+        bundle, telemetry, monkeypatch):
+    """A checkpoint whose young-filter step lies at or past this estimator's young filter
+    resumes with the steady filter; YOUNG_STEPS = 0 means no young filter at all."""
+    import zonecast.estimator.streaming as S
+
+    tt, u, v, y = S.rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:6]))
+    a = S.OnlineEstimator(bundle)
+    for k in range(4):
+        a.advance(tt[k], u[k], v[k], y[k])
+    assert a._young == 3 and a._young_seen == 3
+    monkeypatch.setattr(S, "YOUNG_STEPS", 3)
+    b = S.OnlineEstimator(bundle)
+    b.load_bytes(a.to_bytes())
+    assert b._yf.steps == 3 and b._young is None and b._young_seen == 3
+    b.advance(tt[4], u[4], v[4], y[4])  # the steady filter, no IndexError
+    assert b._young is None and b._young_seen is None
+    monkeypatch.setattr(S, "YOUNG_STEPS", 0)
+    c = S.OnlineEstimator(bundle)
+    for k in range(3):
+        c.advance(tt[k], u[k], v[k], y[k])
+    assert c._young is None and c._young_seen is None

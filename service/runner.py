@@ -134,7 +134,10 @@ class Runner:
         self.late_readings = 0
         self.last_late: tuple[datetime, datetime] | None = None
         self._grace = pd.Timedelta(seconds=settings.grace)
-        self._support = min(settings.watermark_support, len(self.points))
+        self._support = min(settings.watermark_support, len(self._est))
+        #: points whose readings do not move the watermark: the meters, which no row waits
+        #: for (a meter feed ahead of the temperatures would otherwise close their rows)
+        self._not_watermark = sorted(set(self.points) - set(self.convert.points))
         # points without any reading in a processed row yet (named by /forecast's 409)
         self.unseen = np.ones(len(self.points), dtype=bool)
         self._received_seen: datetime | None = None  # arrivals checked for late readings
@@ -250,7 +253,8 @@ class Runner:
                 return done
             first = pd.Timestamp(first).floor(STEP)
             support = self.storage.supported_watermark(self.building, since, until,
-                                                       self._support)
+                                                       self._support,
+                                                       exclude=self._not_watermark)
             support = None if support is None else pd.Timestamp(support)
             idle = (now - pd.Timestamp(received)).total_seconds() >= self.settings.idle_timeout
             if self.next_time is None or first > self.next_time + STEPS_PER_DAY * STEP:

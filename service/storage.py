@@ -458,24 +458,33 @@ class Storage(ABC):
                      for v in (first, last, received))
 
     def supported_watermark(self, building: str, since: Any, until: Any,
-                            min_points: int = 2) -> datetime | None:
+                            min_points: int = 2, exclude: Sequence[str] = ()
+                            ) -> datetime | None:
         """The latest time in ``[since, until)`` at which readings of at least
-        ``min_points`` points of ``building`` are stored; None if there is none.
+        ``min_points`` points of ``building`` are stored; None if there is none. Readings
+        of the ``exclude`` points neither make such a time nor count toward it.
 
         The runner's watermark: a lone reading far ahead of the stream (a publisher with a
-        wrong clock) is not one, so it cannot close the rows before it. One backwards walk
-        of the ``(building, time)`` index from ``until``, with a count per candidate time;
-        it stops at the first time that qualifies.
+        wrong clock) is not one, so it cannot close the rows before it; nor can a feed of
+        points the rows do not wait for (the runner excludes the lights and plug-load
+        meters, which may come from another system ahead of the temperatures). One
+        backwards walk of the ``(building, time)`` index from ``until``, with a count per
+        candidate time; it stops at the first time that qualifies.
         """
         if min_points < 1:
             raise ValueError(f"min_points must be >= 1, got {min_points}")
         lo, hi = self._to_db(_utc(since, "since")), self._to_db(_utc(until, "until"))
+        exclude = sorted(set(exclude))
+        marks = ", ".join("?" * len(exclude))
+        outer = f" AND r.point NOT IN ({marks})" if exclude else ""
+        inner = f" AND s.point NOT IN ({marks})" if exclude else ""
         with self._transaction() as cur:
             cur.execute(self._sql(
                 "SELECT r.time FROM readings r WHERE r.building = ? AND r.time >= ? "
-                "AND r.time < ? AND (SELECT COUNT(*) FROM readings s WHERE s.building = "
-                "r.building AND s.time = r.time) >= ? ORDER BY r.time DESC LIMIT 1"),
-                (building, lo, hi, int(min_points)))
+                f"AND r.time < ?{outer} AND (SELECT COUNT(*) FROM readings s WHERE "
+                f"s.building = r.building AND s.time = r.time{inner}) >= ? "
+                "ORDER BY r.time DESC LIMIT 1"),
+                (building, lo, hi, *exclude, *exclude, int(min_points)))
             row = cur.fetchone()
         return None if row is None else self._from_db(row[0])
 

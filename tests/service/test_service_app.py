@@ -179,6 +179,44 @@ def test_runner_waits_for_late_points_then_closes_by_watermark_or_idle(bundle, t
     store.close()
 
 
+def test_meter_readings_ahead_of_the_temperatures_do_not_close_rows(bundle, telemetry,
+                                                                     tmp_path):
+    """The lights and plug-load meters may come from another system, ahead of the BMS's
+    points: their readings are no watermark, so a row waiting for a straggler still waits
+    (before, meters two hours ahead closed it without its outdoor air temperature)."""
+    from zonecast.service.context import catalogue_for_site
+    from zonecast.service.ingest import validate_message
+    from zonecast.service.runner import Runner
+    from zonecast.service.settings import RunnerSettings
+    from zonecast.service.storage import open_storage
+
+    store = open_storage(f"sqlite:///{tmp_path / 'r.db'}")
+    cats = {bundle.building: catalogue_for_site(bundle.site)}
+    meters = bundle.site.meter_points()
+    assert len(meters) >= 2
+
+    def put(row, keep=None, drop=()):
+        body = body_of(row)
+        body["readings"] = {p: v for p, v in body["readings"].items()
+                            if (keep is None or p in keep) and p not in drop}
+        msg = validate_message(f"zonecast/{bundle.building}/telemetry", json.dumps(body), cats)
+        store.put_readings(bundle.building, msg.readings)
+
+    late = bundle.site.points.outdoor_air_temperature.point
+    runner = Runner(bundle, store, RunnerSettings(grace=300, idle_timeout=1800),
+                    clock=FakeClock("2015-04-13T08:00:00Z"))
+    put(telemetry.iloc[0])
+    put(telemetry.iloc[1], drop=[late])
+    for i in range(2, 10):  # the meters run two hours ahead
+        put(telemetry.iloc[i], keep=meters)
+    assert runner.poll() == 1 and runner.next_time == pd.Timestamp(telemetry.iloc[1]["time"])
+    put(telemetry.iloc[1])  # the straggler arrives: row 1 is complete
+    put(telemetry.iloc[2])
+    assert runner.poll() == 2
+    assert runner.last_report.held_inputs == [] and runner.late_readings == 0
+    store.close()
+
+
 def telemetry_si(bundle, rows: pd.DataFrame, drop_oat=()):
     """Rows of the CSV as an SI frame (the virtual building's units are SI)."""
     frame = rows.set_index(pd.to_datetime(rows["time"], format="ISO8601", utc=True))

@@ -134,6 +134,27 @@ def test_repeats_within_one_batch(storage, caplog):
     assert storage.readings("b", T0, T0 + timedelta(minutes=1))["T"].tolist() == [1.0]
 
 
+def test_supported_watermark_needs_min_points_and_ignores_excluded_ones(storage):
+    """The watermark is the latest time with readings of at least min_points points;
+    readings of excluded points (the meters) neither make such a time nor count."""
+    step = timedelta(minutes=15)
+    storage.put_readings("a", rows_at(4, "T1") + rows_at(4, "T2"))  # T0 .. T0 + 3 steps
+    storage.put_readings("a", [("P1", T0 + 6 * step, 1.0), ("P2", T0 + 6 * step, 2.0),
+                               ("T1", T0 + 5 * step, 1.0), ("P1", T0 + 5 * step, 1.0),
+                               ("T1", T0 + 9 * step, 1.0)])  # a lone reading ahead
+    until = T0 + timedelta(days=1)
+    assert storage.supported_watermark("a", T0, until, 2) == T0 + 6 * step
+    assert storage.supported_watermark("a", T0, until, 2, exclude=["P1", "P2"]) \
+        == T0 + 3 * step
+    assert storage.supported_watermark("a", T0, until, 1, exclude=["P2", "P1", "P1"]) \
+        == T0 + 9 * step
+    assert storage.supported_watermark("a", T0, T0 + 3 * step, 2, exclude=["P1"]) \
+        == T0 + 2 * step
+    assert storage.supported_watermark("a", T0, until, 3, exclude=["P1"]) is None
+    with pytest.raises(ValueError, match="min_points must be >= 1"):
+        storage.supported_watermark("a", T0, until, 0)
+
+
 def test_buildings_are_separate(storage):
     storage.put_readings("a", [("T", T0, 1.0)])
     assert storage.put_readings("b", [("T", T0, 2.0)]) == (1, 0)

@@ -115,6 +115,10 @@ def weekend_daytime_shape(data: ModelData) -> np.ndarray:
                      len(data.zones), axis=1)
 
 
+#: prior (mean, sd) [-] of the daytime shape's scale when the meters give the weekends'
+#: lights and plug loads: the shape stands for those (WEEKEND_DAY_GAIN), so with them known
+#: its scale carries only what no meter sees (people, the model's own daytime error)
+METERED_SHAPE_PRIOR = (0.0, 1.0)
 #: local hours [start, end) of the weekend nights whose median metered power is a zone's
 #: base load (night lighting, standby plug loads), which c_IG carries
 METERED_BASE_HOURS = (0, 6)
@@ -379,7 +383,8 @@ class Pipeline:
                                      else None),
                        start=start.values if convective else None,
                        f_ig=self.weekend_known_gains(data, weekend_gains),
-                       gain_shape=self.weekend_shape(data, weekend_gains))
+                       gain_shape=self.weekend_shape(data, weekend_gains),
+                       shape_prior=self._shape_prior(weekend_gains))
         if weekend_gains in ("known", "scaled"):
             self.params = res.model.params
             progress("weekly internal-gains profile for the weekends' gains")
@@ -406,7 +411,8 @@ class Pipeline:
                            sigma_e=sigma_e, window=window, start=res.model.params.values,
                            f_ig=self.weekend_known_gains(data, weekend_gains),
                            gain_shape=self.weekend_shape(data, weekend_gains),
-                           x0_gains=x0_gains, x0_window=x0_profile_days * per_day,
+                           shape_prior=self._shape_prior(weekend_gains), x0_gains=x0_gains,
+                           x0_window=x0_profile_days * per_day,
                            x0_offset_sd=x0_offset_sd,
                            day_scale_sd=(day_scale_sd if weekend_gains in ("daytime", "metered")
                                      else None))
@@ -415,6 +421,12 @@ class Pipeline:
         self.params = res.model.params
         self._bundle = None
         return res
+
+    @staticmethod
+    def _shape_prior(mode: str | None) -> tuple[float, float]:
+        """Prior of the daytime shape's scale: :data:`METERED_SHAPE_PRIOR` with the meters'
+        rise known, else identify's 1 ± 1 (the shape is the expected lights and plugs)."""
+        return METERED_SHAPE_PRIOR if mode == "metered" else (1.0, 1.0)
 
     def zone_floor_areas(self) -> np.ndarray:
         """Floor area [m2] of each model zone (its rooms' floors), site zone order: the

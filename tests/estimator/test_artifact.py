@@ -232,7 +232,8 @@ def test_weekend_metered_gains_are_the_weekend_rise_above_the_night_base_per_flo
 
 def test_metered_mode_fits_the_daytime_scale_with_the_metered_gains_known(vb, monkeypatch):
     """Pipeline.identify(weekend_gains="metered") hands identify the metered gains as known
-    f_IG and the daytime shape to scale; "daytime" the shape alone."""
+    f_IG and the daytime shape to scale with a prior centred on 0 (the shape stands for the
+    lights and plug loads the meters now give); "daytime" the shape alone, prior 1 ± 1."""
     import zonecast.estimator.pipeline as pl
 
     pipe = Pipeline.from_site(vb / "site.yaml")
@@ -255,6 +256,8 @@ def test_metered_mode_fits_the_daytime_scale_with_the_metered_gains_known(vb, mo
     for kw in seen:
         np.testing.assert_array_equal(kw["gain_shape"], pl.weekend_daytime_shape(data))
     assert seen[1]["f_ig"] is None
+    assert seen[0]["shape_prior"] == pl.METERED_SHAPE_PRIOR == (0.0, 1.0)
+    assert seen[1]["shape_prior"] == (1.0, 1.0)
 
 
 def test_structure_files_without_the_horizontal_column_still_load(vb, bundle, tmp_path):

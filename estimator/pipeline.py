@@ -128,7 +128,8 @@ def weekend_metered_gains(data: ModelData, zone_area) -> np.ndarray:
     """(N, n_zones) [W/m2]: on Saturday and Sunday rows, each zone's metered electric power
     of lights and plug loads (``data.power``) above its base load, per m2 of the zone's
     floor (``zone_area`` [m2], zones in ``data.zones`` order); 0 on working days, for zones
-    without a meter and on rows where a zone's meter did not report. The base load is the
+    without a meter and on rows where a zone's meters left it unknown (a gap longer than
+    :meth:`~.telemetry.Telemetry.power` fills). The base load is the
     median of the zone's weekend readings between :data:`METERED_BASE_HOURS` local time
     (the constant part of the gains is c_IG's). Electricity used in a room becomes heat in
     it, so this part of the weekends' gains is known, day by day."""

@@ -25,6 +25,30 @@ from zonecast.estimator.units import to_si
 MISSING_TOKENS = {"", "nan", "NaN", "NA", "N/A", "null", "None"}
 
 
+#: longest run of missing rows of a lights or plug-load meter that :meth:`Telemetry.power`
+#: fills linearly (1 h at 15 min)
+METER_FILL_STEPS = 4
+
+
+def fill_short_gaps(x: np.ndarray, segments: list[tuple[int, int]], max_fill: int) -> np.ndarray:
+    """``x`` with each run of at most ``max_fill`` NaNs that has a finite value on both
+    sides within the same segment (``[start, stop)`` row ranges) filled by linear
+    interpolation in the row index (rows are equally spaced within a segment); longer
+    runs and runs at a segment's ends stay NaN."""
+    out = np.array(x, float)
+    for a, b in segments:
+        seg = out[a:b]
+        bad = ~np.isfinite(seg)
+        if not bad.any() or max_fill < 1:
+            continue
+        edges = np.diff(np.r_[0, bad.astype(int), 0])
+        for lo, hi in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True):
+            if lo > 0 and hi < len(seg) and hi - lo <= max_fill:
+                w = np.arange(1, hi - lo + 1) / (hi - lo + 1)
+                seg[lo:hi] = seg[lo - 1] + w * (seg[hi] - seg[lo - 1])
+    return out
+
+
 class TelemetryError(ValueError):
     """Telemetry does not meet the contract; the message names the row, column or value."""
 
@@ -129,18 +153,22 @@ class Telemetry:
                 out[:, j] = self.frame[b.discharge_temperature.point].to_numpy() - ts
         return out
 
-    def power(self) -> np.ndarray | None:
+    def power(self, max_fill: int = METER_FILL_STEPS) -> np.ndarray | None:
         """Metered electric power of each model zone's lights and plug loads (N, n_zones)
-        [W], zones in site order: the sum of the zone's meters (``points.power``); NaN
-        where one of them did not report or the zone has none. None when the site maps no
-        meter."""
+        [W], zones in site order: the sum of the zone's meters (``points.power``). A
+        meter's run of at most ``max_fill`` missing rows between two readings of the same
+        segment is filled linearly (a zone's sum is not lost to one meter's dropped
+        message); NaN where a meter's gap is longer, at a segment's ends, or where the zone
+        has none. None when the site maps no meter."""
         meters = self.site.points.power
         if not meters:
             return None
         out = np.full((len(self.frame), len(self.site.zones)), np.nan)
         for j, zone in enumerate(self.site.zones):
             if zone in meters:
-                out[:, j] = self.frame[[m.point for m in meters[zone]]].to_numpy().sum(axis=1)
+                cols = [fill_short_gaps(self.frame[m.point].to_numpy(float), self.segments,
+                                        max_fill) for m in meters[zone]]
+                out[:, j] = np.sum(cols, axis=0)
         return out
 
     def weather(self) -> pd.DataFrame:

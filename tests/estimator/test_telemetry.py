@@ -111,8 +111,9 @@ def test_discharge_air_point_is_a_temperature(tmp_path, site_dict):
 
 
 def test_power_meters_sum_per_zone_in_watts(tmp_path, site_dict, telemetry_csv):
-    """points.power: a zone's meters (W or kW, short form W) are summed; NaN where one of
-    them did not report or the zone has none; ModelData carries them; no meter -> None."""
+    """points.power: a zone's meters (W or kW, short form W) are summed; a meter's short
+    gap inside the data is filled linearly, a longer one or one at the end is NaN, and so
+    is a zone without meters; ModelData carries them; no meter -> None."""
     from zonecast.estimator.dataset import model_data
     assert load_telemetry(telemetry_csv(), load_site(write_site(tmp_path, site_dict))).power() \
         is None
@@ -121,14 +122,16 @@ def test_power_meters_sum_per_zone_in_watts(tmp_path, site_dict, telemetry_csv):
     assert site.point_units()["PA lights"] == "W" and site.point_units()["PA plugs"] == "kW"
     df = telemetry_frame()
     df["PA lights"] = 800.0
-    df["PA plugs"] = 1.5
+    df["PA plugs"] = 1.0 + 0.2 * np.arange(len(df))
     df = df.astype({"PA plugs": object})
-    df.loc[2, "PA plugs"] = ""
+    df.loc[2, "PA plugs"] = ""  # one row: filled
+    df.loc[7, "PA plugs"] = ""  # at the end: not filled
     tel = load_telemetry(telemetry_csv(df), site)
     p = tel.power()
     assert p.shape == (8, 2) and np.isnan(p[:, 1]).all()
-    np.testing.assert_allclose(p[[0, 1, 3], 0], 2300.0)
-    assert np.isnan(p[2, 0])
+    np.testing.assert_allclose(p[:7, 0], 800.0 + 1000.0 + 200.0 * np.arange(7))
+    assert np.isnan(p[7, 0])
+    assert np.isnan(tel.power(max_fill=0)[2, 0])
     data = model_data(tel)
     np.testing.assert_array_equal(data.power, p)
     np.testing.assert_array_equal(data.rows(slice(1, 4)).power, p[1:4])
@@ -148,3 +151,17 @@ def test_power_meters_name_model_zones_and_measure_power(tmp_path, site_dict):
     site_dict["points"]["power"] = {"A": []}
     with pytest.raises(SiteError, match=r"power\[A\] lists no meter"):
         load_site(write_site(tmp_path, site_dict))
+
+
+def test_fill_short_gaps_fills_inner_runs_up_to_the_limit_within_segments():
+    from zonecast.estimator.telemetry import fill_short_gaps
+    nan = np.nan
+    x = np.array([0.0, nan, 2.0, nan, nan, nan, 6.0, nan, 8.0, 9.0, nan, 11.0, nan])
+    # segments [0, 9) and [9, 13): row 8 -> 9 is a jump in time, never bridged
+    got = fill_short_gaps(x, [(0, 9), (9, 13)], 2)
+    np.testing.assert_array_equal(got, [0, 1, 2, nan, nan, nan, 6, 7, 8, 9, 10, 11, nan])
+    np.testing.assert_array_equal(fill_short_gaps(x, [(0, 13)], 3)[3:6], [3, 4, 5])
+    y = np.array([1.0, nan, nan, 4.0])
+    np.testing.assert_array_equal(fill_short_gaps(y, [(0, 2), (2, 4)], 5), y)  # ends of both
+    np.testing.assert_array_equal(fill_short_gaps(x, [(0, 13)], 0), x)
+    assert np.isnan(x[1])  # the input is not changed

@@ -399,6 +399,9 @@ class Layer:
         [J/(kg K)]; 0 for resistance-only layers.
     resistance : float
         Thermal resistance per unit area [m^2 K/W].
+    solar_absorptance : float
+        Of the layer's outer face [-] (the field of Material and Material:NoMass;
+        EnergyPlus's default 0.7 where absent, and for air gaps).
     """
 
     name: str
@@ -408,6 +411,7 @@ class Layer:
     density: float
     specific_heat: float
     resistance: float
+    solar_absorptance: float = 0.7
 
     @property
     def heat_capacity(self) -> float:
@@ -903,10 +907,12 @@ def _materials(data: Mapping[str, Any], unsupported: list[Unsupported]) -> dict[
     mats: dict[str, Any] = {}
     for name, f in data.get("Material", {}).items():
         d, k = float(f["thickness"]), float(f["conductivity"])
-        mats[name] = Layer(name, "mass", d, k, float(f["density"]), float(f["specific_heat"]), d / k)
+        mats[name] = Layer(name, "mass", d, k, float(f["density"]), float(f["specific_heat"]), d / k,
+                           _num(f.get("solar_absorptance"), 0.7))
     for name, f in data.get("Material:NoMass", {}).items():
         r = float(f["thermal_resistance"])
-        mats[name] = Layer(name, "nomass", 0.0, math.nan, 0.0, 0.0, r)
+        mats[name] = Layer(name, "nomass", 0.0, math.nan, 0.0, 0.0, r,
+                           _num(f.get("solar_absorptance"), 0.7))
     for name, f in data.get("Material:AirGap", {}).items():
         r = float(f["thermal_resistance"])
         mats[name] = Layer(name, "airgap", 0.0, math.nan, 0.0, 0.0, r)

@@ -115,8 +115,8 @@ def test_identify_passes_the_internal_gains_option_to_the_model(tmp_path):
 
 @pytest.mark.parametrize("command", ["identify", "reproduce"])
 def test_window_angle_reaches_the_model_options(tmp_path, command):
-    """--window-angle reaches ModelOptions through both commands: a wrong value fails with
-    the options' message."""
+    """--window-angle and --roof-exterior reach ModelOptions through both commands: a wrong
+    value fails with the options' message."""
     from pathlib import Path
 
     site = Path(__file__).resolve().parents[1] / "configs" / "sites" / "nrel" / "5ZoneAirCooled.site.yaml"
@@ -130,6 +130,9 @@ def test_window_angle_reaches_the_model_options(tmp_path, command):
     res = runner.invoke(app, [*args, "--window-angle", "tinted"])
     assert res.exit_code == 2, res.output
     assert "window_angle must be 'none' or 'glass'" in res.output
+    res = runner.invoke(app, [*args, "--roof-exterior", "known"])
+    assert res.exit_code == 2, res.output
+    assert "roof_exterior must be 'fitted' or 'idf'" in res.output
 
 
 @pytest.mark.parametrize("command", ["identify", "reproduce"])

@@ -264,6 +264,10 @@ WindowAngle = Annotated[str, typer.Option(
     help="'none' (the default): the facade columns are the global irradiance on each "
          "facade; 'glass': each part weighed by what the windows' panes let through at its "
          "angle of incidence (docs/model.md \"Windows' angular transmission\")")]
+RoofExterior = Annotated[str, typer.Option(
+    help="'fitted' (the default): roofs' outer faces take the walls' fitted gamma_EW and "
+         "gamma_absorp; 'idf': their own, known film (25 W/m2K) and the IDF's solar "
+         "absorptance of the roof's outer material (docs/model.md \"Roofs' own exterior\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -349,6 +353,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  interior_radiation: InteriorRadiation = "none",
                  internal_gains: InternalGains = "air",
                  window_angle: WindowAngle = "none",
+                 roof_exterior: RoofExterior = "fitted",
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'daytime' (the default since 2026-11-25): a weekend 08-18 h rise of "
@@ -378,6 +383,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  roof_solar=roof_solar, sky=sky,
                                  interior_radiation=interior_radiation, films=films,
                                  internal_gains=internal_gains, window_angle=window_angle,
+                                 roof_exterior=roof_exterior,
                                  x0_profile_days=x0_profile_days,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  progress=lambda m: prog.update(task, description=m))
@@ -477,6 +483,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   interior_radiation: InteriorRadiation = "none",
                   internal_gains: InternalGains = "air",
                   window_angle: WindowAngle = "none",
+                  roof_exterior: RoofExterior = "fitted",
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'daytime' (the default since 2026-11-25: a weekend 08-18 h "
@@ -501,7 +508,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 roof_solar=roof_solar, sky=sky,
                                 interior_radiation=interior_radiation, films=films,
                                 internal_gains=internal_gains, service=service,
-                                window_angle=window_angle,
+                                window_angle=window_angle, roof_exterior=roof_exterior,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:

@@ -87,6 +87,16 @@ RHO_AIR = 1.2
 
 # parameter indices of the seven matrix parameters (same order as rc.parameters.PHYSICAL)
 EW, IW, FLOOR, CEIL, ABSORP, WINSOL, UWIN = range(7)
+#: outside film of a roof with ``ModelOptions.roof_exterior == "idf"`` [W/(m2 K)]: the
+#: handbook's combined film, γ_EW's start and prior mean (parameters.PHYSICAL)
+ROOF_FILM = 25.0
+
+
+def layout_absorptance(construction) -> float:
+    """Solar absorptance [-] of a construction's outer face: its outside layer's (0.7,
+    EnergyPlus's default, for a construction without layers)."""
+    layers = getattr(construction, "layers", ())
+    return float(layers[0].solar_absorptance) if layers else 0.7
 _INSIDE_GAMMA = {"Wall": IW, "Floor": FLOOR, "Ceiling": CEIL, "Roof": CEIL}
 # the other side of an interzone surface faces the mirrored type
 _MIRROR = {"Wall": "Wall", "Floor": "Ceiling", "Ceiling": "Floor", "Roof": "Floor"}
@@ -222,6 +232,13 @@ class ModelOptions:
         air, long-wave with the room's faces, and U_win :func:`glass_factor` to the outdoor
         air (the rated U-factor's inside film is the model's own here); before 2026-11-25
         windows took no part (U_win a conductance to the air).
+    roof_exterior : {"fitted", "idf"}
+        The outer faces of roofs (surfaces of type Roof open to the outdoors): with
+        the walls' fitted γ_EW and γ_absorp (the paper's one exterior balance, the
+        default), or with their own, known ones: the outside film :data:`ROOF_FILM` (the
+        handbook's combined film, γ_EW's prior) and the solar absorptance of the roof's
+        outer material in the IDF (EnergyPlus's 0.7 where it gives none). No parameter is
+        added; the walls keep γ_EW and γ_absorp (docs/model.md "Roofs' own exterior").
     internal_gains : {"air", "idf"}
         Where a room's internal heat a_floor (c_IG + f_IG) goes (paper eq:q_ig): all on the
         room air (the paper), or split as the IDF's People, Lights and equipment objects
@@ -245,8 +262,11 @@ class ModelOptions:
     interior_radiation: str = "none"
     internal_gains: str = "air"
     window_angle: str = "none"
+    roof_exterior: str = "fitted"
 
     def __post_init__(self):
+        if self.roof_exterior not in ("fitted", "idf"):
+            raise ModelDefinitionError("roof_exterior must be 'fitted' or 'idf'")
         if self.window_angle not in ("none", "glass"):
             raise ModelDefinitionError("window_angle must be 'none' or 'glass'")
         if self.internal_gains not in ("air", "idf"):
@@ -815,9 +835,16 @@ def build_structure(
         elif s.boundary == "Outdoors":
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
             face(s, s.zone, nodes[-1])
-            asm.to_temperature(nodes[0], 0, s.area, EW)  # paper eq:q_bh, convection
-            for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
-                asm.source(nodes[0], DISTURBANCES.index(col), w * s.area, ABSORP)
+            if opts.roof_exterior == "idf" and s.surface_type == "Roof":
+                # the roof's own exterior balance, known: film and outer absorptance
+                film, absorp = ROOF_FILM, layout_absorptance(cons)
+                asm.to_temperature(nodes[0], 0, film * s.area, -1)
+                for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
+                    asm.source(nodes[0], DISTURBANCES.index(col), w * absorp * s.area, -1)
+            else:
+                asm.to_temperature(nodes[0], 0, s.area, EW)  # paper eq:q_bh, convection
+                for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
+                    asm.source(nodes[0], DISTURBANCES.index(col), w * s.area, ABSORP)
             view = sky_share(s.tilt)
             if opts.sky != "none" and view > 1e-6:
                 # long-wave to the sky: a scheduled input of constant "airflow"

@@ -574,6 +574,44 @@ def test_roofs_take_the_horizontal_column_only_with_roof_solar_horizontal(five_z
         ModelOptions(roof_solar="sky")
 
 
+def test_roofs_keep_their_own_known_exterior_with_roof_exterior_idf(five_zone):
+    """``roof_exterior="idf"``: the 5-zone's roof takes the film ROOF_FILM (gamma_EW's prior)
+    and its outer material's solar absorptance from the IDF (RG01, 0.65) as constants; the
+    walls keep gamma_EW and gamma_absorp. With "fitted" (the default) the roof takes the
+    walls' parameters, as before."""
+    from zonecast.estimator.rc.network import ROOF_FILM, layout_absorptance
+    from zonecast.estimator.rc.parameters import PHYSICAL
+
+    assert ROOF_FILM == next(p.start for p in PHYSICAL if p.name == "gamma_EW")
+    outdoors = [s for s in five_zone.surfaces.values() if s.boundary == "Outdoors"]
+    roofs = [s for s in outdoors if s.surface_type == "Roof"]
+    assert roofs
+    roof_area = sum(s.area for s in roofs)
+    alpha = layout_absorptance(five_zone.constructions[roofs[0].construction])
+    assert alpha == pytest.approx(0.65)  # RG01's Solar Absorptance in the file
+    ta, sol_h = DISTURBANCES.index("Ta"), DISTURBANCES.index("solH")
+
+    def heat(mode, gamma_ew, gamma_absorp):
+        opts = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
+                            return_air="none", roof_exterior=mode)
+        m = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, options=opts)
+        m = m.with_params({"gamma_EW": gamma_ew, "gamma_absorp": gamma_absorp})
+        return m.Bv * m.structure.capacity[:, None]  # heat per unit input [W/(K or W/m2)]
+
+    for mode, roof_ew in (("idf", 0.0), ("fitted", 1.0)):
+        a, b = heat(mode, 10.0, 0.3), heat(mode, 30.0, 0.9)
+        d_ta = b[:, ta].sum() - a[:, ta].sum()  # what 20 W/m2K more gamma_EW adds
+        walls = sum(s.area for s in outdoors if s.surface_type != "Roof"
+                    and not five_zone.constructions[s.construction].is_window)
+        assert d_ta == pytest.approx(20.0 * (walls + roof_ew * roof_area), rel=1e-9)
+    idf = heat("idf", 10.0, 0.3)
+    assert idf[:, sol_h].sum() == pytest.approx(alpha * roof_area, rel=1e-9)
+    assert heat("idf", 10.0, 0.9)[:, sol_h].sum() == pytest.approx(alpha * roof_area, rel=1e-9)
+    assert heat("fitted", 10.0, 0.3)[:, sol_h].sum() == pytest.approx(0.3 * roof_area, rel=1e-9)
+    with pytest.raises(ModelDefinitionError, match="roof_exterior must be 'fitted' or 'idf'"):
+        ModelOptions(roof_exterior="known")
+
+
 def test_sky_exchange_is_a_scheduled_input_at_each_exterior_face(five_zone):
     """``sky="clear"``: every opaque exterior face of the 5-zone gets a scheduled input of
     conductance SKY_RADIATION F_sky beta A at its outer face, whose supply is the clear-sky

@@ -79,14 +79,14 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   roof_solar: str = "horizontal", sky: str = "none",
                   interior_radiation: str = "none", films: str | None = None,
                   internal_gains: str = "air", window_angle: str = "none",
-                  progress: Progress = _quiet,
+                  roof_exterior: str = "fitted", progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
                   x0_offset_sd: float | None = None,
                   day_scale_sd: float | None = None) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
-    ``interior_radiation``, ``internal_gains``, ``window_angle``: as
+    ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``: as
     :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
@@ -97,7 +97,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                                                          roof_solar=roof_solar, sky=sky,
                                                          interior_radiation=interior_radiation,
                                                          internal_gains=internal_gains,
-                                                         window_angle=window_angle))
+                                                         window_angle=window_angle,
+                                                         roof_exterior=roof_exterior))
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,

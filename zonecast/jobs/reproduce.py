@@ -441,7 +441,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         interior_radiation: str = "none", films: str | None = None,
         internal_gains: str = "air", service: bool = True,
         x0_profile_days: int | None = None, x0_offset_sd: float | None = None,
-        window_angle: str = "none", day_scale_sd: float | None = None) -> Results:
+        window_angle: str = "none", day_scale_sd: float | None = None,
+        roof_exterior: str = "fitted") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
@@ -450,7 +451,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     reheat); off, the report says it was left out; ``x0_profile_days``,
     ``x0_offset_sd``, ``day_scale_sd``: as :meth:`Pipeline.identify`;
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
-    ``interior_radiation``, ``internal_gains``, ``window_angle``:
+    ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``films``: as :meth:`Pipeline.identify`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
@@ -470,7 +471,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                                    roof_solar=roof_solar, sky=sky,
                                                    interior_radiation=interior_radiation,
                                                    internal_gains=internal_gains,
-                                                   window_angle=window_angle))
+                                                   window_angle=window_angle,
+                                                   roof_exterior=roof_exterior))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()

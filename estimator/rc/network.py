@@ -92,11 +92,13 @@ EW, IW, FLOOR, CEIL, ABSORP, WINSOL, UWIN = range(7)
 ROOF_FILM = 25.0
 
 
-def layout_absorptance(construction) -> float:
+def outer_absorptance(construction) -> float:
     """Solar absorptance [-] of a construction's outer face: its outside layer's (0.7,
     EnergyPlus's default, for a construction without layers)."""
     layers = getattr(construction, "layers", ())
     return float(layers[0].solar_absorptance) if layers else 0.7
+
+
 _INSIDE_GAMMA = {"Wall": IW, "Floor": FLOOR, "Ceiling": CEIL, "Roof": CEIL}
 # the other side of an interzone surface faces the mirrored type
 _MIRROR = {"Wall": "Wall", "Floor": "Ceiling", "Ceiling": "Floor", "Roof": "Floor"}
@@ -837,7 +839,7 @@ def build_structure(
             face(s, s.zone, nodes[-1])
             if opts.roof_exterior == "idf" and s.surface_type == "Roof":
                 # the roof's own exterior balance, known: film and outer absorptance
-                film, absorp = ROOF_FILM, layout_absorptance(cons)
+                film, absorp = ROOF_FILM, outer_absorptance(cons)
                 asm.to_temperature(nodes[0], 0, film * s.area, -1)
                 for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
                     asm.source(nodes[0], DISTURBANCES.index(col), w * absorp * s.area, -1)

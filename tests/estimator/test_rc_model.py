@@ -579,7 +579,7 @@ def test_roofs_keep_their_own_known_exterior_with_roof_exterior_idf(five_zone):
     and its outer material's solar absorptance from the IDF (RG01, 0.65) as constants; the
     walls keep gamma_EW and gamma_absorp. With "fitted" (the default) the roof takes the
     walls' parameters, as before."""
-    from zonecast.estimator.rc.network import ROOF_FILM, layout_absorptance
+    from zonecast.estimator.rc.network import ROOF_FILM, outer_absorptance
     from zonecast.estimator.rc.parameters import PHYSICAL
 
     assert ROOF_FILM == next(p.start for p in PHYSICAL if p.name == "gamma_EW")
@@ -587,7 +587,7 @@ def test_roofs_keep_their_own_known_exterior_with_roof_exterior_idf(five_zone):
     roofs = [s for s in outdoors if s.surface_type == "Roof"]
     assert roofs
     roof_area = sum(s.area for s in roofs)
-    alpha = layout_absorptance(five_zone.constructions[roofs[0].construction])
+    alpha = outer_absorptance(five_zone.constructions[roofs[0].construction])
     assert alpha == pytest.approx(0.65)  # RG01's Solar Absorptance in the file
     ta, sol_h = DISTURBANCES.index("Ta"), DISTURBANCES.index("solH")
 

@@ -132,7 +132,7 @@ def test_window_angle_reaches_the_model_options(tmp_path, command):
     assert "window_angle must be 'none' or 'glass'" in res.output
     res = runner.invoke(app, [*args, "--roof-exterior", "known"])
     assert res.exit_code == 2, res.output
-    assert "roof_exterior must be 'fitted' or 'idf'" in res.output
+    assert "roof_exterior must be 'fitted', 'idf' or 'absorptance'" in res.output
 
 
 @pytest.mark.parametrize("command", ["identify", "reproduce"])

@@ -267,7 +267,8 @@ WindowAngle = Annotated[str, typer.Option(
 RoofExterior = Annotated[str, typer.Option(
     help="'fitted' (the default): roofs' outer faces take the walls' fitted gamma_EW and "
          "gamma_absorp; 'idf': their own, known film (25 W/m2K) and the IDF's solar "
-         "absorptance of the roof's outer material (docs/model.md \"Roofs' own exterior\")")]
+         "absorptance of the roof's outer material; 'absorptance': the IDF's absorptance "
+         "with the fitted gamma_EW (docs/model.md \"Roofs' own exterior\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "

@@ -234,13 +234,15 @@ class ModelOptions:
         air, long-wave with the room's faces, and U_win :func:`glass_factor` to the outdoor
         air (the rated U-factor's inside film is the model's own here); before 2026-11-25
         windows took no part (U_win a conductance to the air).
-    roof_exterior : {"fitted", "idf"}
+    roof_exterior : {"fitted", "idf", "absorptance"}
         The outer faces of roofs (surfaces of type Roof open to the outdoors): with
         the walls' fitted γ_EW and γ_absorp (the paper's one exterior balance, the
-        default), or with their own, known ones: the outside film :data:`ROOF_FILM` (the
-        handbook's combined film, γ_EW's prior) and the solar absorptance of the roof's
-        outer material in the IDF (EnergyPlus's 0.7 where it gives none). No parameter is
-        added; the walls keep γ_EW and γ_absorp (docs/model.md "Roofs' own exterior").
+        default), with their own, known ones (``"idf"``: the outside film
+        :data:`ROOF_FILM`, the handbook's combined film and γ_EW's prior, and the solar
+        absorptance of the roof's outer material in the IDF, EnergyPlus's 0.7 where it
+        gives none), or with the IDF's absorptance alone and the fitted γ_EW
+        (``"absorptance"``). No parameter is added; the walls keep γ_EW and γ_absorp
+        (docs/model.md "Roofs' own exterior").
     internal_gains : {"air", "idf"}
         Where a room's internal heat a_floor (c_IG + f_IG) goes (paper eq:q_ig): all on the
         room air (the paper), or split as the IDF's People, Lights and equipment objects
@@ -267,8 +269,8 @@ class ModelOptions:
     roof_exterior: str = "fitted"
 
     def __post_init__(self):
-        if self.roof_exterior not in ("fitted", "idf"):
-            raise ModelDefinitionError("roof_exterior must be 'fitted' or 'idf'")
+        if self.roof_exterior not in ("fitted", "idf", "absorptance"):
+            raise ModelDefinitionError("roof_exterior must be 'fitted', 'idf' or 'absorptance'")
         if self.window_angle not in ("none", "glass"):
             raise ModelDefinitionError("window_angle must be 'none' or 'glass'")
         if self.internal_gains not in ("air", "idf"):
@@ -837,16 +839,16 @@ def build_structure(
         elif s.boundary == "Outdoors":
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
             face(s, s.zone, nodes[-1])
-            if opts.roof_exterior == "idf" and s.surface_type == "Roof":
-                # the roof's own exterior balance, known: film and outer absorptance
-                film, absorp = ROOF_FILM, outer_absorptance(cons)
-                asm.to_temperature(nodes[0], 0, film * s.area, -1)
-                for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
-                    asm.source(nodes[0], DISTURBANCES.index(col), w * absorp * s.area, -1)
+            roof = s.surface_type == "Roof"
+            if roof and opts.roof_exterior == "idf":  # the roof's own film, known
+                asm.to_temperature(nodes[0], 0, ROOF_FILM * s.area, -1)
             else:
                 asm.to_temperature(nodes[0], 0, s.area, EW)  # paper eq:q_bh, convection
-                for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
-                    asm.source(nodes[0], DISTURBANCES.index(col), w * s.area, ABSORP)
+            known = roof and opts.roof_exterior in ("idf", "absorptance")
+            absorp = outer_absorptance(cons) if known else 1.0  # else gamma_absorp's
+            for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
+                asm.source(nodes[0], DISTURBANCES.index(col), w * absorp * s.area,
+                           -1 if known else ABSORP)
             view = sky_share(s.tilt)
             if opts.sky != "none" and view > 1e-6:
                 # long-wave to the sky: a scheduled input of constant "airflow"

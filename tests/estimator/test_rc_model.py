@@ -577,8 +577,8 @@ def test_roofs_take_the_horizontal_column_only_with_roof_solar_horizontal(five_z
 def test_roofs_keep_their_own_known_exterior_with_roof_exterior_idf(five_zone):
     """``roof_exterior="idf"``: the 5-zone's roof takes the film ROOF_FILM (gamma_EW's prior)
     and its outer material's solar absorptance from the IDF (RG01, 0.65) as constants; the
-    walls keep gamma_EW and gamma_absorp. With "fitted" (the default) the roof takes the
-    walls' parameters, as before."""
+    walls keep gamma_EW and gamma_absorp. "absorptance": the IDF's absorptance, the film
+    gamma_EW. With "fitted" (the default) the roof takes the walls' parameters, as before."""
     from zonecast.estimator.rc.network import ROOF_FILM, outer_absorptance
     from zonecast.estimator.rc.parameters import PHYSICAL
 
@@ -598,7 +598,7 @@ def test_roofs_keep_their_own_known_exterior_with_roof_exterior_idf(five_zone):
         m = m.with_params({"gamma_EW": gamma_ew, "gamma_absorp": gamma_absorp})
         return m.Bv * m.structure.capacity[:, None]  # heat per unit input [W/(K or W/m2)]
 
-    for mode, roof_ew in (("idf", 0.0), ("fitted", 1.0)):
+    for mode, roof_ew in (("idf", 0.0), ("fitted", 1.0), ("absorptance", 1.0)):
         a, b = heat(mode, 10.0, 0.3), heat(mode, 30.0, 0.9)
         d_ta = b[:, ta].sum() - a[:, ta].sum()  # what 20 W/m2K more gamma_EW adds
         walls = sum(s.area for s in outdoors if s.surface_type != "Roof"
@@ -608,7 +608,12 @@ def test_roofs_keep_their_own_known_exterior_with_roof_exterior_idf(five_zone):
     assert idf[:, sol_h].sum() == pytest.approx(alpha * roof_area, rel=1e-9)
     assert heat("idf", 10.0, 0.9)[:, sol_h].sum() == pytest.approx(alpha * roof_area, rel=1e-9)
     assert heat("fitted", 10.0, 0.3)[:, sol_h].sum() == pytest.approx(0.3 * roof_area, rel=1e-9)
-    with pytest.raises(ModelDefinitionError, match="roof_exterior must be 'fitted' or 'idf'"):
+    for g in (0.3, 0.9):  # "absorptance": the IDF's, whatever gamma_absorp; the film fitted
+        assert heat("absorptance", 10.0, g)[:, sol_h].sum() == pytest.approx(alpha * roof_area,
+                                                                            rel=1e-9)
+    np.testing.assert_allclose(heat("absorptance", 10.0, 0.3)[:, ta], heat("fitted", 10.0, 0.3)[:, ta])
+    with pytest.raises(ModelDefinitionError,
+                       match="roof_exterior must be 'fitted', 'idf' or 'absorptance'"):
         ModelOptions(roof_exterior="known")
 
 

@@ -265,10 +265,10 @@ WindowAngle = Annotated[str, typer.Option(
          "facade; 'glass': each part weighed by what the windows' panes let through at its "
          "angle of incidence (docs/model.md \"Windows' angular transmission\")")]
 RoofExterior = Annotated[str, typer.Option(
-    help="'fitted' (the default): roofs' outer faces take the walls' fitted gamma_EW and "
-         "gamma_absorp; 'idf': their own, known film (25 W/m2K) and the IDF's solar "
-         "absorptance of the roof's outer material; 'absorptance': the IDF's absorptance "
-         "with the fitted gamma_EW (docs/model.md \"Roofs' own exterior\")")]
+    help="'absorptance' (the default since 2026-12-04): roofs' outer faces take the IDF's "
+         "solar absorptance of their outer material and the fitted gamma_EW; 'fitted': the "
+         "walls' fitted gamma_EW and gamma_absorp (the paper); 'idf': a known film "
+         "(25 W/m2K) as well (docs/model.md \"Roofs' own exterior\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -354,7 +354,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  interior_radiation: InteriorRadiation = "none",
                  internal_gains: InternalGains = "air",
                  window_angle: WindowAngle = "none",
-                 roof_exterior: RoofExterior = "fitted",
+                 roof_exterior: RoofExterior = "absorptance",
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'daytime' (the default since 2026-11-25): a weekend 08-18 h rise of "
@@ -484,7 +484,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   interior_radiation: InteriorRadiation = "none",
                   internal_gains: InternalGains = "air",
                   window_angle: WindowAngle = "none",
-                  roof_exterior: RoofExterior = "fitted",
+                  roof_exterior: RoofExterior = "absorptance",
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'daytime' (the default since 2026-11-25: a weekend 08-18 h "

@@ -236,13 +236,13 @@ class ModelOptions:
         windows took no part (U_win a conductance to the air).
     roof_exterior : {"fitted", "idf", "absorptance"}
         The outer faces of roofs (surfaces of type Roof open to the outdoors): with
-        the walls' fitted γ_EW and γ_absorp (the paper's one exterior balance, the
-        default), with their own, known ones (``"idf"``: the outside film
-        :data:`ROOF_FILM`, the handbook's combined film and γ_EW's prior, and the solar
-        absorptance of the roof's outer material in the IDF, EnergyPlus's 0.7 where it
-        gives none), or with the IDF's absorptance alone and the fitted γ_EW
-        (``"absorptance"``). No parameter is added; the walls keep γ_EW and γ_absorp
-        (docs/model.md "Roofs' own exterior").
+        the IDF's solar absorptance of the roof's outer material (EnergyPlus's 0.7 where
+        it gives none) and the fitted γ_EW (``"absorptance"``, the default since
+        2026-12-04, chosen on the family's training members), with the walls' fitted γ_EW
+        and γ_absorp (``"fitted"``: the paper's one exterior balance; what model files
+        without the option were built with), or with a known film as well (``"idf"``:
+        :data:`ROOF_FILM`, the handbook's combined film and γ_EW's prior). No parameter is
+        added; the walls keep γ_EW and γ_absorp (docs/model.md "Roofs' own exterior").
     internal_gains : {"air", "idf"}
         Where a room's internal heat a_floor (c_IG + f_IG) goes (paper eq:q_ig): all on the
         room air (the paper), or split as the IDF's People, Lights and equipment objects
@@ -266,7 +266,7 @@ class ModelOptions:
     interior_radiation: str = "none"
     internal_gains: str = "air"
     window_angle: str = "none"
-    roof_exterior: str = "fitted"
+    roof_exterior: str = "absorptance"
 
     def __post_init__(self):
         if self.roof_exterior not in ("fitted", "idf", "absorptance"):

@@ -547,8 +547,9 @@ def test_structure_file_keeps_the_facade_rotation(tmp_path):
 
 
 def test_roofs_take_the_horizontal_column_only_with_roof_solar_horizontal(five_zone):
-    """The 5-zone's plenum roof: with ``roof_solar="horizontal"`` its outer face takes
-    gamma_absorp a v_solH and nothing from the facade columns; with ``"mean"`` a quarter
+    """The 5-zone's plenum roof (with the walls' gamma_absorp, ``roof_exterior="fitted"``):
+    with ``roof_solar="horizontal"`` its outer face takes gamma_absorp a v_solH and nothing
+    from the facade columns; with ``"mean"`` a quarter
     of each facade column and nothing from solH; the walls are the same either way."""
     roofs = [s for s in five_zone.surfaces.values()
              if s.boundary == "Outdoors" and s.tilt < 60.0]
@@ -558,7 +559,7 @@ def test_roofs_take_the_horizontal_column_only_with_roof_solar_horizontal(five_z
     mats = {}
     for mode in ("horizontal", "mean", "none"):
         opts = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
-                            return_air="none", roof_solar=mode)
+                            return_air="none", roof_solar=mode, roof_exterior="fitted")
         m = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, options=opts)
         m = m.with_params({"gamma_absorp": absorp})
         mats[mode] = m.Bv * m.structure.capacity[:, None]  # heat per unit input [W/(W/m2)]

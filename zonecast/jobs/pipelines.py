@@ -79,7 +79,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   roof_solar: str = "horizontal", sky: str = "none",
                   interior_radiation: str = "none", films: str | None = None,
                   internal_gains: str = "air", window_angle: str = "none",
-                  roof_exterior: str = "fitted", progress: Progress = _quiet,
+                  roof_exterior: str = "absorptance", progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
                   x0_offset_sd: float | None = None,
                   day_scale_sd: float | None = None) -> IdentifyOutcome:

@@ -442,7 +442,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         internal_gains: str = "air", service: bool = True,
         x0_profile_days: int | None = None, x0_offset_sd: float | None = None,
         window_angle: str = "none", day_scale_sd: float | None = None,
-        roof_exterior: str = "fitted") -> Results:
+        roof_exterior: str = "absorptance") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);

@@ -378,6 +378,10 @@ def load_epjson(
     return data, notes
 
 
+#: EnergyPlus's solar absorptance of a material that gives none [-]
+DEFAULT_SOLAR_ABSORPTANCE = 0.7
+
+
 # --------------------------------------------------------------------------- dataclasses
 @dataclass(frozen=True)
 class Layer:
@@ -411,7 +415,7 @@ class Layer:
     density: float
     specific_heat: float
     resistance: float
-    solar_absorptance: float = 0.7
+    solar_absorptance: float = DEFAULT_SOLAR_ABSORPTANCE
 
     @property
     def heat_capacity(self) -> float:
@@ -908,11 +912,11 @@ def _materials(data: Mapping[str, Any], unsupported: list[Unsupported]) -> dict[
     for name, f in data.get("Material", {}).items():
         d, k = float(f["thickness"]), float(f["conductivity"])
         mats[name] = Layer(name, "mass", d, k, float(f["density"]), float(f["specific_heat"]), d / k,
-                           _num(f.get("solar_absorptance"), 0.7))
+                           _num(f.get("solar_absorptance"), DEFAULT_SOLAR_ABSORPTANCE))
     for name, f in data.get("Material:NoMass", {}).items():
         r = float(f["thermal_resistance"])
         mats[name] = Layer(name, "nomass", 0.0, math.nan, 0.0, 0.0, r,
-                           _num(f.get("solar_absorptance"), 0.7))
+                           _num(f.get("solar_absorptance"), DEFAULT_SOLAR_ABSORPTANCE))
     for name, f in data.get("Material:AirGap", {}).items():
         r = float(f["thermal_resistance"])
         mats[name] = Layer(name, "airgap", 0.0, math.nan, 0.0, 0.0, r)

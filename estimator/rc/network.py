@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from zonecast.estimator.idf import Building, Construction, Surface
+from zonecast.estimator.idf import DEFAULT_SOLAR_ABSORPTANCE, Building, Construction, Surface
 from zonecast.estimator.rc.elements import NodeLayout, discretise_layers
 from zonecast.estimator.shading import FacadeShading, WindowShading
 
@@ -96,7 +96,7 @@ def outer_absorptance(construction) -> float:
     """Solar absorptance [-] of a construction's outer face: its outside layer's (0.7,
     EnergyPlus's default, for a construction without layers)."""
     layers = getattr(construction, "layers", ())
-    return float(layers[0].solar_absorptance) if layers else 0.7
+    return float(layers[0].solar_absorptance) if layers else DEFAULT_SOLAR_ABSORPTANCE
 
 
 _INSIDE_GAMMA = {"Wall": IW, "Floor": FLOOR, "Ceiling": CEIL, "Roof": CEIL}

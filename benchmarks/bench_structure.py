@@ -14,7 +14,8 @@ the open-loop zone temperatures against the measured ones, per zone and mean; pe
 the median and worst over the buildings.
 
 Variants are ``structure:films[:gains]``: ``none`` or ``star``
-(``ModelOptions.interior_radiation``) and ``combined`` (the handbook's convection + radiation
+(``ModelOptions.interior_radiation``) or ``envelope`` (``ModelOptions.envelope_radiation
+= "room"``) and ``combined`` (the handbook's convection + radiation
 films) or ``convective`` (:data:`~zonecast.estimator.priors.CONVECTIVE_FILMS`) or three
 numbers ``iw/floor/ceil`` [W/(m2 K)], e.g. ``none:1.4/1.4/0.9``; then optionally ``air``
 (the default) or ``idf`` (``ModelOptions.internal_gains``: the IDF's radiant split).
@@ -61,8 +62,8 @@ def parse_variant(text: str) -> tuple[str, dict[str, float] | str, str]:
         raise SystemExit(f"variant {text!r}: write structure:films[:gains], e.g. none:combined")
     structure, films = parts[:2]
     gains = parts[2] if len(parts) == 3 else "air"
-    if structure not in ("none", "star"):
-        raise SystemExit(f"variant {text!r}: structure must be 'none' or 'star'")
+    if structure not in ("none", "star", "envelope"):
+        raise SystemExit(f"variant {text!r}: structure must be 'none', 'star' or 'envelope'")
     if gains not in ("air", "idf"):
         raise SystemExit(f"variant {text!r}: gains must be 'air' or 'idf'")
     if films in ("combined", "convective"):
@@ -94,9 +95,12 @@ def true_gains(campaign: Path, data, model) -> np.ndarray:
 
 def open_loop(campaign: Path, structure: str, films, gains: str = "air") -> dict:
     """Open-loop RMS per zone and mean of one building with one variant."""
+    envelope = structure == "envelope"
     pipe = Pipeline.from_site(campaign / "site.yaml",
-                              options=ModelOptions(interior_radiation=structure,
-                                                   internal_gains=gains))
+                              options=ModelOptions(
+                                  interior_radiation="none" if envelope else structure,
+                                  envelope_radiation="room" if envelope else "none",
+                                  internal_gains=gains))
     data = pipe.data(campaign / "telemetry.csv")
     start = ParameterSet(list(pipe.site.zones))
     priors = building_priors(start, pipe._building_or_none(),

@@ -292,6 +292,10 @@ class IdentificationResult:
     x0_window: int = X0_WINDOW
     x0_gains: bool = False
     x0_offsets: dict | None = None
+    #: the weekend-gains mode the fit used (``Pipeline.identify`` resolves ``"auto"``) and
+    #: the meters' weekend / working-day daytime rise that chose it (None without meters)
+    weekend_gains: str | None = None
+    weekend_metered_ratio: float | None = None
 
     def x0_offset(self) -> np.ndarray | None:
         """(n_zones,) :attr:`x0_offsets` [K] in zone order, or None."""
@@ -393,7 +397,9 @@ class IdentificationResult:
                 "map_sigma_e": self.sigma_e, "window": self.window, "spans": self.spans,
                 "gain_scale": self.gain_scale, "gain_day_scale": self.gain_day_scale,
                 "x0_window": self.x0_window,
-                "x0_gains": self.x0_gains, "x0_offsets": self.x0_offsets}
+                "x0_gains": self.x0_gains, "x0_offsets": self.x0_offsets,
+                "weekend_gains": self.weekend_gains,
+                "weekend_metered_ratio": self.weekend_metered_ratio}
 
 
 class _Problem:

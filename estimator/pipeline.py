@@ -124,6 +124,44 @@ METERED_SHAPE_PRIOR = (0.0, 1.0)
 METERED_BASE_HOURS = (0, 6)
 
 
+#: the building's weekend daytime rise of metered lights and plug loads, as a fraction of the
+#: working days' (:func:`weekend_metered_ratio`), from which ``weekend_gains="auto"`` takes the
+#: meters' rise as known weekend gains: chosen on the seed-0 family's training members, whose
+#: floors without weekend people show 0.09-0.10 (cleaning, short visits) and those with them
+#: 0.19-0.37 (docs/identification.md "Metered gains where the weekends are occupied")
+METERED_OCCUPIED_RATIO = 0.15
+
+
+def weekend_metered_ratio(data: ModelData) -> float | None:
+    """The building's metered daytime rise on weekends over that of working days [-]: the
+    mean of the zones' summed meters (``data.power``) between :data:`WEEKEND_DAY_HOURS` local
+    time less the median between :data:`METERED_BASE_HOURS`, Saturdays and Sundays against
+    Monday to Friday, over the rows where every zone's power is known. None without meters
+    or without a working-day rise to compare with. About the share of a working day's
+    people that come in at weekends, plus the cleaning and short visits of an empty floor."""
+    if data.power is None:
+        return None
+    p = np.asarray(data.power, float)
+    ok = np.all(np.isfinite(p), axis=1)
+    total = p.sum(axis=1)
+    local = data.local_times()
+    weekend = np.asarray(local.day_of_week >= 5)
+    hour = np.asarray(local.hour)
+    day = (hour >= WEEKEND_DAY_HOURS[0]) & (hour < WEEKEND_DAY_HOURS[1])
+    night = (hour >= METERED_BASE_HOURS[0]) & (hour < METERED_BASE_HOURS[1])
+
+    def rise(days: np.ndarray) -> float | None:
+        on, base = ok & days & day, ok & days & night
+        if not on.any() or not base.any():
+            return None
+        return float(total[on].mean() - np.median(total[base]))
+
+    working, weekends = rise(~weekend), rise(weekend)
+    if working is None or weekends is None or not working > 0:
+        return None
+    return weekends / working
+
+
 def weekend_metered_gains(data: ModelData, zone_area) -> np.ndarray:
     """(N, n_zones) [W/m2]: on Saturday and Sunday rows, each zone's metered electric power
     of lights and plug loads (``data.power``) above its base load, per m2 of the zone's
@@ -288,7 +326,7 @@ class Pipeline:
                  validation: Sequence[str] | None = None, *, n_starts: int = 1, seed: int = 0,
                  progress: Progress = _quiet, priors: bool | Mapping[str, Prior] = True,
                  sigma_e: float = 0.3, window: str = "weekend",
-                 weekend_gains: bool | str = "daytime",
+                 weekend_gains: bool | str = "auto",
                  gains_weeks: Sequence[int] | None = None,
                  agree_rtol: float = 1e-3, films: str | None = None,
                  x0_profile_days: int | None = None,
@@ -313,8 +351,11 @@ class Pipeline:
         ``agree_rtol``: the starts stop once two reach the same cost within it
         (:func:`~.identify.identify`; 0 runs all ``n_starts``).
 
-        ``weekend_gains`` (default ``"daytime"`` since 2026-11-25, chosen on the family's
-        training members: docs/identification.md "Weekend daytime gains"; ``"none"`` or
+        ``weekend_gains`` (default ``"auto"`` since 2026-12-04: ``"metered"`` when the
+        site's meters say its weekends are occupied (:func:`weekend_metered_ratio` at least
+        :data:`METERED_OCCUPIED_RATIO`), else ``"daytime"`` (the default from 2026-11-25);
+        both chosen on the family's training members: docs/identification.md "Weekend
+        daytime gains", "Metered gains where the weekends are occupied"; ``"none"`` or
         False: the paper's fit): a building occupied at weekends has internal gains on the
         identification weekends that the paper's fit (f_IG = 0) leaves to the parameters.
         With it the fit runs twice: the paper's, then the weekly internal-gains profile of
@@ -354,11 +395,16 @@ class Pipeline:
         this filter.
         """
         modes = {False: None, "none": None, True: "known", "known": "known",
-                 "scaled": "scaled", "daytime": "daytime", "metered": "metered"}
+                 "scaled": "scaled", "daytime": "daytime", "metered": "metered",
+                 "auto": "auto"}
         if weekend_gains not in modes:
-            raise PipelineError(f"weekend_gains={weekend_gains!r}: use 'none', 'known', "
-                                "'scaled', 'daytime' or 'metered'")
+            raise PipelineError(f"weekend_gains={weekend_gains!r}: use 'auto', 'none', "
+                                "'known', 'scaled', 'daytime' or 'metered'")
         weekend_gains = modes[weekend_gains]
+        ratio = weekend_metered_ratio(data)
+        if weekend_gains == "auto":
+            weekend_gains = ("metered" if ratio is not None and ratio >= METERED_OCCUPIED_RATIO
+                             else "daytime")
         if weekend_gains == "metered":
             self._need_meters(data)
         if films is None:
@@ -418,6 +464,8 @@ class Pipeline:
                            day_scale_sd=(day_scale_sd if weekend_gains in ("daytime", "metered")
                                      else None))
             self.x0_gains = x0_gains
+        res.weekend_gains = weekend_gains or "none"
+        res.weekend_metered_ratio = ratio
         self.identification = res
         self.params = res.model.params
         self._bundle = None

@@ -133,6 +133,9 @@ def test_window_angle_reaches_the_model_options(tmp_path, command):
     res = runner.invoke(app, [*args, "--roof-exterior", "known"])
     assert res.exit_code == 2, res.output
     assert "roof_exterior must be 'fitted', 'idf' or 'absorptance'" in res.output
+    res = runner.invoke(app, [*args, "--envelope-radiation", "star"])
+    assert res.exit_code == 2, res.output
+    assert "envelope_radiation must be 'none' or 'room'" in res.output
 
 
 @pytest.mark.parametrize("command", ["identify", "reproduce"])

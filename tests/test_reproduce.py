@@ -120,6 +120,26 @@ def test_reproduce_end_to_end_without_the_service_check(tmp_path):
     assert res.table2["training"]["mean"] <= 0.208
     assert res.table2["validation"]["mean"] <= 0.203
     assert res.table3["fixed"]["mean"] <= 0.318
+    # office6 has meters but nobody at weekends: the default picks the daytime rise
+    ident = res.identification
+    assert ident["weekend_gains_asked"] == "auto" and ident["weekend_gains"] == "daytime"
+    assert 0.0 < ident["weekend_metered_ratio"] < 0.15
+    assert "the weekends are not occupied and the weekend daytime rise" in report
+
+
+def test_report_says_which_weekend_gains_the_meters_chose(tmp_path):
+    """With --weekend-gains auto the report gives the meters' ratio and the mode it chose."""
+    scale = {z: {"value": 0.0, "se": 0.1} for z in ZONES}
+    text = write_report(results(identification={
+        "weekend_gains_asked": "auto", "weekend_gains": "metered",
+        "weekend_metered_ratio": 0.31, "gain_scale": scale}), tmp_path, [], ZONES).read_text()
+    assert "weekend daytime rise is 0.31 of the working days' (threshold 0.15)" in text
+    assert "the weekends are occupied and the metered rise is known gains" in text
+    assert "metered lights and plug loads above its weekend night base" in text
+    plain = write_report(results(identification={"weekend_gains": "daytime",
+                                                  "gain_scale": scale}),
+                         tmp_path, [], ZONES).read_text()
+    assert "chosen from the site's meters" not in plain
 
 
 def test_report_states_the_x0_offsets_when_fitted(tmp_path):

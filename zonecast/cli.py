@@ -269,6 +269,11 @@ RoofExterior = Annotated[str, typer.Option(
          "solar absorptance of their outer material and the fitted gamma_EW; 'fitted': the "
          "walls' fitted gamma_EW and gamma_absorp (the paper); 'idf': a known film "
          "(25 W/m2K) as well (docs/model.md \"Roofs' own exterior\")")]
+EnvelopeRadiation = Annotated[str, typer.Option(
+    help="'none' (the default): each opaque envelope face exchanges with its room's air "
+         "through its fitted film alone (the paper); 'room': also the long-wave heat it "
+         "draws from the room's other faces, in series with their convection "
+         "(docs/model.md \"Envelope faces' long-wave exchange\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -355,9 +360,13 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  internal_gains: InternalGains = "air",
                  window_angle: WindowAngle = "none",
                  roof_exterior: RoofExterior = "absorptance",
+                 envelope_radiation: EnvelopeRadiation = "none",
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
-                     help="'daytime' (the default since 2026-11-25): a weekend 08-18 h rise of "
+                     help="'auto' (the default since 2026-12-04): 'metered' when the site's "
+                          "lights and plug-load meters show occupied weekends (their weekend "
+                          "daytime rise at least 0.15 of the working days'), else 'daytime': "
+                          "a weekend 08-18 h rise of "
                           "each zone's gains fitted with the parameters; 'none': the paper's "
                           "f_IG = 0 at weekends; 'known': "
                           "identify again with the weekly gains profile of the weeks without "
@@ -365,7 +374,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "shape whose scale is fitted with the parameters (buildings occupied "
                           "at weekends; docs/identification.md); 'metered': the daytime fit "
                           "with each zone's metered lights and plug loads (points.power) as "
-                          "known weekend gains")] = "daytime",
+                          "known weekend gains")] = "auto",
                  x0_profile_days: X0ProfileDays = None,
                  x0_offset_sd: X0OffsetSd = None,
                  day_scale_sd: DayScaleSd = None,
@@ -385,6 +394,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  interior_radiation=interior_radiation, films=films,
                                  internal_gains=internal_gains, window_angle=window_angle,
                                  roof_exterior=roof_exterior,
+                                 envelope_radiation=envelope_radiation,
                                  x0_profile_days=x0_profile_days,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  progress=lambda m: prog.update(task, description=m))
@@ -406,9 +416,13 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     if pinned:
         typer.secho(f"warning: at a bound (not determined by the data): {', '.join(pinned)}",
                     fg=typer.colors.YELLOW)
+    if weekend_gains == "auto" and res.weekend_gains == "metered":
+        typer.echo(f"weekend gains: the meters' weekend rise is {res.weekend_metered_ratio:.2f} "
+                   "of the working days' (the weekends are occupied): their rise is known gains "
+                   "in the fit (--weekend-gains metered)")
     occupied = (weekend_occupancy_warning(res.gain_scale, day_scale=res.gain_day_scale,
                                           metered=done.metered)
-                if weekend_gains == "daytime" else None)
+                if res.weekend_gains == "daytime" else None)
     if occupied:
         typer.secho(f"warning: {occupied}", fg=typer.colors.YELLOW)
     if used:
@@ -485,15 +499,18 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   internal_gains: InternalGains = "air",
                   window_angle: WindowAngle = "none",
                   roof_exterior: RoofExterior = "absorptance",
+                  envelope_radiation: EnvelopeRadiation = "none",
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
-                      help="'daytime' (the default since 2026-11-25: a weekend 08-18 h "
+                      help="'auto' (the default since 2026-12-04: 'metered' when the "
+                           "site's meters show occupied weekends, else 'daytime'), 'daytime' "
+                           "(a weekend 08-18 h "
                            "rise per zone fitted with the parameters), 'none' (the paper), "
                            "'known' (identify again with the weekly gains profile of the "
                            "training weeks as known f_IG), 'scaled' (the profile's per-zone "
                            "scale fitted with the parameters) or 'metered' (the daytime fit "
                            "with the zones' metered lights and plug loads as known weekend "
-                           "gains)")] = "daytime"
+                           "gains)")] = "auto"
                   ) -> None:
     """The paper's tables and figures on the virtual building: campaign, identification,
     internal gains, forecasts; writes results.json, figures and report.md."""
@@ -510,6 +527,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 interior_radiation=interior_radiation, films=films,
                                 internal_gains=internal_gains, service=service,
                                 window_angle=window_angle, roof_exterior=roof_exterior,
+                                envelope_radiation=envelope_radiation,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
@@ -520,7 +538,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
     occupied = (weekend_occupancy_warning(ident.get("gain_scale"),
                                           day_scale=ident.get("gain_day_scale"),
                                           metered=bool(ident.get("site_meters")))
-                if weekend_gains == "daytime" else None)
+                if ident.get("weekend_gains") == "daytime" else None)
     if occupied:
         typer.secho(f"warning: {occupied}", fg=typer.colors.YELLOW)
     typer.echo(f"Table 2 mean RMS: training {t2['training']['mean']:.3f}, validation "

@@ -74,6 +74,10 @@ INTERIOR_RADIATION = 5.1
 #: heat capacity of a window's glass [J/(m2 K)] (one 6 mm pane: 2500 kg/m3 x 840 J/(kg K));
 #: its node with ``interior_radiation="star"``
 GLASS_CAPACITY = 12600.0
+#: natural convection at the inside faces of a room [W/(m2 K)]: EnergyPlus's "Simple"
+#: vertical coefficient (3.08), for the faces that pass on the long-wave heat of
+#: ``envelope_radiation="room"`` (docs/model.md "Envelope faces' long-wave exchange")
+ROOM_FACE_CONVECTION = 3.08
 #: U-factor [W/(m2 K)] of windows whose IDF gives none (layered glazing) when no window of
 #: the building has one: double glazing in an aluminium frame (the U_win prior's mean)
 WINDOW_U_DEFAULT = 2.8
@@ -234,6 +238,18 @@ class ModelOptions:
         air, long-wave with the room's faces, and U_win :func:`glass_factor` to the outdoor
         air (the rated U-factor's inside film is the model's own here); before 2026-11-25
         windows took no part (U_win a conductance to the air).
+    envelope_radiation : {"none", "room"}
+        The inside faces of the envelope (opaque surfaces open to the outdoors or on the
+        ground) are colder than the rest of the room in the heating season and draw
+        long-wave heat from its other faces, which the air warms by convection. ``"none"``
+        (the paper): each face exchanges with the air through its fitted film alone.
+        ``"room"``: each envelope face is also linked to its room's air by the series of the
+        long-wave exchange with the room's other faces (:data:`INTERIOR_RADIATION`) and
+        their convection with the air (:data:`ROOM_FACE_CONVECTION` over their area),
+        1 / (1 / h_r + A_i / (h_c A_others)) A_i: the heat an EnergyPlus envelope face
+        receives by radiation, taken from the air through the faces that give it, with
+        the room's other faces at the air temperature. No parameter; the fitted films
+        stay the faces' convection (docs/model.md "Envelope faces' long-wave exchange").
     roof_exterior : {"fitted", "idf", "absorptance"}
         The outer faces of roofs (surfaces of type Roof open to the outdoors): with
         the IDF's solar absorptance of the roof's outer material (EnergyPlus's 0.7 where
@@ -267,8 +283,14 @@ class ModelOptions:
     internal_gains: str = "air"
     window_angle: str = "none"
     roof_exterior: str = "absorptance"
+    envelope_radiation: str = "none"
 
     def __post_init__(self):
+        if self.envelope_radiation not in ("none", "room"):
+            raise ModelDefinitionError("envelope_radiation must be 'none' or 'room'")
+        if self.envelope_radiation != "none" and self.interior_radiation == "star":
+            raise ModelDefinitionError("envelope_radiation='room' approximates the star of "
+                                       "interior_radiation='star'; choose one of them")
         if self.roof_exterior not in ("fitted", "idf", "absorptance"):
             raise ModelDefinitionError("roof_exterior must be 'fitted', 'idf' or 'absorptance'")
         if self.window_angle not in ("none", "glass"):
@@ -675,6 +697,35 @@ def _interior_radiation(asm: _Assembler, floor_faces: Mapping[str, list],
     return count
 
 
+def envelope_radiation_conductance(area: float, others: float,
+                                   h_r: float = INTERIOR_RADIATION,
+                                   h_c: float = ROOM_FACE_CONVECTION) -> float:
+    """Conductance [W/K] between an envelope face of ``area`` [m2] and its room's air
+    through the room's other faces (``others`` [m2]): long-wave exchange h_r A in series with
+    their convection h_c A_others (``ModelOptions.envelope_radiation="room"``)."""
+    if area <= 0 or others <= 0:
+        return 0.0
+    return area / (1.0 / h_r + area / (h_c * others))
+
+
+def _envelope_radiation(asm: _Assembler, envelope: Sequence[tuple[str, int, float]],
+                        room_state: Mapping[str, int], floor_faces: Mapping[str, list],
+                        other_faces: Mapping[str, list]) -> int:
+    """Link each envelope face to its room's air (:func:`envelope_radiation_conductance`,
+    parameter-free); returns the number of faces linked."""
+    env_area: dict[str, float] = {}
+    for room, _, a in envelope:
+        env_area[room] = env_area.get(room, 0.0) + a
+    count = 0
+    for room, node, a in envelope:
+        total = sum(x for _, x in floor_faces.get(room, []) + other_faces.get(room, []))
+        g = envelope_radiation_conductance(a, total - env_area[room])
+        if g > 0:
+            asm.link(node, room_state[room], g)
+            count += 1
+    return count
+
+
 def _solar_targets(opts: ModelOptions, floors: list, others: list,
                    air: int) -> list[tuple[int, float]]:
     """(state, share) pairs that receive a window's solar heat (shares sum to 1)."""
@@ -795,6 +846,9 @@ def build_structure(
     floor_faces: dict[str, list[tuple[int, float]]] = {}
     other_faces: dict[str, list[tuple[int, float]]] = {}
 
+    # (room, inside face node, area) of the envelope's opaque faces (envelope_radiation)
+    envelope: list[tuple[str, int, float]] = []
+
     def face(surface: Surface, room: str, node: int) -> None:
         """Record an element face of ``surface`` exposed to ``room``'s air."""
         kind = floor_faces if surface.surface_type == "Floor" else other_faces
@@ -839,6 +893,7 @@ def build_structure(
         elif s.boundary == "Outdoors":
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
             face(s, s.zone, nodes[-1])
+            envelope.append((s.zone, nodes[-1], s.area))
             roof = s.surface_type == "Roof"
             if roof and opts.roof_exterior == "idf":  # the roof's own film, known
                 asm.to_temperature(nodes[0], 0, ROOF_FILM * s.area, -1)
@@ -862,6 +917,8 @@ def build_structure(
         else:
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
             face(s, s.zone, nodes[-1])
+            if s.boundary == "Ground":
+                envelope.append((s.zone, nodes[-1], s.area))
             if s.boundary == "Ground" and opts.ground == "idf":
                 # the outer face held near the ground temperature T_g(month): a scheduled
                 # input of constant "airflow" G A / c_p at the face whose supply is T_g
@@ -886,6 +943,12 @@ def build_structure(
         nodes = _add_element(asm, "internal_mass", name, room_state, layout, m.area, m.zone, IW)
         asm.link(nodes[0], room_state[m.zone], m.area, IW)
         other_faces.setdefault(m.zone, []).extend([(nodes[0], m.area), (nodes[-1], m.area)])
+
+    if opts.envelope_radiation == "room":
+        n_env = _envelope_radiation(asm, envelope, room_state, floor_faces, other_faces)
+        notes.append(f"envelope faces' long-wave exchange with their rooms: {n_env} faces "
+                     f"({INTERIOR_RADIATION} W/m2K in series with {ROOM_FACE_CONVECTION} "
+                     "W/m2K at the room's other faces)")
 
     window_area: dict[str, np.ndarray] = {}
     glass_faces: dict[str, list[tuple[int, float]]] = {}

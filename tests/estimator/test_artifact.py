@@ -167,7 +167,8 @@ def test_structure_file_errors_say_what_to_fix(vb, tmp_path):
 
 def test_pipeline_rejects_an_unknown_weekend_gains_mode(vb):
     pipe = Pipeline.from_site(vb / "site.yaml")
-    with pytest.raises(PipelineError, match="use 'none', 'known', 'scaled', 'daytime' or 'metered'"):
+    with pytest.raises(PipelineError,
+                       match="use 'auto', 'none', 'known', 'scaled', 'daytime' or 'metered'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), weekend_gains="sometimes")
     with pytest.raises(PipelineError, match="films='radiant': use 'combined' or 'convective'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), films="radiant")
@@ -230,6 +231,23 @@ def test_weekend_metered_gains_are_the_weekend_rise_above_the_night_base_per_flo
         pipe.identify(dataclasses.replace(data, power=None), weekend_gains="metered")
 
 
+class _Stop(Exception):
+    """Raised by the stand-in of identify() once it has seen its arguments."""
+
+
+def _capture_identify(monkeypatch, module) -> list[dict]:
+    """Replace ``module.identify`` by a stand-in that records its keyword arguments and
+    raises :class:`_Stop`; returns the list they go into."""
+    seen: list[dict] = []
+
+    def fake(*args, **kwargs):
+        seen.append(kwargs)
+        raise _Stop
+
+    monkeypatch.setattr(module, "identify", fake)
+    return seen
+
+
 def test_metered_mode_fits_the_daytime_scale_with_the_metered_gains_known(vb, monkeypatch):
     """Pipeline.identify(weekend_gains="metered") hands identify the metered gains as known
     f_IG and the daytime shape to scale with a prior centred on 0 (the shape stands for the
@@ -238,18 +256,9 @@ def test_metered_mode_fits_the_daytime_scale_with_the_metered_gains_known(vb, mo
 
     pipe = Pipeline.from_site(vb / "site.yaml")
     data = pipe.data(pipe.telemetry(vb))
-    seen = []
-
-    class Stop(Exception):
-        pass
-
-    def fake(*args, **kwargs):
-        seen.append(kwargs)
-        raise Stop
-
-    monkeypatch.setattr(pl, "identify", fake)
+    seen = _capture_identify(monkeypatch, pl)
     for mode in ("metered", "daytime"):
-        with pytest.raises(Stop):
+        with pytest.raises(_Stop):
             pipe.identify(data, train=["2015-04-18"], validation=[], weekend_gains=mode)
     np.testing.assert_array_equal(seen[0]["f_ig"], pipe.weekend_known_gains(data, "metered"))
     assert seen[0]["f_ig"].any()
@@ -258,6 +267,73 @@ def test_metered_mode_fits_the_daytime_scale_with_the_metered_gains_known(vb, mo
     assert seen[1]["f_ig"] is None
     assert seen[0]["shape_prior"] == pl.METERED_SHAPE_PRIOR == (0.0, 1.0)
     assert seen[1]["shape_prior"] == (1.0, 1.0)
+
+
+def test_weekend_metered_ratio_is_the_weekend_daytime_rise_over_the_working_days(vb):
+    """The building's summed meters: mean between 08 and 18 h less the median between 00
+    and 06 h local, weekends over working days; rows where a zone's meter is unknown are
+    left out; None without meters or without a working-day rise."""
+    import dataclasses
+
+    from zonecast.estimator.pipeline import weekend_metered_ratio
+
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    data = pipe.data(pipe.telemetry(vb))
+    total = data.power.sum(axis=1)
+    local = data.local_times()
+    weekend, hour = np.asarray(local.day_of_week >= 5), np.asarray(local.hour)
+    day, night = (hour >= 8) & (hour < 18), hour < 6
+
+    def rise(days):
+        return total[days & day].mean() - np.median(total[days & night])
+
+    ratio = weekend_metered_ratio(data)
+    assert ratio == pytest.approx(rise(weekend) / rise(~weekend), rel=1e-12)
+    assert 0.0 < ratio < 0.15  # office6: nobody at weekends, cleaning and visits only
+    # twice the weekend daytime rise of every zone doubles the ratio
+    more = data.power.copy()
+    on = weekend & day
+    base = np.median(data.power[weekend & night], axis=0)
+    more[on] = base + 2.0 * (data.power[on] - base)
+    doubled = weekend_metered_ratio(dataclasses.replace(data, power=more))
+    assert doubled == pytest.approx(2.0 * ratio, rel=0.05)
+    gap = data.power.copy()
+    gap[np.flatnonzero(on)[:40], 0] = np.nan  # a meter's gap: those rows are left out
+    assert np.isfinite(weekend_metered_ratio(dataclasses.replace(data, power=gap)))
+    assert weekend_metered_ratio(dataclasses.replace(data, power=None)) is None
+    flat = np.ones_like(data.power)
+    assert weekend_metered_ratio(dataclasses.replace(data, power=flat)) is None
+
+
+def test_auto_weekend_gains_take_the_meters_only_where_the_weekends_are_occupied(
+        vb, monkeypatch):
+    """weekend_gains="auto" (the default) fits as "metered" when the meters' weekend rise
+    is at least METERED_OCCUPIED_RATIO of the working days', else as "daytime" (and so
+    without meters); the result says which mode and ratio."""
+    import dataclasses
+
+    import zonecast.estimator.pipeline as pl
+
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    data = pipe.data(pipe.telemetry(vb))
+    seen = _capture_identify(monkeypatch, pl)
+    ratio = pl.weekend_metered_ratio(data)
+    for threshold, expect in ((ratio + 0.01, "daytime"), (ratio - 0.01, "metered")):
+        monkeypatch.setattr(pl, "METERED_OCCUPIED_RATIO", threshold)
+        with pytest.raises(_Stop):
+            pipe.identify(data, train=["2015-04-18"], validation=[])
+        kw = seen[-1]
+        if expect == "metered":
+            np.testing.assert_array_equal(kw["f_ig"], pipe.weekend_known_gains(data, "metered"))
+            assert kw["shape_prior"] == pl.METERED_SHAPE_PRIOR
+        else:
+            assert kw["f_ig"] is None and kw["shape_prior"] == (1.0, 1.0)
+    with pytest.raises(_Stop):  # no meters: daytime, whatever the threshold
+        pipe.identify(dataclasses.replace(data, power=None), train=["2015-04-18"],
+                      validation=[])
+    assert seen[-1]["f_ig"] is None
+    monkeypatch.undo()
+    assert pl.METERED_OCCUPIED_RATIO == 0.15
 
 
 def test_structure_files_without_the_horizontal_column_still_load(vb, bundle, tmp_path):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -616,6 +617,53 @@ def test_roofs_keep_their_own_known_exterior_with_roof_exterior_idf(five_zone):
     with pytest.raises(ModelDefinitionError,
                        match="roof_exterior must be 'fitted', 'idf' or 'absorptance'"):
         ModelOptions(roof_exterior="known")
+
+
+def test_envelope_faces_draw_long_wave_heat_from_their_rooms(five_zone):
+    """``envelope_radiation="room"``: every opaque face open to the outdoors or on the ground
+    gets one
+    parameter-free link from its inside node to its room's air, the series of
+    INTERIOR_RADIATION A_i and ROOM_FACE_CONVECTION over the room's other faces; the rest
+    of A is the same (the new links' rows sum to zero: heat moves between states), A stays
+    Metzler and stable, and the option refuses the star it approximates."""
+    from zonecast.estimator.rc.network import (
+        INTERIOR_RADIATION,
+        ROOM_FACE_CONVECTION,
+        envelope_radiation_conductance,
+    )
+
+    g = envelope_radiation_conductance(10.0, 40.0)
+    assert g == pytest.approx(10.0 / (1.0 / INTERIOR_RADIATION + 10.0 / (ROOM_FACE_CONVECTION * 40.0)))
+    assert g < INTERIOR_RADIATION * 10.0 and g < ROOM_FACE_CONVECTION * 40.0
+    assert envelope_radiation_conductance(10.0, 0.0) == 0.0
+    base = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
+                        return_air="none")
+    plain = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, options=base)
+    room = build_model(five_zone, FIVE_ZONES, FIVE_BOXES,
+                       options=dataclasses.replace(base, envelope_radiation="room"))
+    st = room.structure
+    n_faces = sum(1 for s in five_zone.surfaces.values() if s.boundary in ("Outdoors", "Ground"))
+    assert n_faces > 10 and any(f"{n_faces} faces" in n for n in st.notes)
+    # conductances [W/K]: A times the capacity of the row's state
+    full = np.asarray(room.A) * st.capacity[:, None] - np.asarray(plain.A) * plain.structure.capacity[:, None]
+    np.testing.assert_allclose(full.sum(axis=1), 0.0, atol=1e-6)  # links between states only
+    diff = full.copy()
+    np.fill_diagonal(diff, 0.0)
+    rows, cols = np.nonzero(np.abs(diff) > 1e-9)
+    pairs = {tuple(sorted((int(r), int(c)))) for r, c in zip(rows, cols)}
+    assert len(pairs) == n_faces  # one link per envelope face, to its room's air
+    air = set(np.flatnonzero([lab.kind in ("room_air", "unmeasured_air") for lab in st.labels]))
+    assert all(len(set(p) & air) == 1 for p in pairs)
+    np.testing.assert_allclose(diff, diff.T, atol=1e-9)  # a conductance both ways
+    assert np.all(diff >= -1e-12)
+    a = np.asarray(room.A)
+    off = a - np.diag(np.diag(a))
+    assert off.min() >= 0.0
+    assert np.max(np.linalg.eigvals(a).real) < 0.0
+    with pytest.raises(ModelDefinitionError, match="envelope_radiation must be 'none' or 'room'"):
+        ModelOptions(envelope_radiation="star")
+    with pytest.raises(ModelDefinitionError, match="choose one of them"):
+        ModelOptions(envelope_radiation="room", interior_radiation="star")
 
 
 def test_sky_exchange_is_a_scheduled_input_at_each_exterior_face(five_zone):

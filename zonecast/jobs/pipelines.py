@@ -74,19 +74,20 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   validate: list[str] | None = None, starts: int = 1,
                   profile_weeks: bool = True, window_solar: str = "surfaces", seed: int = 0,
                   priors: bool = True, sigma_e: float = 0.3, window: str = "weekend",
-                  infiltration: str = "idf", weekend_gains: bool | str = "daytime",
+                  infiltration: str = "idf", weekend_gains: bool | str = "auto",
                   ground: str = "idf", shading: str = "idf", return_air: str = "idf",
                   roof_solar: str = "horizontal", sky: str = "none",
                   interior_radiation: str = "none", films: str | None = None,
                   internal_gains: str = "air", window_angle: str = "none",
-                  roof_exterior: str = "absorptance", progress: Progress = _quiet,
+                  roof_exterior: str = "absorptance", envelope_radiation: str = "none",
+                  progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
                   x0_offset_sd: float | None = None,
                   day_scale_sd: float | None = None) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
-    ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``: as
+    ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``, ``envelope_radiation``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``: as
     :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
@@ -98,7 +99,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                                                          interior_radiation=interior_radiation,
                                                          internal_gains=internal_gains,
                                                          window_angle=window_angle,
-                                                         roof_exterior=roof_exterior))
+                                                         roof_exterior=roof_exterior,
+                                                         envelope_radiation=envelope_radiation))
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,

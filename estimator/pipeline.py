@@ -267,7 +267,8 @@ class Pipeline:
     def building(self) -> Building:
         """The building read from the site's EnergyPlus file (needs EnergyPlus; cached)."""
         if self._building is None:
-            self._building = read_building(self.site.idf_path, self.energyplus_dir)
+            self._building = read_building(self.site.idf_path, self.energyplus_dir,
+                                           weather_file=self.site.weather_path)
         return self._building
 
     def _building_or_none(self) -> Building | None:

@@ -275,6 +275,9 @@ class Site(_Strict):
     points : telemetry columns by role, with units.
     experiments : excitation experiment periods, if any.
     thermostat : the zones' set point schedule, if known.
+    weather_file : the EPW weather file the building's EnergyPlus input is simulated with,
+        relative to the site file, if any: its ground temperatures are what EnergyPlus puts
+        under F- and C-factor floors and walls (docs/data.md).
     """
 
     schema_version: int = SITE_SCHEMA_VERSION
@@ -288,6 +291,7 @@ class Site(_Strict):
     points: Points
     experiments: list[Experiment] = Field(default_factory=list)
     thermostat: Thermostat | None = None
+    weather_file: Path | None = None
     base_dir: Path | None = Field(None, exclude=True)
 
     @field_validator("step", mode="before")
@@ -374,6 +378,14 @@ class Site(_Strict):
     @property
     def idf_path(self) -> Path:
         return self.idf if self.idf.is_absolute() or self.base_dir is None else self.base_dir / self.idf
+
+    @property
+    def weather_path(self) -> Path | None:
+        """The weather file's path (None if the site names none)."""
+        w = self.weather_file
+        if w is None:
+            return None
+        return w if w.is_absolute() or self.base_dir is None else self.base_dir / w
 
     def to_yaml(self, path: str | Path) -> None:
         data = self.model_dump(mode="json", exclude={"base_dir"})

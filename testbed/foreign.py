@@ -5,8 +5,9 @@ An EnergyPlus input nobody on this project wrote (e.g. NREL's ``5ZoneAirCooled.i
 read through EnergyPlus's own converter into epJSON, patched for the paper's excitation
 experiments (section 2-B) and run over the campaign's weeks; the run folder holds the same
 files as a testbed campaign (``telemetry.csv``, ``site.yaml``, ``truth.csv``,
-``experiments.csv``, ``run.json``) and the patched input (``building.epJSON``, plus
-EnergyPlus's conversion of it to ``building.idf``).
+``experiments.csv``, ``run.json``), the patched input (``building.epJSON``, plus
+EnergyPlus's conversion of it to ``building.idf``) and the weather file it ran with
+(``weather.epw``, the site's ``weather_file``).
 
 What the patch changes (everything else, in particular every HVAC object, is kept):
 
@@ -504,6 +505,10 @@ def campaign_weeks(n: int | None = None) -> tuple[list[dt.date], list[dt.date]]:
     return weeks, weekends
 
 
+#: the weather file's copy beside the site (the site's ``weather_file``)
+WEATHER_FILE = "weather.epw"
+
+
 def _epw_location(path: Path) -> dict:
     head = path.read_text(errors="replace").splitlines()[0].split(",")
     return {"latitude": float(head[6]), "longitude": float(head[7]), "time_zone": float(head[8]),
@@ -787,8 +792,9 @@ def run_foreign(idf: str | Path, out: str | Path, weeks: list[dt.date] | None = 
             "solar": {"global_horizontal": names["ghi"], "direct_normal": names["dni"],
                       "diffuse_horizontal": names["dhi"]}},
         "experiments": [{"start": s, "end": e} for s, e in experiments],
-        "thermostat": thermostat})
+        "thermostat": thermostat, "weather_file": WEATHER_FILE})
     progress("writing files")
+    shutil.copy(wfile, out / WEATHER_FILE)
     write_csv(tel, out / "telemetry.csv", tzname)
     write_csv(tru, out / "truth.csv", tzname)
     site.to_yaml(out / "site.yaml")

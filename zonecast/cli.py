@@ -141,7 +141,8 @@ def testbed_foreign(idf: Annotated[Path, typer.Option(help="EnergyPlus input (ID
                 task, description=f"third-party building: {s}"))
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
-    typer.echo(f"wrote {res.out}/telemetry.csv, site.yaml, truth.csv, building.epJSON "
+    typer.echo(f"wrote {res.out}/telemetry.csv, site.yaml, truth.csv, building.epJSON, "
+               "weather.epw "
                f"({len(res.telemetry)} steps; EnergyPlus {res.timings['energyplus_s']:.1f} s, "
                f"total {res.timings['total_s']:.1f} s)")
 

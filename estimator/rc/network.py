@@ -928,7 +928,8 @@ def build_structure(
                 box_rooms[box] = s.zone
                 scheduled[box] = {"flow": GROUND_CONDUCTANCE * s.area / opts.cp_air,
                                   "supply": "ground",
-                                  "monthly": [float(t) for t in building.ground_temperature]}
+                                  "monthly": [float(t)
+                                              for t in building.ground_temperature_at(name)]}
             elif s.boundary not in ("Adiabatic", "Ground"):
                 notes.append(f"surface {name}: boundary {s.boundary} treated as adiabatic")
     if any(s.boundary == "Ground" for s in surfaces.values()):

@@ -159,6 +159,9 @@ def test_one_week_runs_and_fills_the_data_contract(week):
     truth = pd.read_csv(week.out / "truth.csv", index_col=0)
     assert truth["people:zone:SPACE1-1"].max() > 0 and truth["window_solar:zone:SPACE1-1"].max() > 0
     assert (week.out / "building.idf").is_file() and (week.out / "building.epJSON").is_file()
+    # the weather file it ran with, beside the site (its ground temperatures: F/C-factor faces)
+    assert site.weather_file == Path("weather.epw") and site.weather_path.is_file()
+    assert site.weather_path.read_text(errors="replace").startswith("LOCATION,Chicago")
 
 
 def test_site_draft_of_the_run_input_checks_against_its_telemetry(week, tmp_path):

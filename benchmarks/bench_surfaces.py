@@ -119,13 +119,17 @@ def summarise(wide: pd.DataFrame, faces: pd.DataFrame, rated: dict[str, float]) 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--campaign", type=Path, required=True,
-                    help="a testbed building folder (building.idf, building.yaml, eplus/)")
+                    help="a testbed building folder (building.idf, building.yaml, eplus/) or a "
+                         "third-party one (zonecast testbed foreign: building.idf, run.json)")
     ap.add_argument("--rooms", nargs="+", required=True, help="EnergyPlus zones to report")
     ap.add_argument("--out", type=Path)
     ap.add_argument("--keep", type=Path, help="keep the EnergyPlus run in this folder")
     args = ap.parse_args(argv)
     camp = args.campaign
-    weather = yaml.safe_load((camp / "building.yaml").read_text())["weather"]
+    if (camp / "building.yaml").is_file():  # a testbed member
+        weather = yaml.safe_load((camp / "building.yaml").read_text())["weather"]
+    else:  # a third-party building (zonecast testbed foreign)
+        weather = json.loads((camp / "run.json").read_text())["weather"]
     epdir = energyplus_dir()
     work = args.keep or Path(tempfile.mkdtemp(prefix="zonecast-surfaces-"))
     work.mkdir(parents=True, exist_ok=True)

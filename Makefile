@@ -20,8 +20,10 @@ $(VENV)/.installed: pyproject.toml
 demo: venv
 	$(BIN)/zonecast demo --out $(DEMO_OUT)
 
+# the suite on every core (pytest-xdist); each test keeps its own broker port, database
+# schema and temporary folders
 test: venv
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto
 
 bench: venv
 	for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

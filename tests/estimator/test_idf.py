@@ -256,6 +256,45 @@ def test_pre96_file_reads_like_its_current_version(tmp_path, five_zone_path, fiv
     assert {w.name: round(w.area, 6) for w in b.windows.values()} == \
         {w.name: round(w.area, 6) for w in five_zone.windows.values()}
     assert b.internal_masses == five_zone.internal_masses
+    # what the model uses beyond the geometry is read too (pre-9.6 fields unchanged)
+    assert b.infiltration and b.infiltration == five_zone.infiltration
+    assert b.schedules.keys() == five_zone.schedules.keys()
+    assert b.ground_temperature == five_zone.ground_temperature
+    assert b.return_plenum == five_zone.return_plenum
+    assert b.internal_gains and b.internal_gains == five_zone.internal_gains
+
+
+def test_pre96_class_the_converter_rejects_is_left_out_and_said(tmp_path):
+    """A 9.0 People object's radiant-temperature keyword (ZoneAveraged) is refused by the
+    current schema: People is left out, the rest (infiltration, ground) still read."""
+    install = find_energyplus()
+    if install.transitions is not None:
+        pytest.skip("this EnergyPlus has transition programs")
+    idf = tmp_path / "old.idf"
+    idf.write_text(
+        "Version, 9.0;\nBuilding, B;\nGlobalGeometryRules, UpperLeftCorner, Counterclockwise, "
+        "Relative;\nZone, Z1;\nMaterial, M1, Rough, 0.1, 1.0, 2000, 900;\n"
+        "Construction, C1, M1;\n"
+        "BuildingSurface:Detailed, S1, Wall, C1, Z1, Outdoors, , SunExposed, WindExposed, 0.5, 4,"
+        " 0,0,3, 0,0,0, 10,0,0, 10,0,3;\n"
+        "BuildingSurface:Detailed, F1, Floor, C1, Z1, Ground, , NoSun, NoWind, 0, 4,"
+        " 0,0,0, 0,5,0, 10,5,0, 10,0,0;\n"
+        "Site:GroundTemperature:BuildingSurface, 10,11,12,13,14,15,16,17,18,19,20,21;\n"
+        "ScheduleTypeLimits, Fraction, 0, 1, Continuous;\n"
+        "Schedule:Compact, Infil, Fraction, Through: 12/31, For: Weekdays, Until: 06:00, 1, "
+        "Until: 24:00, 0.25, For: AllOtherDays, Until: 24:00, 1;\n"
+        "ZoneInfiltration:DesignFlowRate, I1, Z1, Infil, Flow/Zone, 0.05, , , , 1, 0, 0, 0;\n"
+        "People, P1, Z1, Infil, People, 10, , , 0.3, autocalculate, Infil, 3.82E-8, No, "
+        "ZoneAveraged;\n"
+    )
+    b = read_building(idf)
+    (note,) = [n for n in b.notes if "without transition" in n]
+    assert "rejected by the converter: people" in note
+    assert "zoneinfiltration:designflowrate" in note
+    assert b.infiltration["I1"].flow == pytest.approx(0.05)
+    assert b.infiltration["I1"].schedule.lower() == "infil"
+    assert b.ground_temperature == tuple(float(t) for t in range(10, 22))
+    assert not b.internal_gains
 
 
 def test_a_relative_idf_path_is_read(five_zone_path, tmp_path, monkeypatch):

@@ -340,3 +340,26 @@ def test_thermostat_inferred_with_saturdays_and_holidays():
     flat = tru.copy()
     flat[:] = 21.0
     assert infer_thermostat(flat, ["A", "B"], "America/Chicago", np.zeros(len(tru), bool)) is None
+
+
+def test_a_pre96_file_says_it_needs_an_upgrade(tmp_path):
+    """Without transition programs a pre-9.6 file's HVAC cannot be run: a clear error, not
+    "no air terminal" (the reader kept only what the estimator uses)."""
+    from zonecast.estimator.idf import _PRE96_SPACE_FIELD, find_energyplus, idf_objects
+
+    if find_energyplus().transitions is not None:
+        pytest.skip("this EnergyPlus has transition programs")
+    lines = []  # the 5-zone file in 9.5's field order (no Space fields), declared 9.5
+    for obj in idf_objects(FIVE_ZONE.read_text(encoding="latin-1")):
+        cls, fields = obj[0], obj[1:]
+        pos = _PRE96_SPACE_FIELD.get(cls.lower())
+        if cls.lower() == "version":
+            fields = ["9.5"]
+        elif pos is not None and len(fields) > pos:
+            fields = fields[:pos] + fields[pos + 1:]
+        lines.append(cls + ", " + ", ".join(fields) + ";")
+    old = tmp_path / "five_95.idf"
+    old.write_text("\n".join(lines))
+    with pytest.raises(ForeignBuildingError, match="predates EnergyPlus 9.6.*IDFVersionUpdater"):
+        run_foreign(old, tmp_path / "out")
+

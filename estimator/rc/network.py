@@ -250,6 +250,13 @@ class ModelOptions:
         receives by radiation, taken from the air through the faces that give it, with
         the room's other faces at the air temperature. No parameter; the fitted films
         stay the faces' convection (docs/model.md "Envelope faces' long-wave exchange").
+    solar_enclosure : {"air_boundaries", "room"}
+        Where a window's transmitted sun lands: on the faces of its room (``"room"``, what
+        model files without the option were built with), or, the default since 2026-12-04,
+        on the faces of every room joined to it by air boundaries
+        (``Construction:AirBoundary``; :attr:`~zonecast.estimator.idf.Building.air_boundaries`),
+        which EnergyPlus makes one solar and radiant enclosure; a building without air
+        boundaries is unchanged (docs/model.md "Air boundaries").
     roof_exterior : {"fitted", "idf", "absorptance"}
         The outer faces of roofs (surfaces of type Roof open to the outdoors): with
         the IDF's solar absorptance of the roof's outer material (EnergyPlus's 0.7 where
@@ -284,8 +291,11 @@ class ModelOptions:
     window_angle: str = "none"
     roof_exterior: str = "absorptance"
     envelope_radiation: str = "none"
+    solar_enclosure: str = "air_boundaries"
 
     def __post_init__(self):
+        if self.solar_enclosure not in ("room", "air_boundaries"):
+            raise ModelDefinitionError("solar_enclosure must be 'room' or 'air_boundaries'")
         if self.envelope_radiation not in ("none", "room"):
             raise ModelDefinitionError("envelope_radiation must be 'none' or 'room'")
         if self.envelope_radiation != "none" and self.interior_radiation == "star":
@@ -727,6 +737,25 @@ def _envelope_radiation(asm: _Assembler, envelope: Sequence[tuple[str, int, floa
     return count
 
 
+def solar_enclosures(air_boundaries: Sequence[tuple[str, str, float]]) -> dict[str, list[str]]:
+    """Room -> the sorted rooms of its enclosure (itself included): the connected groups of
+    rooms joined by air boundaries, which EnergyPlus treats as one solar and radiant
+    enclosure; rooms without an air boundary are not listed."""
+    parent: dict[str, str] = {}
+
+    def find(x: str) -> str:
+        while parent.setdefault(x, x) != x:
+            x = parent[x]
+        return x
+
+    for a, b, _ in air_boundaries:
+        parent[find(a)] = find(b)
+    groups: dict[str, list[str]] = {}
+    for room in parent:
+        groups.setdefault(find(room), []).append(room)
+    return {room: sorted(members) for members in groups.values() for room in members}
+
+
 def _solar_targets(opts: ModelOptions, floors: list, others: list,
                    air: int) -> list[tuple[int, float]]:
     """(state, share) pairs that receive a window's solar heat (shares sum to 1)."""
@@ -952,6 +981,11 @@ def build_structure(
                      f"({INTERIOR_RADIATION} W/m2K in series with {ROOM_FACE_CONVECTION} "
                      "W/m2K at the room's other faces)")
 
+    enclosure = (solar_enclosures(building.air_boundaries)
+                 if opts.solar_enclosure == "air_boundaries" else {})
+    for members in {tuple(m) for m in enclosure.values()}:
+        notes.append("one solar enclosure (air boundaries): the sun through the windows of "
+                     + ", ".join(members) + " lands on the faces of all of them")
     window_area: dict[str, np.ndarray] = {}
     glass_faces: dict[str, list[tuple[int, float]]] = {}
     rated = [(w.u_value, w.area) for w in building.windows.values() if w.u_value]
@@ -976,8 +1010,9 @@ def build_structure(
                 glass_faces.setdefault(w.zone, []).append((node, w.area))
             else:
                 asm.to_temperature(r, 0, w.area, UWIN)  # paper eq:q_bh, window transmission
-            targets = _solar_targets(opts, floor_faces.get(w.zone, []),
-                                     other_faces.get(w.zone, []), r)
+            members = enclosure.get(w.zone, [w.zone])
+            targets = _solar_targets(opts, [f for m in members for f in floor_faces.get(m, [])],
+                                     [f for m in members for f in other_faces.get(m, [])], r)
             cols = facade_of(parent.tilt, parent.azimuth, opts.roof_solar, rotation)
             shades = (building.shading.get(name, []) + building.shading.get("*", [])
                       if opts.shading == "idf" else [])

@@ -485,3 +485,39 @@ def test_interzone_window_pair_couples_once(world_probe):
     a = st.A_p[UWIN].toarray()
     assert a[room["U"], room["U2"]] * st.capacity[room["U"]] == pytest.approx(15.0)
     assert a[room["U2"], room["U"]] * st.capacity[room["U2"]] == pytest.approx(15.0)
+
+
+def test_solar_enclosures_are_the_groups_joined_by_air_boundaries():
+    from zonecast.estimator.rc.network import solar_enclosures
+
+    groups = solar_enclosures([("A", "B", 0.1), ("C", "D", 0.1), ("B", "E", 0.2)])
+    assert groups == {r: ["A", "B", "E"] for r in "ABE"} | {r: ["C", "D"] for r in "CD"}
+    assert solar_enclosures([]) == {}
+
+
+def test_window_sun_lands_on_the_faces_of_the_whole_enclosure(tmp_path):
+    """EnergyPlus makes rooms joined by an air boundary one solar enclosure: the sun through
+    A's window lands on the faces of A and B, by area (as on one room's faces); with
+    solar_enclosure="room" (model files before the option) on A's alone. Same total."""
+    from zonecast.estimator.rc.network import DISTURBANCES, WINSOL, ModelOptions, build_structure
+
+    idf = tmp_path / "in.idf"
+    idf.write_text(AIR_BOUNDARY_IDF + "WindowMaterial:SimpleGlazingSystem, Glass, 2.0, 0.4;\n"
+                   "Construction, Win, Glass;\nWindow, AS_W, Win, AS, , 1, 1, 0.5, 2, 1.5;\n")
+    b = read_building(idf)
+    zones = {"A": ["A"], "B": ["B"]}
+    col = DISTURBANCES.index("solS")
+    per_room = {}
+    for opt in ("air_boundaries", "room"):
+        st = build_structure(b, zones, {}, ModelOptions(solar_enclosure=opt))
+        bv = st.Bv_p[WINSOL].toarray()[:, col]
+        rooms = {}
+        for i in np.flatnonzero(bv):
+            rooms[st.labels[i].room] = rooms.get(st.labels[i].room, 0.0) + bv[i] * st.capacity[i]
+        per_room[opt] = rooms
+        assert sum(rooms.values()) == pytest.approx(2.0 * 1.5)  # the window's area, all of it
+        assert any("solar enclosure" in n for n in st.notes) == (opt == "air_boundaries")
+    assert set(per_room["room"]) == {"A"}
+    assert set(per_room["air_boundaries"]) == {"A", "B"}
+    # B's faces (its floor twice A's) take more than A's
+    assert per_room["air_boundaries"]["B"] > per_room["air_boundaries"]["A"]

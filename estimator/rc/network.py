@@ -255,7 +255,8 @@ class ModelOptions:
         model files without the option were built with), or, the default since 2026-12-04,
         on the faces of every room joined to it by air boundaries
         (``Construction:AirBoundary``; :attr:`~zonecast.estimator.idf.Building.air_boundaries`),
-        which EnergyPlus makes one solar and radiant enclosure; a building without air
+        which EnergyPlus makes one solar and radiant enclosure (with
+        ``internal_gains="idf"`` the gains' radiant share too); a building without air
         boundaries is unchanged (docs/model.md "Air boundaries").
     roof_exterior : {"fitted", "idf", "absorptance"}
         The outer faces of roofs (surfaces of type Roof open to the outdoors): with
@@ -1103,8 +1104,12 @@ def build_structure(
             i = room_state[r]
             heat = building.zones[r].floor_area  # paper eq:q_ig: a_floor (c_IG + f_IG)
             if opts.internal_gains == "idf":
-                targets = _gain_targets(building, r, room_state, floor_faces.get(r, []),
-                                        other_faces.get(r, []), glass.get(r, 0.0))
+                # the radiant share reaches the faces of the room's solar enclosure
+                members = enclosure.get(r, [r])
+                targets = _gain_targets(building, r, room_state,
+                                        [f for m in members for f in floor_faces.get(m, [])],
+                                        [f for m in members for f in other_faces.get(m, [])],
+                                        sum(glass.get(m, 0.0) for m in members))
                 n_split += len(targets) > 1
             else:
                 targets = [(i, 1.0)]

@@ -521,3 +521,29 @@ def test_window_sun_lands_on_the_faces_of_the_whole_enclosure(tmp_path):
     assert set(per_room["air_boundaries"]) == {"A", "B"}
     # B's faces (its floor twice A's) take more than A's
     assert per_room["air_boundaries"]["B"] > per_room["air_boundaries"]["A"]
+
+
+def test_radiant_gains_reach_the_whole_enclosure(tmp_path):
+    """With internal_gains="idf" the radiant share of A's lights lands on the faces of A's
+    enclosure (A and B), the convective share on A's air; "room" keeps it in A."""
+    from zonecast.estimator.rc.network import ModelOptions, build_structure
+
+    idf = tmp_path / "in.idf"
+    idf.write_text(AIR_BOUNDARY_IDF + "Schedule:Constant, On, , 1;\n"
+                   "Lights, L, A, On, LightingLevel, 200, , , 0, 0.6, 0.2;\n")
+    b = read_building(idf)
+    zones = {"A": ["A"], "B": ["B"]}
+    heat = {}
+    for opt in ("air_boundaries", "room"):
+        st = build_structure(b, zones, {}, ModelOptions(internal_gains="idf",
+                                                        solar_enclosure=opt))
+        col = np.asarray(st.B_ig)[:, 0] * st.capacity  # zone A's gains [W per W/m2]
+        rooms = {}
+        for i in np.flatnonzero(col):
+            key = (st.labels[i].room, st.labels[i].kind == "room_air")
+            rooms[key] = rooms.get(key, 0.0) + col[i]
+        heat[opt] = rooms
+        assert sum(rooms.values()) == pytest.approx(b.zones["A"].floor_area)
+    assert {r for r, _ in heat["room"]} == {"A"}
+    assert ("B", False) in heat["air_boundaries"] and ("B", True) not in heat["air_boundaries"]
+    assert heat["air_boundaries"][("A", True)] == pytest.approx(heat["room"][("A", True)])

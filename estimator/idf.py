@@ -324,9 +324,8 @@ def _convert_pre96(path: Path, install: EnergyPlusInstall, work: Path
     """A pre-9.6 file's geometry and :data:`_PRE96_CONTEXT` classes through EnergyPlus's
     converter; a context class the converter rejects is left out and the conversion run
     again. Returns (data, context classes kept, classes rejected, objects left out)."""
-    context = {c for c in _PRE96_CONTEXT}
     present = {obj[0].lower() for obj in idf_objects(path.read_text(encoding="latin-1"))}
-    context &= present
+    context = _PRE96_CONTEXT & present
     rejected: set[str] = set()
     for attempt in range(len(context) + 1):
         source, dropped = _pre96_subset(path, install.version, work / f"pre96-{attempt}.idf",
@@ -1324,15 +1323,14 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
             notes.append(f"zone {z.name}: {', '.join(z.geometry_computed)} computed from geometry")
     schedules: dict[str, CompactSchedule] = {}
     infiltration = _infiltration(data, zkey, zones, surfaces, unsupported, notes, schedules)
-    fc_names = (data.get(_FC_GROUND_KEY) or {}).get("surfaces", set())
+    fc_ground = data.get(_FC_GROUND_KEY) or {"surfaces": set(), "monthly": ()}
+    ground_of = {n: tuple(fc_ground["monthly"]) for n in surfaces
+                 if n.lower() in fc_ground["surfaces"]}
     ground = _ground_temperature(data, {n: s for n, s in surfaces.items()
-                                        if n.lower() not in fc_names}, notes)
+                                        if n not in ground_of}, notes)
     shading = _shading(data, geo, zones_raw, base, windows, notes)
     plenums = _return_plenums(data, zkey, notes)
     gains = _internal_gains(data, zkey, zones, notes)
-    fc_ground = data.get(_FC_GROUND_KEY)
-    ground_of = {n: tuple(fc_ground["monthly"]) for n in surfaces
-                 if fc_ground and n.lower() in fc_ground["surfaces"]}
     return Building(
         ground_temperature_of=ground_of,
         name=bname, version=version_text, north_axis=north, zones=zones, surfaces=surfaces,
@@ -1967,9 +1965,13 @@ def epw_ground_temperatures(path: str | os.PathLike) -> dict[float, tuple[float,
     return {}
 
 
-def _epw_location(path: Path) -> tuple[float, float]:
-    head = path.read_text(errors="replace").split("\n", 1)[0].split(",")
-    return float(head[6]), float(head[7])
+def epw_location(path: str | os.PathLike) -> dict[str, Any]:
+    """An EPW file's LOCATION header (its first line only): ``name``, ``latitude``,
+    ``longitude`` [deg], ``time_zone`` [h from UTC] and ``elevation`` [m]."""
+    with open(path, errors="replace") as fh:
+        head = fh.readline().split(",")
+    return {"latitude": float(head[6]), "longitude": float(head[7]),
+            "time_zone": float(head[8]), "elevation": float(head[9]), "name": head[1]}
 
 
 def fc_ground_temperature(data: Mapping[str, Any], weather_file: str | os.PathLike | None,
@@ -1997,8 +1999,8 @@ def fc_ground_temperature(data: Mapping[str, Any], weather_file: str | os.PathLi
         if sites and wdir.is_dir():
             lat = _num(sites[0].get("latitude"), 0.0)
             lon = _num(sites[0].get("longitude"), 0.0)
-            near = [(math.hypot(a - lat, b - lon), q) for q in sorted(wdir.glob("*.epw"))
-                    for a, b in [_epw_location(q)]]
+            near = [(math.hypot(loc["latitude"] - lat, loc["longitude"] - lon), q)
+                    for q in sorted(wdir.glob("*.epw")) for loc in [epw_location(q)]]
             if near and min(near)[0] <= FC_WEATHER_RADIUS:
                 source = min(near)[1]
                 how = (f"the weather file shipped with EnergyPlus nearest to the input's "

@@ -49,7 +49,7 @@ from zoneinfo import ZoneInfo
 
 import numpy as np
 import pandas as pd
-from zonecast.estimator.idf import find_energyplus, load_epjson
+from zonecast.estimator.idf import epw_location, find_energyplus, load_epjson
 from zonecast.estimator.site import Site
 from zonecast.estimator.site_draft import (
     DraftError,
@@ -509,12 +509,6 @@ def campaign_weeks(n: int | None = None) -> tuple[list[dt.date], list[dt.date]]:
 WEATHER_FILE = "weather.epw"
 
 
-def _epw_location(path: Path) -> dict:
-    head = path.read_text(errors="replace").splitlines()[0].split(",")
-    return {"latitude": float(head[6]), "longitude": float(head[7]), "time_zone": float(head[8]),
-            "elevation": float(head[9]), "name": head[1]}
-
-
 def find_weather(data: dict, weather: str | Path | None = None) -> Path:
     """The weather file: ``weather`` (a path, or a name in EnergyPlus's WeatherData folder),
     else the shipped EPW nearest to the file's Site:Location (within 1 degree)."""
@@ -530,9 +524,9 @@ def find_weather(data: dict, weather: str | Path | None = None) -> Path:
     if not sites:
         raise ForeignBuildingError("the input has no Site:Location; pass weather=PATH.epw")
     lat, lon = float(sites[0].get("latitude", 0)), float(sites[0].get("longitude", 0))
-    best = min(wdir.glob("*.epw"), key=lambda q: math.hypot(_epw_location(q)["latitude"] - lat,
-                                                            _epw_location(q)["longitude"] - lon))
-    loc = _epw_location(best)
+    best = min(wdir.glob("*.epw"), key=lambda q: math.hypot(epw_location(q)["latitude"] - lat,
+                                                            epw_location(q)["longitude"] - lon))
+    loc = epw_location(best)
     if math.hypot(loc["latitude"] - lat, loc["longitude"] - lon) > 1.0:
         raise ForeignBuildingError(f"no shipped weather file within 1 degree of the file's site "
                                    f"({lat}, {lon}); pass weather=PATH.epw")
@@ -739,7 +733,7 @@ def run_foreign(idf: str | Path, out: str | Path, weeks: list[dt.date] | None = 
             "(the estimator itself reads such a file's envelope, infiltration and gains)")
     layout = describe(data)
     wfile = find_weather(data, weather)
-    loc = _epw_location(wfile)
+    loc = epw_location(wfile)
     try:
         tzname = local_timezone(data, loc["time_zone"], timezone)
     except DraftError as exc:

@@ -1974,6 +1974,19 @@ def epw_location(path: str | os.PathLike) -> dict[str, Any]:
             "time_zone": float(head[8]), "elevation": float(head[9]), "name": head[1]}
 
 
+def nearest_weather_file(folder: str | os.PathLike, latitude: float, longitude: float
+                         ) -> tuple[Path, float] | None:
+    """The EPW file of ``folder`` whose LOCATION is nearest to (``latitude``,
+    ``longitude``) [deg] and its distance [deg, on the latitude-longitude plane]; None for
+    a folder without EPW files."""
+    near = [(math.hypot(loc["latitude"] - latitude, loc["longitude"] - longitude), q)
+            for q in sorted(Path(folder).glob("*.epw")) for loc in [epw_location(q)]]
+    if not near:
+        return None
+    dist, path = min(near)
+    return path, dist
+
+
 def fc_ground_temperature(data: Mapping[str, Any], weather_file: str | os.PathLike | None,
                           install: EnergyPlusInstall | None,
                           notes: list[str]) -> tuple[float, ...] | None:
@@ -1999,10 +2012,9 @@ def fc_ground_temperature(data: Mapping[str, Any], weather_file: str | os.PathLi
         if sites and wdir.is_dir():
             lat = _num(sites[0].get("latitude"), 0.0)
             lon = _num(sites[0].get("longitude"), 0.0)
-            near = [(math.hypot(loc["latitude"] - lat, loc["longitude"] - lon), q)
-                    for q in sorted(wdir.glob("*.epw")) for loc in [epw_location(q)]]
-            if near and min(near)[0] <= FC_WEATHER_RADIUS:
-                source = min(near)[1]
+            near = nearest_weather_file(wdir, lat, lon)
+            if near is not None and near[1] <= FC_WEATHER_RADIUS:
+                source = near[0]
                 how = (f"the weather file shipped with EnergyPlus nearest to the input's "
                        f"Site:Location ({source.name}; give the site's weather_file to use "
                        "another)")

@@ -49,7 +49,12 @@ from zoneinfo import ZoneInfo
 
 import numpy as np
 import pandas as pd
-from zonecast.estimator.idf import epw_location, find_energyplus, load_epjson
+from zonecast.estimator.idf import (
+    epw_location,
+    find_energyplus,
+    load_epjson,
+    nearest_weather_file,
+)
 from zonecast.estimator.site import Site
 from zonecast.estimator.site_draft import (
     DraftError,
@@ -524,10 +529,8 @@ def find_weather(data: dict, weather: str | Path | None = None) -> Path:
     if not sites:
         raise ForeignBuildingError("the input has no Site:Location; pass weather=PATH.epw")
     lat, lon = float(sites[0].get("latitude", 0)), float(sites[0].get("longitude", 0))
-    best = min(wdir.glob("*.epw"), key=lambda q: math.hypot(epw_location(q)["latitude"] - lat,
-                                                            epw_location(q)["longitude"] - lon))
-    loc = epw_location(best)
-    if math.hypot(loc["latitude"] - lat, loc["longitude"] - lon) > 1.0:
+    best, dist = nearest_weather_file(wdir, lat, lon) or (None, math.inf)
+    if best is None or dist > 1.0:
         raise ForeignBuildingError(f"no shipped weather file within 1 degree of the file's site "
                                    f"({lat}, {lon}); pass weather=PATH.epw")
     return best

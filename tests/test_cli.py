@@ -136,6 +136,9 @@ def test_window_angle_reaches_the_model_options(tmp_path, command):
     res = runner.invoke(app, [*args, "--envelope-radiation", "star"])
     assert res.exit_code == 2, res.output
     assert "envelope_radiation must be 'none' or 'room'" in res.output
+    res = runner.invoke(app, [*args, "--solar-enclosure", "zone"])
+    assert res.exit_code == 2, res.output
+    assert "solar_enclosure must be 'room' or 'air_boundaries'" in res.output
 
 
 @pytest.mark.parametrize("command", ["identify", "reproduce"])

@@ -275,6 +275,10 @@ EnvelopeRadiation = Annotated[str, typer.Option(
          "through its fitted film alone (the paper); 'room': also the long-wave heat it "
          "draws from the room's other faces, in series with their convection "
          "(docs/model.md \"Envelope faces' long-wave exchange\")")]
+SolarEnclosure = Annotated[str, typer.Option(
+    help="'air_boundaries' (the default since 2026-12-04): the sun through a window lands on "
+         "the faces of every room joined to its room by air boundaries, one enclosure as in "
+         "EnergyPlus; 'room': on its own room's faces (docs/model.md \"Air boundaries\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -362,6 +366,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  window_angle: WindowAngle = "none",
                  roof_exterior: RoofExterior = "absorptance",
                  envelope_radiation: EnvelopeRadiation = "none",
+                 solar_enclosure: SolarEnclosure = "air_boundaries",
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'auto' (the default since 2026-12-04): 'metered' when the site's "
@@ -396,6 +401,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  internal_gains=internal_gains, window_angle=window_angle,
                                  roof_exterior=roof_exterior,
                                  envelope_radiation=envelope_radiation,
+                                 solar_enclosure=solar_enclosure,
                                  x0_profile_days=x0_profile_days,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  progress=lambda m: prog.update(task, description=m))
@@ -501,6 +507,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   window_angle: WindowAngle = "none",
                   roof_exterior: RoofExterior = "absorptance",
                   envelope_radiation: EnvelopeRadiation = "none",
+                  solar_enclosure: SolarEnclosure = "air_boundaries",
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'auto' (the default since 2026-12-04: 'metered' when the "
@@ -529,6 +536,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 internal_gains=internal_gains, service=service,
                                 window_angle=window_angle, roof_exterior=roof_exterior,
                                 envelope_radiation=envelope_radiation,
+                                solar_enclosure=solar_enclosure,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:

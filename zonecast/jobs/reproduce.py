@@ -457,7 +457,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         internal_gains: str = "air", service: bool = True,
         x0_profile_days: int | None = None, x0_offset_sd: float | None = None,
         window_angle: str = "none", day_scale_sd: float | None = None,
-        roof_exterior: str = "absorptance", envelope_radiation: str = "none") -> Results:
+        roof_exterior: str = "absorptance", envelope_radiation: str = "none",
+        solar_enclosure: str = "air_boundaries") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
@@ -467,7 +468,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     ``x0_offset_sd``, ``day_scale_sd``: as :meth:`Pipeline.identify`;
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
-    ``envelope_radiation``: :class:`~zonecast.estimator.rc.network.ModelOptions`;
+    ``envelope_radiation``, ``solar_enclosure``:
+    :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``films``: as :meth:`Pipeline.identify`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
     the forecast study's split (never its validation weeks)."""
@@ -488,7 +490,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                                    internal_gains=internal_gains,
                                                    window_angle=window_angle,
                                                    roof_exterior=roof_exterior,
-                                                   envelope_radiation=envelope_radiation))
+                                                   envelope_radiation=envelope_radiation,
+                                                   solar_enclosure=solar_enclosure))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()

@@ -451,5 +451,17 @@ def draft_site(idf: str | os.PathLike, *, out: str | os.PathLike | None = None,
         doc["thermostat"] = thermostat
     if float(loc.get("latitude", 0.0)) == 0.0:
         notes.append("check the location: Site:Location reads latitude 0")
+    epws = sorted(idf.resolve().parent.glob("*.epw"))
+    if len(epws) == 1:
+        # EnergyPlus users keep the weather file beside the input: the F/C-factor faces'
+        # ground temperatures come from it (docs/data.md, weather_file)
+        try:
+            doc["weather_file"] = os.path.relpath(epws[0], target.resolve().parent)
+        except ValueError:  # another drive
+            doc["weather_file"] = str(epws[0])
+        notes.append(f"weather_file {epws[0].name}: the one EPW beside the input")
+    elif len(epws) > 1:
+        notes.append(f"{len(epws)} EPW files beside the input: set weather_file to the one the "
+                     "building is simulated with (its ground temperatures)")
     site = Site.model_validate({**doc, "base_dir": target.resolve().parent})
     return SiteDraft(site, doc, notes)

@@ -103,6 +103,25 @@ def test_draft_is_a_valid_site_with_the_convention_and_the_thermostat(tmp_path):
     assert "# note: C: thermostat but no air terminal" in path.read_text()
 
 
+def test_draft_names_the_one_weather_file_beside_the_input(tmp_path):
+    """An EPW beside the input becomes the site's weather_file (relative to the site file);
+    with two, the notes ask which one; with none, no field."""
+    (tmp_path / "sub").mkdir()
+    out = tmp_path / "sub" / "site.yaml"
+    none = draft_site(tmp_path / "b.idf", out=out, timezone="Europe/Zurich", data=_building())
+    assert none.site.weather_file is None
+    (tmp_path / "zurich.epw").write_text("LOCATION,Zurich\n")
+    one = draft_site(tmp_path / "b.idf", out=out, timezone="Europe/Zurich", data=_building())
+    assert one.site.weather_file == Path("../zurich.epw")
+    assert one.site.weather_path.resolve() == (tmp_path / "zurich.epw").resolve()
+    out.write_text(one.to_yaml_text())
+    assert load_site(out).weather_path.resolve() == (tmp_path / "zurich.epw").resolve()
+    (tmp_path / "other.epw").write_text("LOCATION,Other\n")
+    two = draft_site(tmp_path / "b.idf", out=out, timezone="Europe/Zurich", data=_building())
+    assert two.site.weather_file is None
+    assert any("2 EPW files beside the input" in n for n in two.notes)
+
+
 def test_thermostat_notes_what_it_approximates():
     data = _building()
     data["Schedule:Compact"]["HTG"] = _compact(

@@ -127,18 +127,14 @@ def test_window_angle_reaches_the_model_options(tmp_path, command):
         (tmp_path / "telemetry.csv").write_text("time\n")
         (tmp_path / "site.yaml").write_text(site.read_text().replace(
             "idf: 5ZoneAirCooled.idf", f"idf: {site.parent / '5ZoneAirCooled.idf'}"))
-    res = runner.invoke(app, [*args, "--window-angle", "tinted"])
-    assert res.exit_code == 2, res.output
-    assert "window_angle must be 'none' or 'glass'" in res.output
-    res = runner.invoke(app, [*args, "--roof-exterior", "known"])
-    assert res.exit_code == 2, res.output
-    assert "roof_exterior must be 'fitted', 'idf' or 'absorptance'" in res.output
-    res = runner.invoke(app, [*args, "--envelope-radiation", "star"])
-    assert res.exit_code == 2, res.output
-    assert "envelope_radiation must be 'none' or 'room'" in res.output
-    res = runner.invoke(app, [*args, "--solar-enclosure", "zone"])
-    assert res.exit_code == 2, res.output
-    assert "solar_enclosure must be 'room' or 'air_boundaries'" in res.output
+    for option, value, message in (
+            ("--window-angle", "tinted", "window_angle must be 'none' or 'glass'"),
+            ("--roof-exterior", "known", "roof_exterior must be 'fitted', 'idf' or 'absorptance'"),
+            ("--envelope-radiation", "star", "envelope_radiation must be 'none' or 'room'"),
+            ("--solar-enclosure", "zone", "solar_enclosure must be 'room' or 'air_boundaries'")):
+        res = runner.invoke(app, [*args, option, value])
+        assert res.exit_code == 2, res.output
+        assert message in res.output, option
 
 
 @pytest.mark.parametrize("command", ["identify", "reproduce"])

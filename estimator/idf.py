@@ -2005,6 +2005,9 @@ def fc_ground_temperature(data: Mapping[str, Any], weather_file: str | os.PathLi
         notes.append("F/C-factor surfaces: ground at Site:GroundTemperature:FCfactorMethod")
         return tuple(_num(objs[0].get(f"{m}_ground_temperature"), 13.0) for m in _MONTHS)
     source = Path(weather_file) if weather_file is not None else None
+    if source is not None and not source.is_file():
+        raise FileNotFoundError(f"weather file {source} (the site's weather_file) does not "
+                                "exist: fix the path or leave the field out")
     how = "the site's weather file"
     if source is None and install is not None:
         sites = list(data.get("Site:Location", {}).values())

@@ -173,3 +173,11 @@ def test_model_holds_each_ground_face_at_its_own_temperature(no_fc):
     assert monthly["ground:F"] == pytest.approx(list(no_fc["eio"]), abs=0.006)
     assert monthly["ground:S"] == monthly["ground:F"]
     assert monthly["ground:G"] == [20.0] * 6 + [21.0] * 6
+
+
+def test_a_missing_site_weather_file_is_a_clear_error(tmp_path):
+    idf = tmp_path / "in.idf"
+    idf.write_text(NO_FC)
+    with pytest.raises(FileNotFoundError, match="the site's weather_file.*does not exist"):
+        read_building(idf, weather_file=tmp_path / "nowhere.epw")
+

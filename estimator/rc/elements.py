@@ -120,4 +120,8 @@ def discretise_layers(layers: Sequence[Layer]) -> NodeLayout:
             node_cap[k + 1] += density * right
     # layers of zero resistance but with mass cannot exist (R = d/k > 0); keep totals exact
     node_cap *= c_total / node_cap.sum()
+    # a node between massless layers only (the outer face of an F- or C-factor construction:
+    # EnergyPlus's fictitious insulation outside its concrete) gets a massless face's
+    # capacity, as a construction without mass does: a state needs a capacity
+    node_cap[node_cap <= 0] = MASSLESS_FACE_CAPACITY
     return NodeLayout(pos, node_cap, np.diff(pos))

@@ -3,6 +3,7 @@ buildings use them) read as the layered constructions EnergyPlus builds for them
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from zonecast.estimator.idf import _eio_construction_layers, read_building
 from zonecast.testbed.run import energyplus_dir, run_energyplus
@@ -181,3 +182,22 @@ def test_a_missing_site_weather_file_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="the site's weather_file.*does not exist"):
         read_building(idf, weather_file=tmp_path / "nowhere.epw")
 
+
+
+def test_fc_faces_are_regular_states(no_fc):
+    """EnergyPlus puts the fictitious insulation outside the concrete: the outer face node
+    lies between massless layers and still gets a capacity (a massless face's), so the
+    model is finite and stable (it was 1/0 before)."""
+    from zonecast.estimator.rc.elements import MASSLESS_FACE_CAPACITY, discretise_layers
+    from zonecast.estimator.rc.network import build_structure
+
+    layout = discretise_layers(no_fc["site"].constructions["Slab F"].layers)
+    assert (layout.capacities > 0).all() and layout.capacities[0] == MASSLESS_FACE_CAPACITY
+    from zonecast.estimator.model import build_model
+
+    st = build_structure(no_fc["site"], {"Z": ["Z"]}, {})
+    assert np.isfinite(st.A0.toarray()).all()
+    model = build_model(no_fc["site"], {"Z": ["Z"]}, {})
+    a = model.structure.A(model.params.physical)
+    a = a.toarray() if hasattr(a, "toarray") else np.asarray(a)
+    assert np.isfinite(a).all() and np.linalg.eigvals(a).real.max() < 0

@@ -74,3 +74,16 @@ def test_thermostat_schedule_follows_local_time_and_experiments(tmp_path, site_d
     assert sp.tolist() == [17, 21, 21, 17, 17]
     exp = np.array([False, True, False, False, False])
     assert site.thermostat.heating_setpoint(local, tz, exp).tolist() == [17, 10, 21, 17, 17]
+
+
+def test_weather_file_relative_to_the_site(tmp_path, site_dict):
+    (tmp_path / "w").mkdir()
+    (tmp_path / "w" / "x.epw").write_text("LOCATION,X\n")
+    site_dict["weather_file"] = "w/x.epw"
+    site = load_site(write_site(tmp_path, site_dict))
+    assert site.weather_path == tmp_path.resolve() / "w" / "x.epw"
+    # a missing file is an error only where it is read (F/C-factor faces: read_building),
+    # not when a served model's site is loaded
+    site_dict["weather_file"] = "w/gone.epw"
+    assert load_site(write_site(tmp_path, site_dict)).weather_path.name == "gone.epw"
+

@@ -923,6 +923,19 @@ _UNSUPPORTED_TYPES: dict[str, str] = {
     "DaylightingDevice:Tubular": "tubular daylighting device not modelled",
     "ZoneMixing": "inter-zone air mixing not modelled",
     "ZoneCrossMixing": "inter-zone air mixing not modelled",
+    "ZoneVentilation:DesignFlowRate": "ventilation (windows opened or exhaust fans) not "
+                                      "modelled: only ZoneInfiltration:DesignFlowRate is",
+    "ZoneVentilation:WindandStackOpenArea": "wind and stack ventilation not modelled",
+    "ZoneInfiltration:EffectiveLeakageArea": "infiltration by leakage area not modelled: only "
+                                             "ZoneInfiltration:DesignFlowRate is",
+    "ZoneInfiltration:FlowCoefficient": "infiltration by flow coefficient not modelled: only "
+                                        "ZoneInfiltration:DesignFlowRate is",
+    "AirflowNetwork:SimulationControl": "airflow network (its infiltration and inter-zone flows) "
+                                        "not modelled",
+    "Foundation:Kiva": "Kiva foundation not modelled: surfaces on it are adiabatic",
+    "ZoneEarthtube": "earth tube not modelled",
+    "ZoneCoolTower:Shower": "cooling tower (shower) not modelled",
+    "ZoneThermalChimney": "thermal chimney not modelled",
     "InternalMass:Space": "space internal mass not read",
     "Space": "spaces are read as their zone",
 }

@@ -547,3 +547,23 @@ def test_radiant_gains_reach_the_whole_enclosure(tmp_path):
     assert {r for r, _ in heat["room"]} == {"A"}
     assert ("B", False) in heat["air_boundaries"] and ("B", True) not in heat["air_boundaries"]
     assert heat["air_boundaries"][("A", True)] == pytest.approx(heat["room"][("A", True)])
+
+
+def test_air_paths_the_model_lacks_are_listed_as_not_modelled():
+    """Ventilation, other infiltration objects, an airflow network and Kiva foundations
+    change EnergyPlus's heat balance: the reader says they are not modelled."""
+    wall = {"construction_name": "Wall", "zone_name": "Z", "azimuth_angle": 180,
+            "starting_x_coordinate": 0, "starting_y_coordinate": 0, "starting_z_coordinate": 0,
+            "length": 4, "height": 3}
+    data = _minimal(**{"Wall:Exterior": {"W": wall},
+                       "ZoneVentilation:DesignFlowRate": {"Vent": {"zone_or_zonelist_name": "Z"}},
+                       "ZoneInfiltration:EffectiveLeakageArea": {"ELA": {"zone_name": "Z"}},
+                       "AirflowNetwork:SimulationControl": {"AFN": {}},
+                       "Foundation:Kiva": {"Slab": {}}})
+    b = building_from_epjson(data)
+    listed = {(u.object_type, u.name): u.reason for u in b.unsupported}
+    assert "only ZoneInfiltration:DesignFlowRate" in listed[("ZoneVentilation:DesignFlowRate",
+                                                             "Vent")]
+    assert "leakage area" in listed[("ZoneInfiltration:EffectiveLeakageArea", "ELA")]
+    assert ("AirflowNetwork:SimulationControl", "AFN") in listed
+    assert "adiabatic" in listed[("Foundation:Kiva", "Slab")]

@@ -984,7 +984,7 @@ def build_structure(
 
     enclosure = (solar_enclosures(building.air_boundaries)
                  if opts.solar_enclosure == "air_boundaries" else {})
-    for members in {tuple(m) for m in enclosure.values()}:
+    for members in sorted({tuple(m) for m in enclosure.values()}):
         notes.append("one solar enclosure (air boundaries): the sun through the windows of "
                      + ", ".join(members) + " lands on the faces of all of them")
     window_area: dict[str, np.ndarray] = {}

@@ -18,8 +18,12 @@ the steady-state filter from every start, the second with the young filter's gai
 each start (``streaming.YOUNG_FILTER``; docs/forecasts.md "The filter after a restart").
 ``--side young-std``: both runs with both controllers and the young filter, the first
 with the steady filter's forecast std for every forecast, the second with the young
-filter's while it runs (``streaming.YOUNG_STD``). Every other side runs with the library's
-defaults for the young filter.
+filter's while it runs (``streaming.YOUNG_STD``). ``--side day-class``: both runs with
+the library's defaults, the first with the intervals calibrated on all days pooled, the
+second per day class of the target (``streaming.DAY_CLASS_INTERVALS``; docs/forecasts.md
+"Intervals by day class"). Every other side runs with the library's defaults for the
+young filter and the day classes. The last column is the coverage of the targets on the
+site's working days and on its other days (weekends, holidays).
 
 ``--reports`` is a ``bench_family.py --out`` folder (``<name>/model.json``,
 ``<name>/results.json``); campaigns are ``--family/<name>`` or the ``--extra`` folders.
@@ -39,8 +43,9 @@ from pathlib import Path
 
 import numpy as np
 from zonecast.estimator import streaming
-from zonecast.estimator.constants import HORIZON
+from zonecast.estimator.constants import HORIZON, STEP
 from zonecast.estimator.evaluate import rms_by_zone
+from zonecast.estimator.inputs_forecast import DayCalendar
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.site import load_site
 from zonecast.estimator.telemetry import load_telemetry
@@ -51,10 +56,11 @@ from zonecast.jobs.reproduce import _interval_coverage, validation_issues
 
 
 def served(campaign: Path, model: Path, control: bool,
-           side: str = "reheat") -> tuple[dict, dict, float]:
+           side: str = "reheat") -> tuple[dict, dict, float, tuple[float, float]]:
     """RMS per zone, coverage and seconds of the served forecasts with the controller
     ``control`` on or off: the reheat (``side`` "reheat"), with the reheat on the cooling
-    ("cooling"), or with both on the young filter ("young")."""
+    ("cooling"), or with both on the young filter ("young"); and the coverage of the
+    targets on working days and on other days."""
     site = load_site(campaign / "site.yaml")
     frame = load_telemetry(campaign / "telemetry.csv", site).frame
     data = Pipeline.from_site(campaign / "site.yaml").data(campaign / "telemetry.csv")
@@ -62,7 +68,7 @@ def served(campaign: Path, model: Path, control: bool,
     issues = validation_issues(data, 0)
     nz = len(data.zones)
     before = (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
-              streaming.YOUNG_STD)
+              streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -71,9 +77,11 @@ def served(campaign: Path, model: Path, control: bool,
     elif side == "young":
         streaming.REHEAT_CONTROL = streaming.COOLING_CONTROL = True
         streaming.YOUNG_FILTER = control
-    else:
+    elif side == "young-std":
         streaming.REHEAT_CONTROL = streaming.COOLING_CONTROL = streaming.YOUNG_FILTER = True
         streaming.YOUNG_STD = control
+    else:  # day-class: the library's defaults but for the intervals' day classes
+        streaming.DAY_CLASS_INTERVALS = control
     try:
         t0 = time.perf_counter()
         fcs = Pipeline.from_model_file(model).forecast(
@@ -81,7 +89,7 @@ def served(campaign: Path, model: Path, control: bool,
         seconds = time.perf_counter() - t0
     finally:
         (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
-         streaming.YOUNG_STD) = before
+         streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS) = before
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
     for k, (r, stop) in enumerate(issues):
         fc = fcs[data.times[r]]
@@ -89,7 +97,19 @@ def served(campaign: Path, model: Path, control: bool,
         pred[k], lo[k], hi[k] = fc.mean, fc.lower, fc.upper
         meas[k, :n] = data.y[r + 1:r + 1 + n]
     rms = rms_by_zone(pred.reshape(-1, nz), meas.reshape(-1, nz), data.zones)
-    return rms, _interval_coverage(lo, hi, meas, data.zones), seconds
+    # coverage by the targets' day class (the site's calendar)
+    cal = DayCalendar.for_site(site)
+    targets = np.array([[data.times[r].value + (h + 1) * STEP_NS for h in range(HORIZON)]
+                        for r, _ in issues])
+    other = (cal.slots(targets.reshape(-1)) // cal.per_day).reshape(targets.shape) == 1
+    inside = (meas >= lo) & (meas <= hi)
+    seen = np.isfinite(meas)
+    by_class = tuple(float((inside & seen & m[:, :, None]).sum() / max((seen & m[:, :, None]).sum(), 1))
+                     for m in (~other, other))
+    return rms, _interval_coverage(lo, hi, meas, data.zones), seconds, by_class
+
+
+STEP_NS = STEP.value
 
 
 def _find(doc, key):
@@ -109,12 +129,12 @@ def main() -> None:
     ap.add_argument("--family", type=Path)
     ap.add_argument("--extra", type=Path, nargs="*", default=[])
     ap.add_argument("--only", nargs="*")
-    ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std"),
+    ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std", "day-class"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
-                         "filter after restarts (both controllers on), or its forecast "
-                         "std (the young filter on)")
+                         "filter after restarts (both controllers on), its forecast "
+                         "std (the young filter on), or the intervals' day classes")
     args = ap.parse_args()
     campaigns = {p.name: p for p in args.extra}
     if args.family is not None:
@@ -128,14 +148,15 @@ def main() -> None:
     head = {"reheat": ("learned rise", "thermostat's reheat"),
             "cooling": ("reheat, cooling off", "reheat and cooling"),
             "young": ("steady filter", "young filter"),
-            "young-std": ("young filter, steady std", "young filter and std")}[args.side]
+            "young-std": ("young filter, steady std", "young filter and std"),
+            "day-class": ("pooled days", "day classes")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
-          "| seconds off / on |")
-    print("|---|---|---|---|---|---|")
+          "| working / other days | seconds off / on |")
+    print("|---|---|---|---|---|---|---|")
     for name in names:
         model = args.reports / name / "model.json"
-        off, cov_off, s_off = served(campaigns[name], model, False, args.side)
-        on, cov_on, s_on = served(campaigns[name], model, True, args.side)
+        off, cov_off, s_off, cls_off = served(campaigns[name], model, False, args.side)
+        on, cov_on, s_on, cls_on = served(campaigns[name], model, True, args.side)
         res = args.reports / name / "results.json"
         known = _find(json.loads(res.read_text()), "service_known_inputs") if res.is_file() \
             else None
@@ -145,6 +166,7 @@ def main() -> None:
                  f"{max(c[z] for z in c if z != 'all'):.3f}" for c in (cov_off, cov_on)]
         print(f"| {name} | {off['mean']:.3f} | **{on['mean']:.3f}** | {ratio} | "
               f"{cov_off['all']:.3f} ({zones[0]}) → {cov_on['all']:.3f} ({zones[1]}) | "
+              f"{cls_off[0]:.3f} / {cls_off[1]:.3f} → {cls_on[0]:.3f} / {cls_on[1]:.3f} | "
               f"{s_off:.0f} / {s_on:.0f} |", flush=True)
 
 

@@ -13,14 +13,22 @@ rescales it by lead time from the errors the building's own served forecasts mad
   2 h, 2-8 h, 8-24 h) times the UTC time of day of the *target* in ``tod_bins`` bins:
   the errors depend on both (small at night, largest at noon of a working day), and a
   forecast issued at any time of day must get intervals that fit it;
+- with a ``day_class`` (the site's working days against weekends and holidays,
+  :class:`~zonecast.estimator.inputs_forecast.DayCalendar`) the bins are split by the
+  target's day class too: a building's errors on a day its HVAC runs its occupied
+  schedule are not those of a day it floats, and pooled scores over-cover the one and
+  under-cover the other (docs/forecasts.md "Intervals by day class"); a class's bin
+  without enough scores of its own uses the classes' pooled scores;
 - the histograms decay by ``lam`` per step (an effective window of 1 / (1 - lam) steps of
-  data, ~``window_days``), so the calibration follows the recent days, O(1) per step;
+  data, ~``window_days``), so the calibration follows the recent days, O(1) per step; with
+  day classes only the target's class decays at a step (a window of ``window_days`` days
+  of that class);
   scores inside the site's experiments are not kept (the streaming estimator skips them);
 - the served half-width is q(bin, zone) x std(h): split-conformal scaling of the model
   std with the empirical quantile of recent scores;
 - the quantile's level per zone follows adaptive conformal inference (Gibbs and Candès
   2021): after each scored error, level += gamma (miss - (1 - target)), with miss = 1 when
-  the error lay outside the interval then served. A window of harder (or easier) days
+  the error lay outside the interval then served (per day class and zone). A window of harder (or easier) days
   than the present would otherwise widen (narrow) the intervals for as long as it lasts.
 
 Until a bin has ``min_weight`` scores the model's own z_0.9 = 1.645 is used.
@@ -29,7 +37,7 @@ Until a bin has ``min_weight`` scores the model's own z_0.9 = 1.645 is used.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -42,6 +50,24 @@ CALIBRATION_DEFAULTS = {"window_days": 7.0, "cadence": 8, "tod_bins": 12, "level
 
 _EDGES = np.geomspace(1e-2, 1e2, 51)  # score bins; below/above go to the first/last
 _DAY_NS = 86_400 * 10**9
+
+
+def _hist_quantile(hist: np.ndarray, level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Quantile at ``level`` (bins, zones) of score histograms (bins, zones, score bins)
+    with linear interpolation in log score within a score bin; and the histograms'
+    weights."""
+    c = np.cumsum(hist, axis=2)
+    total = c[:, :, -1]
+    target = level * total
+    k = np.minimum((c < target[:, :, None]).sum(axis=2), len(_EDGES))
+    prev = np.take_along_axis(c, np.maximum(k - 1, 0)[:, :, None], axis=2)[:, :, 0]
+    prev = np.where(k == 0, 0.0, prev)
+    here = np.take_along_axis(hist, k[:, :, None], axis=2)[:, :, 0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        frac = np.clip(np.where(here > 0, (target - prev) / here, 0.5), 0.0, 1.0)
+    lo_e = np.log(np.concatenate([[_EDGES[0] / 1.1], _EDGES]))
+    hi_e = np.log(np.concatenate([_EDGES, [_EDGES[-1] * 1.1]]))
+    return np.exp(lo_e[k] + frac * (hi_e[k] - lo_e[k])), total
 
 
 class IntervalCalibrator:
@@ -69,6 +95,12 @@ class IntervalCalibrator:
         Scores a bin needs before its quantile replaces z_0.9.
     z_default : float
         Multiplier of std without enough scores.
+    day_class : callable, optional
+        UTC grid times [ns since the epoch] (int64 array) -> day class of each (int array
+        in ``0 .. n_classes - 1``), e.g. ``DayCalendar.slots(t) // DayCalendar.per_day``.
+        None: one class (the calibration before 2026-12-04).
+    n_classes : int
+        Day classes ``day_class`` returns.
     """
 
     def __init__(self, n_zones: int, horizon: int, steps_per_day: int, *,
@@ -79,9 +111,13 @@ class IntervalCalibrator:
                  min_weight: float = CALIBRATION_DEFAULTS["min_weight"],
                  gamma: float = CALIBRATION_DEFAULTS["gamma"],
                  lead_edges=(0, 8, 32), step_ns: int = 900 * 10**9,
-                 z_default: float = 1.6448536269514722):
+                 z_default: float = 1.6448536269514722,
+                 day_class: Callable[[np.ndarray], np.ndarray] | None = None,
+                 n_classes: int = 1):
         if not 0 < level < 1:
             raise ValueError("level must lie in (0, 1)")
+        if n_classes < 1 or (day_class is None) != (n_classes == 1):
+            raise ValueError("give day_class with n_classes > 1, or neither")
         self.nz, self.horizon, self.cadence = int(n_zones), int(horizon), int(cadence)
         self.tod_bins, self.target, self.gamma = int(tod_bins), float(level), float(gamma)
         self.step_ns = int(step_ns)
@@ -90,9 +126,13 @@ class IntervalCalibrator:
         lead_class = np.searchsorted(np.asarray(lead_edges[1:]), np.arange(1, horizon + 1),
                                      side="right")
         self._lead_class = lead_class  # lead h (1..horizon) at index h - 1
-        self.n_bins = (int(lead_class.max()) + 1) * self.tod_bins
+        self.day_class, self.n_classes = day_class, int(n_classes)
+        #: bins of one day class (lead class x time of day)
+        self.n_class_bins = (int(lead_class.max()) + 1) * self.tod_bins
+        self.n_bins = self.n_classes * self.n_class_bins
         self.hist = np.zeros((self.n_bins, self.nz, len(_EDGES) + 1))
-        self.level = np.full(self.nz, self.target)
+        #: adaptive level per day class and zone
+        self.levels = np.full((self.n_classes, self.nz), self.target)
         # (issue step, mean, std or None: the std given to resolve)
         self.pending: deque[tuple[int, np.ndarray, np.ndarray | None]] = deque(
             maxlen=horizon // cadence + 1)
@@ -103,8 +143,28 @@ class IntervalCalibrator:
         step ``step_index``."""
         leads = np.asarray(leads, dtype=np.int64)
         t = (int(step_index) + leads) * self.step_ns
+        b = self._class_bins(t, leads)
+        if self.day_class is not None:
+            b = b + np.asarray(self.day_class(t), dtype=np.int64) * self.n_class_bins
+        return b
+
+    def _class_bins(self, t: np.ndarray, leads: np.ndarray) -> np.ndarray:
+        """Bin within a day class of targets at UTC grid times ``t`` [ns] and leads."""
         tod = (t % _DAY_NS) * self.tod_bins // _DAY_NS
         return self._lead_class[leads - 1] * self.tod_bins + tod
+
+    def class_of(self, step_index: int) -> int:
+        """Day class of grid step ``step_index`` (0 without day classes)."""
+        if self.day_class is None:
+            return 0
+        t = np.array([int(step_index) * self.step_ns], dtype=np.int64)
+        return int(np.asarray(self.day_class(t))[0])
+
+    @property
+    def level(self) -> np.ndarray:
+        """Adaptive level per zone (n_zones,) of the first day class (all of them
+        without day classes)."""
+        return self.levels[0]
 
     def due(self, step_index: int) -> bool:
         """Whether a calibration forecast is due at grid step number ``step_index``."""
@@ -125,6 +185,7 @@ class IntervalCalibrator:
         y = np.asarray(y, float)
         ok = np.isfinite(y)
         added = 0
+        c = self.class_of(step_index)
         if ok.any():
             zones = np.flatnonzero(ok)
             q = self.quantiles()
@@ -133,15 +194,17 @@ class IntervalCalibrator:
                 if 1 <= h <= self.horizon:
                     sd = std if own is None else own
                     s = np.abs(y[zones] - mean[h - 1, zones]) / np.maximum(sd[h - 1, zones], 1e-9)
-                    b = int(self.bins(k0, [h])[0])
+                    b = int(self._class_bins(np.array([step_index * self.step_ns]),
+                                             np.array([h]))[0]) + c * self.n_class_bins
                     self.hist[b, zones, np.searchsorted(_EDGES, s)] += 1.0
                     if self.gamma > 0:
                         miss = (s > q[b, zones]).astype(float)
-                        self.level[zones] = np.clip(
-                            self.level[zones] + self.gamma * (miss - (1.0 - self.target)),
+                        self.levels[c, zones] = np.clip(
+                            self.levels[c, zones] + self.gamma * (miss - (1.0 - self.target)),
                             0.5, 0.995)
                     added += len(zones)
-        self.hist *= self.lam
+        # the target's day class forgets (all of them without classes)
+        self.hist[c * self.n_class_bins:(c + 1) * self.n_class_bins] *= self.lam
         while self.pending and step_index - self.pending[0][0] >= self.horizon:
             self.pending.popleft()
         self._q = None
@@ -153,18 +216,14 @@ class IntervalCalibrator:
         bin."""
         if self._q is not None:
             return self._q
-        c = np.cumsum(self.hist, axis=2)
-        total = c[:, :, -1]
-        target = self.level[None, :] * total
-        k = np.minimum((c < target[:, :, None]).sum(axis=2), len(_EDGES))
-        prev = np.take_along_axis(c, np.maximum(k - 1, 0)[:, :, None], axis=2)[:, :, 0]
-        prev = np.where(k == 0, 0.0, prev)
-        here = np.take_along_axis(self.hist, k[:, :, None], axis=2)[:, :, 0]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            frac = np.clip(np.where(here > 0, (target - prev) / here, 0.5), 0.0, 1.0)
-        lo_e = np.log(np.concatenate([[_EDGES[0] / 1.1], _EDGES]))
-        hi_e = np.log(np.concatenate([_EDGES, [_EDGES[-1] * 1.1]]))
-        q = np.exp(lo_e[k] + frac * (hi_e[k] - lo_e[k]))
+        level = np.repeat(self.levels, self.n_class_bins, axis=0)  # (n_bins, nz)
+        q, total = _hist_quantile(self.hist, level)
+        if self.n_classes > 1:
+            # a class's bin short of scores takes the classes' pooled ones at its level
+            pooled = self.hist.reshape(self.n_classes, self.n_class_bins, self.nz, -1).sum(axis=0)
+            qp, tp = _hist_quantile(np.tile(pooled, (self.n_classes, 1, 1)), level)
+            q = np.where(total >= self.min_weight, q, qp)
+            total = np.where(total >= self.min_weight, total, tp)
         self._q = np.where(total >= self.min_weight, q, self.z_default)
         return self._q
 
@@ -181,15 +240,25 @@ class IntervalCalibrator:
         nan = np.full((self.horizon, self.nz), np.nan)
         stds = np.array([nan if s is None else s for _, _, s in self.pending]).reshape(
             -1, self.horizon, self.nz)
-        return {f"{prefix}hist": self.hist, f"{prefix}level": self.level,
+        return {f"{prefix}hist": self.hist, f"{prefix}level": self.levels,
                 f"{prefix}steps": steps, f"{prefix}means": means, f"{prefix}stds": stds}
 
     def load_state_arrays(self, arrays: Mapping[str, np.ndarray], prefix: str = "cal_") -> bool:
-        if f"{prefix}hist" not in arrays or np.shape(arrays[f"{prefix}hist"]) != self.hist.shape:
+        if f"{prefix}hist" not in arrays:
             return False
-        self.hist = np.array(arrays[f"{prefix}hist"], float)
-        if f"{prefix}level" in arrays:
-            self.level = np.array(arrays[f"{prefix}level"], float)
+        hist = np.array(arrays[f"{prefix}hist"], float)
+        level = np.array(arrays.get(f"{prefix}level", self.levels[0]), float)
+        if hist.shape == self.hist.shape:
+            self.hist = hist
+            self.levels = level.reshape(self.levels.shape) if level.size == self.levels.size \
+                else np.tile(level.reshape(1, -1)[-1:], (self.n_classes, 1))
+        elif hist.shape == (self.n_class_bins,) + self.hist.shape[1:]:
+            # a checkpoint of the calibration without day classes: each class starts from
+            # the pooled scores and level
+            self.hist = np.tile(hist, (self.n_classes, 1, 1))
+            self.levels = np.tile(level.reshape(1, -1)[-1:], (self.n_classes, 1))
+        else:
+            return False
         self.pending.clear()
         stds = arrays.get(f"{prefix}stds")  # absent in checkpoints before it
         for i, (k, m) in enumerate(zip(arrays[f"{prefix}steps"], arrays[f"{prefix}means"])):

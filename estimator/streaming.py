@@ -152,6 +152,12 @@ YOUNG_STEPS = 192
 #: training member; docs/forecasts.md "The filter after a restart"). The state's std is
 #: the young filter's either way.
 YOUNG_STD = False
+#: calibrate the served intervals per day class of the target (the site's working days
+#: against weekends and holidays, :class:`~zonecast.estimator.inputs_forecast.DayCalendar`):
+#: pooled, they over-covered working days and under-covered weekends (docs/forecasts.md
+#: "Intervals by day class"); the default of the estimator's
+#: :class:`~zonecast.estimator.calibration.IntervalCalibrator`
+DAY_CLASS_INTERVALS = True
 #: forecast the cooling of every VAV box as its room's thermostat does: the heat removal
 #: that holds each room's air at the cooling set point, none below it, wherever the
 #: reheat controller runs (chosen on the family's training members, docs/forecasts.md
@@ -788,8 +794,11 @@ class OnlineEstimator:
                                              shrink=[d["sigma0"]] + [d["sigma0_solar"]] * 4,
                                              nonnegative=nonneg)
         self.weather_fb = DiurnalWeather(self.calendar.per_day)
-        self.calibrator = IntervalCalibrator(self._nz, HORIZON, self.calendar.per_day,
-                                             step_ns=STEP.value)
+        cal = self.calendar
+        self.calibrator = IntervalCalibrator(
+            self._nz, HORIZON, cal.per_day, step_ns=STEP.value,
+            **({"day_class": lambda t: cal.slots(t) // cal.per_day,
+                "n_classes": cal.n_classes} if DAY_CLASS_INTERVALS else {}))
         self.weather_max_age = pd.Timedelta(hours=WEATHER_DEFAULTS["max_age_h"])
         self.weather_obs_tau_h = WEATHER_DEFAULTS["obs_tau_h"]
         self._experiments = [(pd.Timestamp(e.start).value, pd.Timestamp(e.end).value)

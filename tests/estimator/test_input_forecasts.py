@@ -195,6 +195,85 @@ def test_calibrated_intervals_cover_on_stationary_errors():
     assert np.array_equal(other.halfwidth(5, std), cal.halfwidth(5, std))
 
 
+def _weekend_class(t):
+    """Day class of UTC grid times [ns]: 1 on the 6th and 7th day of every week of the
+    epoch's days, else 0."""
+    return ((np.asarray(t, dtype=np.int64) // (86_400 * 10**9)) % 7 >= 5).astype(np.int64)
+
+
+def _run_two_laws(cal, sigma_work, sigma_off, days, rng):
+    """Feed ``cal`` errors of std ``sigma_work`` on working days and ``sigma_off`` on the
+    other days; return the coverage of its half-widths over the second half, per class."""
+    H = cal.horizon
+    std = np.full((H, 1), 0.2)
+    hits, n = np.zeros(2), np.zeros(2)
+    for k in range(96 * days):
+        c = int(_weekend_class([k * 900 * 10**9])[0])
+        y = np.array([20.0 + (sigma_off if c else sigma_work) * rng.standard_normal()])
+        if k > 96 * days // 2:
+            for k0, mean, _ in cal.pending:
+                h = k - k0
+                if 1 <= h <= H:
+                    hits[c] += float(abs(y[0] - mean[h - 1, 0]) <= cal.halfwidth(k0, std)[h - 1, 0])
+                    n[c] += 1
+        cal.resolve(k, y, std)
+        if cal.due(k):
+            cal.add_forecast(k, np.full((H, 1), 20.0))
+    return hits / n
+
+
+def test_day_classes_calibrate_working_days_and_weekends_apart():
+    """Errors three times larger on weekends: pooled, the intervals over-cover the working
+    days and under-cover the weekends; per day class both come close to 90 %."""
+    pooled = IntervalCalibrator(1, 96, 96, window_days=14, gamma=0.0)
+    split = IntervalCalibrator(1, 96, 96, window_days=14, gamma=0.0,
+                               day_class=_weekend_class, n_classes=2)
+    cov_pooled = _run_two_laws(pooled, 0.3, 0.9, 70, np.random.default_rng(5))
+    cov_split = _run_two_laws(split, 0.3, 0.9, 70, np.random.default_rng(5))
+    assert cov_pooled[0] > 0.95 and cov_pooled[1] < 0.75
+    assert np.all(np.abs(cov_split - 0.9) < 0.04), cov_split
+
+
+def test_a_day_class_short_of_scores_takes_the_pooled_ones():
+    """A weekend bin with fewer than min_weight scores of its own uses the pooled scores,
+    not the model's z_0.9."""
+    from zonecast.estimator.calibration import _EDGES
+
+    cal = IntervalCalibrator(1, 96, 96, gamma=0.0, day_class=_weekend_class, n_classes=2)
+    b_work = cal.bins(0, np.arange(1, 97))  # day 0 is a working day of _weekend_class
+    cal.hist[b_work, 0, np.searchsorted(_EDGES, 3.0)] = 100.0
+    q = cal.quantiles()
+    assert np.allclose(q[b_work, 0], 3.0, rtol=0.1)
+    b_off = cal.bins(5 * 96, np.arange(1, 97))  # day 5: the other class, no scores
+    assert set(np.unique(b_off // cal.n_class_bins)) == {1}
+    np.testing.assert_allclose(q[b_off, 0], q[b_work, 0])
+
+
+def test_day_class_calibration_starts_from_a_pooled_checkpoint():
+    """A checkpoint of the calibration without day classes seeds both classes."""
+    old = IntervalCalibrator(1, 96, 96, gamma=0.01)
+    rng = np.random.default_rng(1)
+    std = np.ones((96, 1))
+    for k in range(96 * 3):
+        old.resolve(k, np.array([rng.standard_normal()]), std)
+        if old.due(k):
+            old.add_forecast(k, np.zeros((96, 1)))
+    new = IntervalCalibrator(1, 96, 96, gamma=0.01, day_class=_weekend_class, n_classes=2)
+    assert new.load_state_arrays(old.state_arrays())
+    assert new.levels.shape == (2, 1) and np.all(new.levels == old.level[0])
+    for c in range(2):
+        part = new.hist[c * new.n_class_bins:(c + 1) * new.n_class_bins]
+        assert np.array_equal(part, old.hist)
+    assert len(new.pending) == len(old.pending)
+
+
+def test_day_class_needs_its_count():
+    with pytest.raises(ValueError, match="give day_class with n_classes > 1"):
+        IntervalCalibrator(1, 96, 96, day_class=_weekend_class)
+    with pytest.raises(ValueError, match="give day_class with n_classes > 1"):
+        IntervalCalibrator(1, 96, 96, n_classes=2)
+
+
 def test_adaptive_level_widens_after_misses():
     cal = IntervalCalibrator(1, 96, 96, gamma=0.01)
     std = np.ones((96, 1))

@@ -280,3 +280,36 @@ def test_young_checkpoints_past_the_filters_end_and_a_zero_length_young_filter(
     for k in range(3):
         c.advance(tt[k], u[k], v[k], y[k])
     assert c._young is None and c._young_seen is None
+
+
+def test_estimator_calibrates_by_the_sites_day_class_and_resumes_a_pooled_checkpoint(
+        bundle, telemetry, monkeypatch):
+    """The estimator's interval calibration is split by the site calendar's day class
+    (working day / weekend or holiday) of the target; a checkpoint written by an estimator
+    calibrating all days pooled resumes with both classes seeded from its scores."""
+    from zonecast.estimator import streaming
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:400]))
+    est = OnlineEstimator(bundle)
+    cal = est.calibrator
+    assert cal.n_classes == 2
+    saturday = pd.Timestamp("2015-05-16 12:00", tz=bundle.site.timezone)
+    monday = pd.Timestamp("2015-05-18 12:00", tz=bundle.site.timezone)
+    step = streaming.STEP.value
+    assert cal.class_of(saturday.value // step) == 1 and cal.class_of(monday.value // step) == 0
+    monkeypatch.setattr(streaming, "DAY_CLASS_INTERVALS", False)
+    old = OnlineEstimator(bundle)
+    assert old.calibrator.n_classes == 1
+    for k in range(len(tt)):
+        old.advance(tt[k], u[k], v[k], y[k])
+    assert old.calibrator.hist.sum() > 0
+    monkeypatch.setattr(streaming, "DAY_CLASS_INTERVALS", True)
+    new = OnlineEstimator(bundle)
+    new.load_bytes(old.to_bytes())
+    n = new.calibrator.n_class_bins
+    for c in range(2):
+        assert np.array_equal(new.calibrator.hist[c * n:(c + 1) * n], old.calibrator.hist)
+    assert np.array_equal(new.calibrator.levels, np.tile(old.calibrator.levels, (2, 1)))
+    f = new.forecast()
+    assert np.all(np.isfinite(f.lower)) and np.all(f.upper > f.lower)

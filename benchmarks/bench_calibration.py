@@ -1,12 +1,16 @@
 """Cost of the served intervals' calibration per estimator step: one ``resolve`` (score the
 kept forecasts, decay, adaptive level, quantiles) and one ``halfwidth`` (the served
 forecast's interval), all days pooled against per day class (docs/forecasts.md
-"Intervals by day class").
+"Intervals by day class"); and, given a model file and its telemetry, the served
+forecast's run alone against the run and the weather-perturbed second run of the
+intervals' std (docs/forecasts.md "Intervals that know the weather's error").
 
     python benchmarks/bench_calibration.py [--zones 6] [--steps 4000]
+                                           [--model MODEL --telemetry CSV [--rows A:B]]
 
 Synthetic scores (standard normal errors, model std 0.3 K) on a 15-min grid from
-2015-01-01; the calendar is a Monday-to-Friday one in America/Chicago.
+2015-01-01; the calendar is a Monday-to-Friday one in America/Chicago. The served forecast
+is timed at the state after replaying telemetry rows A:B (default 5000:6500), 20 times.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import argparse
 import platform
 import time
+from pathlib import Path
 
 import numpy as np
 from zonecast.estimator.calibration import IntervalCalibrator
@@ -53,10 +58,47 @@ def measure(split: bool, zones: int, steps: int) -> tuple[float, float]:
     return (t1 - t0) / steps, (t2 - t1) / (steps // 10)
 
 
+def served(model: Path, telemetry: Path, rows: slice, reps: int = 20) -> tuple[float, float]:
+    """Median seconds of a served forecast's run, and of the run plus the intervals' std
+    with the weather's spread, at the state after replaying ``rows`` of ``telemetry``."""
+    from zonecast.estimator.artifact import load_model_file
+    from zonecast.estimator.streaming import OnlineEstimator, model_rows, telemetry_frame
+
+    bundle = load_model_file(model)
+    frame = telemetry_frame(telemetry, bundle)
+    r = model_rows(bundle, frame[frame.notna().any(axis=1)].iloc[rows])
+    est = OnlineEstimator(bundle)
+    for k in range(len(r.times)):
+        est.advance(r.times[k], r.u[k], r.v[k], r.y[k], r.reheat[k])
+    if est.time is None:
+        raise SystemExit("no telemetry row with data in --rows")
+    ins, f = est.forecast_inputs(), est.dayahead_gains()
+    control = est.reheat_control
+
+    def run():
+        return est._run_forecast(ins, f, control=control)
+
+    def both():
+        return est._served_std(ins, f, control, run())
+
+    out = []
+    for fn in (run, both):
+        ts = []
+        for _ in range(reps):
+            t0 = time.perf_counter()
+            fn()
+            ts.append(time.perf_counter() - t0)
+        out.append(float(np.median(ts)))
+    return out[0], out[1]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--zones", type=int, default=6)
     ap.add_argument("--steps", type=int, default=4000)
+    ap.add_argument("--model", type=Path)
+    ap.add_argument("--telemetry", type=Path)
+    ap.add_argument("--rows", default="5000:6500")
     args = ap.parse_args()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; {args.zones} zones, "
           f"{args.steps} steps")
@@ -66,6 +108,11 @@ def main() -> None:
         r, h = measure(split, args.zones, args.steps)
         print(f"| {'per day class' if split else 'all days pooled'} | {r * 1e6:.0f} | "
               f"{h * 1e6:.0f} |", flush=True)
+    if args.model is not None and args.telemetry is not None:
+        a, b = (int(x) for x in args.rows.split(":"))
+        run, both = served(args.model, args.telemetry, slice(a, b))
+        print(f"\nserved forecast ({args.model}, rows {args.rows}): run {run * 1e3:.1f} ms; "
+              f"run and the weather-perturbed run {both * 1e3:.1f} ms")
 
 
 if __name__ == "__main__":

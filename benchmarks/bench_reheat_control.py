@@ -21,8 +21,12 @@ with the steady filter's forecast std for every forecast, the second with the yo
 filter's while it runs (``streaming.YOUNG_STD``). ``--side day-class``: both runs with
 the library's defaults, the first with the intervals calibrated on all days pooled, the
 second per day class of the target (``streaming.DAY_CLASS_INTERVALS``; docs/forecasts.md
-"Intervals by day class"). Every other side runs with the library's defaults for the
-young filter and the day classes. The last column is the coverage of the targets on the
+"Intervals by day class"). ``--side weather-spread``: both runs with the library's
+defaults, the first with the intervals scaling the model's std alone, the second the std
+widened by the forecast's sensitivity to the weather forecast's learned error
+(``streaming.WEATHER_SPREAD``; docs/forecasts.md "Intervals that know the weather's
+error"). Every other side runs with the library's defaults for the young filter, the
+day classes and the weather spread. The last column is the coverage of the targets on the
 site's working days and on its other days (weekends, holidays).
 
 ``--reports`` is a ``bench_family.py --out`` folder (``<name>/model.json``,
@@ -68,7 +72,7 @@ def served(campaign: Path, model: Path, control: bool,
     issues = validation_issues(data, 0)
     nz = len(data.zones)
     before = (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
-              streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS)
+              streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -80,8 +84,10 @@ def served(campaign: Path, model: Path, control: bool,
     elif side == "young-std":
         streaming.REHEAT_CONTROL = streaming.COOLING_CONTROL = streaming.YOUNG_FILTER = True
         streaming.YOUNG_STD = control
-    else:  # day-class: the library's defaults but for the intervals' day classes
+    elif side == "day-class":  # the library's defaults but for the intervals' day classes
         streaming.DAY_CLASS_INTERVALS = control
+    else:  # weather-spread: the library's defaults but for the weather's spread
+        streaming.WEATHER_SPREAD = control
     try:
         t0 = time.perf_counter()
         fcs = Pipeline.from_model_file(model).forecast(
@@ -89,7 +95,7 @@ def served(campaign: Path, model: Path, control: bool,
         seconds = time.perf_counter() - t0
     finally:
         (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
-         streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS) = before
+         streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD) = before
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
     for k, (r, stop) in enumerate(issues):
         fc = fcs[data.times[r]]
@@ -129,12 +135,14 @@ def main() -> None:
     ap.add_argument("--family", type=Path)
     ap.add_argument("--extra", type=Path, nargs="*", default=[])
     ap.add_argument("--only", nargs="*")
-    ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std", "day-class"),
+    ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std", "day-class",
+                                       "weather-spread"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
                          "filter after restarts (both controllers on), its forecast "
-                         "std (the young filter on), or the intervals' day classes")
+                         "std (the young filter on), the intervals' day classes, or the "
+                         "weather's spread in the intervals")
     args = ap.parse_args()
     campaigns = {p.name: p for p in args.extra}
     if args.family is not None:
@@ -149,7 +157,8 @@ def main() -> None:
             "cooling": ("reheat, cooling off", "reheat and cooling"),
             "young": ("steady filter", "young filter"),
             "young-std": ("young filter, steady std", "young filter and std"),
-            "day-class": ("pooled days", "day classes")}[args.side]
+            "day-class": ("pooled days", "day classes"),
+            "weather-spread": ("model std", "with the weather's spread")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| working / other days | seconds off / on |")
     print("|---|---|---|---|---|---|---|")

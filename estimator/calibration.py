@@ -41,7 +41,7 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-__all__ = ["CALIBRATION_DEFAULTS", "IntervalCalibrator"]
+__all__ = ["CALIBRATION_DEFAULTS", "IntervalCalibrator", "WeatherSpread"]
 
 #: window chosen on office6's training weeks; gamma re-chosen on the validation weeks of the
 #: family's training buildings (docs/forecasts.md "Served forecast")
@@ -265,4 +265,108 @@ class IntervalCalibrator:
             sd = None if stds is None or np.isnan(stds[i]).all() else np.array(stds[i], float)
             self.pending.append((int(k), np.array(m, float), sd))
         self._q = None
+        return True
+
+
+class WeatherSpread:
+    """Errors of the weather inputs the served forecasts used, by lead, learned online.
+
+    Each calibration forecast's weather inputs (H, channels) are kept until the horizon
+    has passed; each new row's measured weather scores them by lead (bins of
+    ``lead_bin`` steps): the exponentially weighted mean square error per (lead bin,
+    channel), and for ``relative`` channels (irradiance: zero at night, an error that
+    scales with the sun) the mean square of the values used too. :meth:`spread` turns a
+    forecast's weather inputs into a one-sided perturbation of each: the RMS error of
+    an absolute channel, the relative RMS error times the value of a relative one. The
+    estimator runs its forecast again with the perturbed weather, and the zone
+    temperatures' change is the forecast's sensitivity to the weather forecast's error:
+    large when the rooms float with the sun and the outdoor air, small where the
+    thermostats hold them (docs/forecasts.md "Intervals that know the weather's error").
+
+    Parameters
+    ----------
+    n_channels, horizon : int
+        Weather channels and forecast steps.
+    steps_per_day : int
+        Steps per day (for ``window_days``).
+    relative : sequence of bool
+        Per channel: error relative to the value (True) or absolute (False).
+    window_days : float
+        Effective memory [days of data].
+    lead_bin : int
+        Steps per lead bin.
+    min_weight : float
+        Scores a (lead bin, channel) needs before it perturbs (none before).
+    """
+
+    def __init__(self, n_channels: int, horizon: int, steps_per_day: int, relative, *,
+                 window_days: float = 7.0, lead_bin: int = 4, min_weight: float = 30.0):
+        self.nc, self.horizon, self.lead_bin = int(n_channels), int(horizon), int(lead_bin)
+        self.relative = np.asarray(relative, dtype=bool)
+        if self.relative.shape != (self.nc,):
+            raise ValueError(f"relative needs one flag per channel ({self.nc})")
+        self.lam = 1.0 - 1.0 / (window_days * steps_per_day)
+        self.min_weight = float(min_weight)
+        nl = -(-self.horizon // self.lead_bin)
+        self.sq_err = np.zeros((nl, self.nc))
+        self.sq_val = np.zeros((nl, self.nc))
+        self.weight = np.zeros((nl, self.nc))
+        self._lead_bin_of = np.arange(self.horizon) // self.lead_bin  # lead h at h - 1
+        self.pending: deque[tuple[int, np.ndarray]] = deque(maxlen=horizon + 1)
+
+    def add(self, step_index: int, values: np.ndarray) -> None:
+        """Keep the weather inputs (horizon, channels) of a forecast issued at grid step
+        ``step_index`` (row 0 the issue interval, row h lead h)."""
+        self.pending.append((int(step_index), np.array(values, dtype=float)))
+
+    def resolve(self, step_index: int, measured: np.ndarray) -> None:
+        """Score the kept inputs against the weather ``measured`` (channels,) at grid step
+        ``step_index``; decays once."""
+        obs = np.asarray(measured, float)
+        for k0, vals in self.pending:
+            h = step_index - k0
+            if 1 <= h < self.horizon:
+                v = vals[h]
+                ok = np.isfinite(obs) & np.isfinite(v)
+                lb = self._lead_bin_of[h - 1]
+                self.sq_err[lb, ok] += (v[ok] - obs[ok]) ** 2
+                self.sq_val[lb, ok] += v[ok] ** 2
+                self.weight[lb, ok] += 1.0
+        for a in (self.sq_err, self.sq_val, self.weight):
+            a *= self.lam
+        while self.pending and step_index - self.pending[0][0] >= self.horizon:
+            self.pending.popleft()
+
+    def spread(self, values: np.ndarray) -> np.ndarray:
+        """One-sided perturbation (horizon, channels) of weather inputs ``values``: 0 at
+        row 0 (measured) and wherever too few scores are learned."""
+        values = np.asarray(values, float)
+        ok = self.weight >= self.min_weight
+        with np.errstate(invalid="ignore", divide="ignore"):
+            absolute = np.where(ok, np.sqrt(self.sq_err / np.maximum(self.weight, 1e-300)), 0.0)
+            ratio = np.where(ok & (self.sq_val > 0),
+                             np.sqrt(self.sq_err / np.where(self.sq_val > 0, self.sq_val, 1.0)),
+                             0.0)
+        out = np.zeros_like(values)
+        lb = self._lead_bin_of[:len(values) - 1]
+        out[1:] = np.where(self.relative[None, :], ratio[lb] * np.abs(values[1:]), absolute[lb])
+        return np.nan_to_num(out)
+
+    def state_arrays(self, prefix: str = "wsp_") -> dict[str, np.ndarray]:
+        steps = np.array([k for k, _ in self.pending], dtype=np.int64)
+        vals = np.array([v for _, v in self.pending]).reshape(-1, self.horizon, self.nc)
+        return {f"{prefix}sq_err": self.sq_err, f"{prefix}sq_val": self.sq_val,
+                f"{prefix}weight": self.weight, f"{prefix}steps": steps,
+                f"{prefix}values": vals}
+
+    def load_state_arrays(self, arrays: Mapping[str, np.ndarray], prefix: str = "wsp_") -> bool:
+        if (f"{prefix}sq_err" not in arrays
+                or np.shape(arrays[f"{prefix}sq_err"]) != self.sq_err.shape):
+            return False
+        self.sq_err = np.array(arrays[f"{prefix}sq_err"], float)
+        self.sq_val = np.array(arrays[f"{prefix}sq_val"], float)
+        self.weight = np.array(arrays[f"{prefix}weight"], float)
+        self.pending.clear()
+        for k, v in zip(arrays[f"{prefix}steps"], arrays[f"{prefix}values"]):
+            self.pending.append((int(k), np.array(v, float)))
         return True

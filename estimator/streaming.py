@@ -75,7 +75,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from zonecast.estimator.artifact import ModelBundle, load_model_file
-from zonecast.estimator.calibration import IntervalCalibrator
+from zonecast.estimator.calibration import IntervalCalibrator, WeatherSpread
 from zonecast.estimator.constants import (
     DAYAHEAD_TAU,
     DAYAHEAD_WINDOW,
@@ -158,6 +158,12 @@ YOUNG_STD = False
 #: "Intervals by day class"); the default of the estimator's
 #: :class:`~zonecast.estimator.calibration.IntervalCalibrator`
 DAY_CLASS_INTERVALS = True
+#: widen the served intervals by the forecast's sensitivity to the weather forecast's
+#: error: the forecast run again with the weather perturbed by its learned RMS error by
+#: lead (:class:`~zonecast.estimator.calibration.WeatherSpread`), the change added to the
+#: model's std in quadrature before the calibration scales it (docs/forecasts.md
+#: "Intervals that know the weather's error")
+WEATHER_SPREAD = True
 #: forecast the cooling of every VAV box as its room's thermostat does: the heat removal
 #: that holds each room's air at the cooling set point, none below it, wherever the
 #: reheat controller runs (chosen on the family's training members, docs/forecasts.md
@@ -590,16 +596,20 @@ class OnlineEstimator:
                                  + (", then the discharge-air rise per box" if self._rh else ""))
         mean = self._run_forecast(ins, f_ig, control=control)
         std = self._forecast_std()
+        # the served inputs' weather is a forecast: its error widens the interval
+        scale = self._served_std(ins, f_ig, control, mean) if inputs is None else std
         times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
         return Forecast(t, times, mean, std, f_ig, self.bundle.zones, self.bundle.version,
-                        halfwidth=self.calibrator.halfwidth(t.value // STEP.value, std))
+                        halfwidth=self.calibrator.halfwidth(t.value // STEP.value, scale))
 
     def _run_forecast(self, ins: np.ndarray, f_ig: np.ndarray, *,
-                      control: bool = False) -> np.ndarray:
+                      control: bool = False, keep_responses: bool = False) -> np.ndarray:
         """Zone temperatures (HORIZON, n_zones) [degC] from the current state with the
         inputs ``ins`` and gains ``f_ig`` over the horizon. ``control`` (and the site has a
         thermostat and boxes with a discharge-air point): the reheat of those boxes is
-        their thermostats' (:meth:`_controlled_run`), not the rise in ``ins``."""
+        their thermostats' (:meth:`_controlled_run`), not the rise in ``ins``.
+        ``keep_responses``: the controlled run starts from the air responses the last run
+        left (a run with the same airflows right before, e.g. :meth:`_served_std`'s)."""
         m = self.bundle.model
         nb = m.n_boxes
         u, v = ins[:, :nb], ins[:, nb:nb + NV]
@@ -610,7 +620,8 @@ class OnlineEstimator:
         cooling = control and self.cooling_control and self._cool.any()
         if control and band is not None and (cooling or (self._rh and self._coil.any())):
             xs = self._controlled_run(stepper, u, forcing, v[:, 1], ins[:, nb + NV:], band[0],
-                                      band[1] if cooling else None)
+                                      band[1] if cooling else None,
+                                      keep_responses=keep_responses)
         else:
             if self._rh:  # the boxes' discharge-air rise (docs/model.md "Discharge air")
                 forcing = forcing + m.reheat_forcing(u, ins[:, nb + NV:])
@@ -623,7 +634,8 @@ class OnlineEstimator:
 
     def _controlled_run(self, stepper, u: np.ndarray, forcing: np.ndarray, ts: np.ndarray,
                         rise: np.ndarray, heat: np.ndarray,
-                        cool: np.ndarray | None = None) -> np.ndarray:
+                        cool: np.ndarray | None = None, *,
+                        keep_responses: bool = False) -> np.ndarray:
         """States (HORIZON + 1, n) [degC] of a forecast in which the boxes with a
         discharge-air point reheat as their rooms' thermostats do (docs/forecasts.md
         "Reheat as the thermostat's answer"): at each step the model is first stepped
@@ -652,7 +664,8 @@ class OnlineEstimator:
         H = len(u)
         xs = np.empty((H + 1, m.n))
         xs[0] = x = self._x
-        self._air_resp[1][:] = False  # responses from this run only: same inputs, same run
+        if not keep_responses:  # responses from this run only: same inputs, same run
+            self._air_resp[1][:] = False
 
         def short(xr, j):
             """Per kind (kind, rooms needing control at step j, signed need [K])."""
@@ -707,8 +720,10 @@ class OnlineEstimator:
         this run (at an earlier step's airflows; the step is linear in r, so each
         iteration is one exact step) to :data:`REHEAT_TOL`; the responses are recomputed
         at ``u`` when that has not converged in :data:`REHEAT_ITER` steps. Every run
-        starts without responses, so a forecast is a function of its state and inputs
-        alone (replay equals offline bit for bit)."""
+        starts without responses (but the weather-perturbed run of a served forecast,
+        which follows its forecast's run with the same airflows and starts from its
+        responses), so a forecast is a function of its state and inputs alone (replay
+        equals offline bit for bit)."""
         # a rise r of room i's boxes forces only its air state: g_i r [K/s], with
         # g_i = sum of -Bxu_b u_b over its boxes of that kind (model.reheat_forcing)
         rows = np.concatenate([self._ctl[k]["rooms"][sel] for k, sel, _ in sels])
@@ -799,6 +814,11 @@ class OnlineEstimator:
             self._nz, HORIZON, cal.per_day, step_ns=STEP.value,
             **({"day_class": lambda t: cal.slots(t) // cal.per_day,
                 "n_classes": cal.n_classes} if DAY_CLASS_INTERVALS else {}))
+        # the weather channels of the inputs: Ta, then the facades' and the horizontal sun
+        self._w_cols = np.array([nb] + list(range(nb + 2, nb + NV)))
+        self.weather_spread = (WeatherSpread(len(self._w_cols), HORIZON, cal.per_day,
+                                             [False] + [True] * (len(self._w_cols) - 1))
+                               if WEATHER_SPREAD else None)
         self.weather_max_age = pd.Timedelta(hours=WEATHER_DEFAULTS["max_age_h"])
         self.weather_obs_tau_h = WEATHER_DEFAULTS["obs_tau_h"]
         self._experiments = [(pd.Timestamp(e.start).value, pd.Timestamp(e.end).value)
@@ -858,13 +878,37 @@ class OnlineEstimator:
             self.weather_fb.update(tod, inputs[nb], inputs[nb + 2:nb + NV])
         k = tn // STEP.value
         steady = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
+        if self.weather_spread is not None:
+            self.weather_spread.resolve(k, inputs[self._w_cols] if operating
+                                        else np.full(len(self._w_cols), np.nan))
         self.calibrator.resolve(k, y if operating else np.full(self._nz, np.nan), steady)
         if operating and self.started and self.time == t and self.calibrator.due(k):
             ins = self.forecast_inputs()
             if np.isfinite(ins).all():
-                self.calibrator.add_forecast(k, self._run_forecast(
-                    ins, self.dayahead_gains(), control=self.reheat_control),
-                    self._forecast_std())
+                f_ig = self.dayahead_gains()
+                mean = self._run_forecast(ins, f_ig, control=self.reheat_control)
+                self.calibrator.add_forecast(
+                    k, mean, self._served_std(ins, f_ig, self.reheat_control, mean))
+                if self.weather_spread is not None:
+                    self.weather_spread.add(k, ins[:, self._w_cols])
+
+    def _served_std(self, ins: np.ndarray, f_ig: np.ndarray, control: bool,
+                    mean: np.ndarray) -> np.ndarray:
+        """Std (HORIZON, n_zones) [K] of a served forecast (inputs ``ins``, gains
+        ``f_ig``, mean ``mean``) that the calibration scales: the model's, and with
+        :attr:`weather_spread` in quadrature the change of the forecast when its weather
+        is perturbed by its learned error (:class:`WeatherSpread`)."""
+        std = self._forecast_std()
+        if self.weather_spread is None:
+            return std
+        d = self.weather_spread.spread(ins[:, self._w_cols])
+        if not d.any():
+            return std
+        pert = ins.copy()
+        pert[:, self._w_cols] += d
+        # the same airflows as the run of ``mean`` just before: its air responses hold
+        change = self._run_forecast(pert, f_ig, control=control, keep_responses=True) - mean
+        return np.sqrt(std ** 2 + change ** 2)
 
     def _horizon_var(self, own: bool = False) -> np.ndarray:
         """Output variances (HORIZON, n_zones) [K²] after 1..HORIZON predictions from the
@@ -1044,6 +1088,8 @@ class OnlineEstimator:
         arrays.update(self.inputs_fc.state_arrays())
         arrays.update(self.weather_fb.state_arrays())
         arrays.update(self.calibrator.state_arrays())
+        if self.weather_spread is not None:
+            arrays.update(self.weather_spread.state_arrays())
         if self.weather is not None:  # the weather forecast in use, raw
             wf = self.weather
             arrays["wf_issued"] = np.array([wf.issued.value], dtype=np.int64)
@@ -1110,6 +1156,8 @@ class OnlineEstimator:
         self.inputs_fc.load_state_arrays(arr)
         self.weather_fb.load_state_arrays(arr)
         self.calibrator.load_state_arrays(arr)
+        if self.weather_spread is not None:
+            self.weather_spread.load_state_arrays(arr)
         if "wf_times" in arr:
             vals = arr["wf_values"]
             self.set_weather_forecast(WeatherForecast(

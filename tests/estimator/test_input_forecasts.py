@@ -274,6 +274,42 @@ def test_day_class_needs_its_count():
         IntervalCalibrator(1, 96, 96, n_classes=2)
 
 
+def test_weather_spread_learns_absolute_and_relative_errors_by_lead():
+    """Temperature forecasts off by N(0, 0.5 + lead/24 K), irradiance by a relative
+    N(0, 0.2): the spread converges to the RMS error per lead bin and to the relative RMS
+    error times the value; nothing before enough scores, nothing at the issue row."""
+    from zonecast.estimator.calibration import WeatherSpread
+
+    rng = np.random.default_rng(7)
+    H = 96
+    ws = WeatherSpread(2, H, 96, [False, True], window_days=30)
+    assert not ws.spread(np.ones((H, 2))).any()  # nothing learned: no perturbation
+    truth = np.column_stack([10 + 5 * np.sin(np.arange(96 * 40) / 15.0),
+                             300 + 200 * np.sin(np.arange(96 * 40) / 9.0)])
+    sd_t = 0.5 + np.arange(H) / 96.0  # grows with lead (by step)
+    for k in range(96 * 40):
+        ws.resolve(k, truth[k])
+        if k % 8 == 0 and k + H < len(truth):
+            fc = truth[k:k + H].copy()
+            fc[1:, 0] += sd_t[1:] * rng.standard_normal(H - 1)
+            fc[1:, 1] *= 1 + 0.2 * rng.standard_normal(H - 1)
+            ws.add(k, fc)
+    vals = np.column_stack([np.full(H, 12.0), np.full(H, 400.0)])
+    d = ws.spread(vals)
+    assert np.all(d[0] == 0)
+    lead_mid = (np.arange(4, H, 4) + np.arange(1, H - 3, 4)) / 2.0  # bin middles, steps
+    for b, h in enumerate(lead_mid):
+        expected = np.sqrt(np.mean(sd_t[int(h) - 2:int(h) + 2] ** 2))
+        assert abs(d[4 * b + 2, 0] - expected) < 0.2 * expected
+    ratio = 0.2 / np.sqrt(1 + 0.2 ** 2)
+    np.testing.assert_allclose(d[1:, 1], 400.0 * ratio, rtol=0.2)
+    other = WeatherSpread(2, H, 96, [False, True], window_days=30)
+    assert other.load_state_arrays(ws.state_arrays())
+    assert np.array_equal(other.spread(vals), d) and len(other.pending) == len(ws.pending)
+    with pytest.raises(ValueError, match="one flag per channel"):
+        WeatherSpread(2, H, 96, [True])
+
+
 def test_adaptive_level_widens_after_misses():
     cal = IntervalCalibrator(1, 96, 96, gamma=0.01)
     std = np.ones((96, 1))

@@ -313,3 +313,37 @@ def test_estimator_calibrates_by_the_sites_day_class_and_resumes_a_pooled_checkp
     assert np.array_equal(new.calibrator.levels, np.tile(old.calibrator.levels, (2, 1)))
     f = new.forecast()
     assert np.all(np.isfinite(f.lower)) and np.all(f.upper > f.lower)
+
+
+def test_served_interval_widens_by_the_forecasts_change_under_the_weathers_error(
+        bundle, telemetry):
+    """The served forecast's interval scales sqrt(std^2 + change^2), the change being the
+    forecast run again with its weather inputs perturbed by the learned spread; the
+    spread is learned from the served weather's own errors and survives a checkpoint."""
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:700]))
+    est = OnlineEstimator(bundle)
+    for k in range(len(tt)):
+        est.advance(tt[k], u[k], v[k], y[k])
+    ws = est.weather_spread
+    assert ws is not None and ws.weight.max() >= ws.min_weight
+    ins = est.forecast_inputs()
+    f_ig = est.dayahead_gains()
+    control = est.reheat_control
+    mean = est._run_forecast(ins, f_ig, control=control)
+    d = ws.spread(ins[:, est._w_cols])
+    assert d[1:, 0].min() > 0  # the outdoor temperature's error, every lead
+    pert = ins.copy()
+    pert[:, est._w_cols] += d
+    change = est._run_forecast(pert, f_ig, control=control) - mean
+    want = np.sqrt(est._forecast_std() ** 2 + change ** 2)
+    np.testing.assert_allclose(est._served_std(ins, f_ig, control, mean), want)
+    fc = est.forecast()
+    k = est.time.value // 900_000_000_000
+    np.testing.assert_allclose(fc.upper - fc.mean, est.calibrator.halfwidth(k, want))
+    assert np.abs(change).max() > 0.01  # the weather moves the forecast
+    other = OnlineEstimator(bundle)
+    other.load_bytes(est.to_bytes())
+    assert np.array_equal(other.weather_spread.spread(ins[:, est._w_cols]), d)
+    assert np.array_equal(other.forecast().upper, fc.upper)

@@ -32,6 +32,10 @@ rescales it by lead time from the errors the building's own served forecasts mad
   than the present would otherwise widen (narrow) the intervals for as long as it lasts.
 
 Until a bin has ``min_weight`` scores the model's own z_0.9 = 1.645 is used.
+
+:class:`WeatherSpread` learns the errors of the weather the served forecasts used, by lead;
+the streaming estimator widens the std the calibration scales by the forecast's change
+under that error (docs/forecasts.md "Intervals that know the weather's error").
 """
 
 from __future__ import annotations

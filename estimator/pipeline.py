@@ -42,7 +42,7 @@ from zonecast.estimator.priors import CONVECTIVE_FILMS, Prior, building_priors
 from zonecast.estimator.rc.network import ModelOptions, RCStructure, build_structure
 from zonecast.estimator.rc.parameters import ParameterSet
 from zonecast.estimator.site import Site, load_site
-from zonecast.estimator.streaming import offline_forecasts
+from zonecast.estimator.streaming import offline_forecast_variants, offline_forecasts
 from zonecast.estimator.telemetry import Telemetry, load_telemetry
 
 __all__ = ["Pipeline", "PipelineError"]
@@ -589,3 +589,13 @@ class Pipeline:
         service serves."""
         return offline_forecasts(self.bundle, telemetry, times, inputs=inputs,
                                  weather=weather, persistence=persistence)
+
+    def forecast_variants(self, telemetry: Telemetry | str | os.PathLike | pd.DataFrame,
+                          times: Iterable, variants: Mapping, *,
+                          weather: Iterable | None = None
+                          ) -> dict[str, dict[pd.Timestamp, Forecast]]:
+        """Several day-ahead forecasts at each of ``times`` from one replay of
+        ``telemetry`` (:func:`~zonecast.estimator.streaming.offline_forecast_variants`):
+        name -> None (served), ``"persistence"`` or a mapping issue time -> inputs."""
+        return offline_forecast_variants(self.bundle, telemetry, times, variants,
+                                         weather=weather)

@@ -176,7 +176,8 @@ REHEAT_TOL = 1e-9
 REHEAT_ITER = 3
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
-           "StepReport", "checkpoint_header", "has_discharge", "model_rows", "offline_forecasts",
+           "StepReport", "checkpoint_header", "has_discharge", "model_rows",
+           "offline_forecast_variants", "offline_forecasts",
            "rows_from_frame", "telemetry_frame"]
 
 _DAY_NS = 86_400 * 10**9
@@ -1395,6 +1396,28 @@ def offline_forecasts(model_file: ModelBundle | str | Path,
     dict
         UTC issue time -> :class:`~zonecast.estimator.forecast.Forecast`.
     """
+    variant = "persistence" if persistence and inputs is None else inputs
+    return offline_forecast_variants(model_file, telemetry, times, {"_": variant},
+                                     max_gap=max_gap, weather=weather,
+                                     persistence_fallback=persistence)["_"]
+
+
+def offline_forecast_variants(model_file: ModelBundle | str | Path,
+                              telemetry: Telemetry | str | Path | pd.DataFrame,
+                              times: Iterable, variants: Mapping[str, Mapping | str | None], *,
+                              max_gap: pd.Timedelta = MAX_GAP,
+                              weather: Iterable[WeatherForecast] | None = None,
+                              persistence_fallback: bool = False
+                              ) -> dict[str, dict[pd.Timestamp, Forecast]]:
+    """Several forecasts at each of ``times`` from one replay of ``telemetry``: what
+    :func:`offline_forecasts` gives for each variant, run once (the estimator's state
+    does not depend on the forecasts it is asked for, only on the rows and the weather
+    forecasts it is given).
+
+    ``variants``: name -> None (the served forecast), ``"persistence"``
+    (:meth:`OnlineEstimator.persistence_inputs`) or a mapping UTC issue time -> inputs
+    (where it gives none: the served forecast, or persistence with
+    ``persistence_fallback``). Returns name -> UTC issue time -> Forecast."""
     bundle = model_file if isinstance(model_file, ModelBundle) else load_model_file(model_file)
     wanted = set()
     for t in times:
@@ -1402,10 +1425,14 @@ def offline_forecasts(model_file: ModelBundle | str | Path,
         if ts.tzinfo is None:
             raise ValueError(f"issue time {t!r} needs a UTC offset")
         wanted.add(ts.tz_convert("UTC"))
+    for name, how in variants.items():
+        if not (how is None or how == "persistence" or isinstance(how, Mapping)):
+            raise ValueError(f"variant {name!r}: None, 'persistence' or a mapping of issue "
+                             "time -> inputs")
     frame = telemetry_frame(telemetry, bundle)
     frame = frame[frame.notna().any(axis=1)]
     est = OnlineEstimator(bundle, max_gap=max_gap)
-    out: dict[pd.Timestamp, Forecast] = {}
+    out: dict[str, dict[pd.Timestamp, Forecast]] = {name: {} for name in variants}
     last = max(wanted) if wanted else None
     rows = model_rows(bundle, frame)
     tt, u, v, y, rh = rows.times, rows.u, rows.v, rows.y, rows.reheat
@@ -1421,12 +1448,16 @@ def offline_forecasts(model_file: ModelBundle | str | Path,
             est.set_weather_forecast(newest)
         est.advance(t, u[k], v[k], y[k], rh[k])
         if t in wanted and est.started:
-            given = None if inputs is None else inputs.get(t)
-            if given is None and persistence:
-                given = est.persistence_inputs()
-            out[t] = est.forecast(given)
-    missing = sorted(wanted - set(out))
-    if missing:
+            for name, how in variants.items():
+                if how == "persistence":
+                    given = est.persistence_inputs()
+                else:
+                    given = None if how is None else how.get(t)
+                    if given is None and persistence_fallback:
+                        given = est.persistence_inputs()
+                out[name][t] = est.forecast(given)
+    missing = sorted(wanted - set(next(iter(out.values()), {})))
+    if missing and variants:
         raise ValueError(f"no forecast at {len(missing)} requested times (first "
                          f"{missing[0].isoformat()}): not a telemetry row with data, or before "
                          "the first measurement")

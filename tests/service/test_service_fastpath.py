@@ -347,3 +347,36 @@ def test_served_interval_widens_by_the_forecasts_change_under_the_weathers_error
     other.load_bytes(est.to_bytes())
     assert np.array_equal(other.weather_spread.spread(ins[:, est._w_cols]), d)
     assert np.array_equal(other.forecast().upper, fc.upper)
+
+
+def test_forecast_variants_of_one_replay_equal_separate_replays(bundle, telemetry):
+    """offline_forecast_variants gives, variant for variant, bit for bit what a replay per
+    variant (offline_forecasts) gives: the served forecast, persistence, and given inputs
+    where the mapping has them (served elsewhere)."""
+    from zonecast.estimator.streaming import (
+        OnlineEstimator,
+        offline_forecast_variants,
+        offline_forecasts,
+    )
+
+    frame = si_frame(bundle, telemetry.iloc[:500])
+    times = list(frame.index[[300, 420, 499]])
+    persisted = offline_forecasts(bundle, frame, times, persistence=True)
+    nin = OnlineEstimator(bundle)._nin  # u, v and any per-box discharge-air rise
+    rng = np.random.default_rng(0)
+    base = np.column_stack([np.full((96, bundle.model.n_boxes), 0.2), np.full((96, 1), 10.0),
+                            np.full((96, 1), 14.0), rng.uniform(0, 300, (96, 5))])
+    given = {times[1]: np.hstack([base, np.zeros((96, nin - base.shape[1]))])}
+    separate = {"served": offline_forecasts(bundle, frame, times),
+                "persistence": persisted,
+                "given": offline_forecasts(bundle, frame, times, inputs=given)}
+    together = offline_forecast_variants(bundle, frame, times, {
+        "served": None, "persistence": "persistence", "given": given})
+    for name, fcs in separate.items():
+        for t in times:
+            a, b = fcs[t], together[name][t]
+            assert np.array_equal(a.mean, b.mean) and np.array_equal(a.upper, b.upper), name
+    assert not np.array_equal(together["given"][times[1]].mean, together["served"][times[1]].mean)
+    assert np.array_equal(together["given"][times[0]].mean, together["served"][times[0]].mean)
+    with pytest.raises(ValueError, match="None, 'persistence' or a mapping"):
+        offline_forecast_variants(bundle, frame, times, {"x": "yesterday"})

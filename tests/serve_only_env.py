@@ -20,11 +20,21 @@ ROOT = Path(__file__).resolve().parents[1]
 BUILD_KEY = pytest.StashKey[tuple]()
 
 
+#: what the build's copy of the project leaves out (environments, outputs, caches)
+_NOT_SOURCES = shutil.ignore_patterns(".venv", ".git", "runs", "build", "demo-out", "*.egg-info",
+                                      "__pycache__", ".pytest_cache", ".ruff_cache",
+                                      "node_modules")
+
+
 def build_venv(folder: Path) -> subprocess.Popen:
-    """Start building the environment in ``folder / "venv"`` (log in ``build.log``)."""
-    venv = folder / "venv"
+    """Start building the environment in ``folder / "venv"`` (log in ``build.log``) from a
+    copy of the project's sources in ``folder / "src"``: with pytest-xdist every worker
+    starts a build, and two pip builds of one source tree share its ``build/`` folder
+    (a race that failed one build with "Directory not empty")."""
+    venv, src = folder / "venv", folder / "src"
+    shutil.copytree(ROOT, src, ignore=_NOT_SOURCES)
     script = (f'"{sys.executable}" -m venv "{venv}" && '
-              f'"{venv}/bin/python" -m pip install --quiet "{ROOT}[service]"')
+              f'"{venv}/bin/python" -m pip install --quiet "{src}[service]"')
     with (folder / "build.log").open("w") as log:
         return subprocess.Popen(["/bin/sh", "-c", script], stdout=log, stderr=subprocess.STDOUT,
                                 start_new_session=True)  # one process group: killed together

@@ -28,8 +28,9 @@ rescales it by lead time from the errors the building's own served forecasts mad
   std with the empirical quantile of recent scores;
 - the quantile's level per zone follows adaptive conformal inference (Gibbs and Candès
   2021): after each scored error, level += gamma (miss - (1 - target)), with miss = 1 when
-  the error lay outside the interval then served (per day class and zone). A window of harder (or easier) days
-  than the present would otherwise widen (narrow) the intervals for as long as it lasts.
+  the error lay outside the interval then served (per day class and zone). A window of
+  harder (or easier) days than the present would otherwise widen (narrow) the intervals
+  for as long as it lasts.
 
 Until a bin has ``min_weight`` scores the model's own z_0.9 = 1.645 is used.
 

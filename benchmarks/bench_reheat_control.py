@@ -46,6 +46,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from zonecast.estimator import streaming
 from zonecast.estimator.constants import HORIZON, STEP
 from zonecast.estimator.evaluate import rms_by_zone
@@ -56,7 +57,8 @@ from zonecast.estimator.telemetry import load_telemetry
 from zonecast.estimator.weather_forecast import parse_weather_forecast
 from zonecast.testbed.forecasts import weather_forecasts
 
-from zonecast.jobs.reproduce import _interval_coverage, validation_issues
+from zonecast.jobs.reproduce import (_interval_coverage, has_discharge, measured_inputs,
+                                     validation_issues)
 
 
 def served(campaign: Path, model: Path, control: bool,
@@ -72,7 +74,8 @@ def served(campaign: Path, model: Path, control: bool,
     issues = validation_issues(data, 0)
     nz = len(data.zones)
     before = (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
-              streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD)
+              streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
+              streaming.GAINS_LEVEL_TAU)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -86,16 +89,28 @@ def served(campaign: Path, model: Path, control: bool,
         streaming.YOUNG_STD = control
     elif side == "day-class":  # the library's defaults but for the intervals' day classes
         streaming.DAY_CLASS_INTERVALS = control
-    else:  # weather-spread: the library's defaults but for the weather's spread
+    elif side == "weather-spread":  # the library's defaults but for the weather's spread
         streaming.WEATHER_SPREAD = control
+    else:  # gains-level: the library's defaults but for the served gains' slow level
+        streaming.GAINS_LEVEL_TAU = LEVEL_TAU if control else None
     try:
         t0 = time.perf_counter()
-        fcs = Pipeline.from_model_file(model).forecast(
-            campaign / "telemetry.csv", [data.times[r] for r, _ in issues], weather=weather)
+        pipe = Pipeline.from_model_file(model)
+        times = [data.times[r] for r, _ in issues]
+        fcs = pipe.forecast(campaign / "telemetry.csv", times, weather=weather)
         seconds = time.perf_counter() - t0
+        if KNOWN:  # the same estimator's forecasts with the measured inputs (reproduce's)
+            rh = has_discharge(pipe.bundle)
+            measured = {data.times[r]: measured_inputs(data, r, r + HORIZON, rh)
+                        for r, _ in issues}
+            measured = {t: a for t, a in measured.items()
+                        if len(a) == HORIZON and np.isfinite(a).all()}
+            known_fcs = pipe.forecast_variants(campaign / "telemetry.csv", times,
+                                               {"known": measured})["known"]
     finally:
         (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
-         streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD) = before
+         streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
+         streaming.GAINS_LEVEL_TAU) = before
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
     for k, (r, stop) in enumerate(issues):
         fc = fcs[data.times[r]]
@@ -103,6 +118,14 @@ def served(campaign: Path, model: Path, control: bool,
         pred[k], lo[k], hi[k] = fc.mean, fc.lower, fc.upper
         meas[k, :n] = data.y[r + 1:r + 1 + n]
     rms = rms_by_zone(pred.reshape(-1, nz), meas.reshape(-1, nz), data.zones)
+    if KNOWN:
+        kp = np.full_like(pred, np.nan)
+        for k, (r, _) in enumerate(issues):
+            if data.times[r] in known_fcs:
+                kp[k] = known_fcs[data.times[r]].mean
+        ok = np.isfinite(kp).all(axis=(1, 2))
+        rms["known"] = rms_by_zone(kp[ok].reshape(-1, nz), meas[ok].reshape(-1, nz),
+                                   data.zones)["mean"]
     # coverage by the targets' day class (the site's calendar)
     cal = DayCalendar.for_site(site)
     targets = np.array([[data.times[r].value + (h + 1) * STEP_NS for h in range(HORIZON)]
@@ -116,6 +139,10 @@ def served(campaign: Path, model: Path, control: bool,
 
 
 STEP_NS = STEP.value
+#: the slow level's time constant tried by ``--side gains-level`` (``--level-tau``)
+LEVEL_TAU = pd.Timedelta("24h")
+#: also the forecasts with the measured inputs (``--known``): the served / known ratio in-run
+KNOWN = False
 
 
 def _find(doc, key):
@@ -136,14 +163,24 @@ def main() -> None:
     ap.add_argument("--extra", type=Path, nargs="*", default=[])
     ap.add_argument("--only", nargs="*")
     ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std", "day-class",
-                                       "weather-spread"),
+                                       "weather-spread", "gains-level"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
                          "filter after restarts (both controllers on), its forecast "
                          "std (the young filter on), the intervals' day classes, or the "
-                         "weather's spread in the intervals")
+                         "weather's spread in the intervals, or the served gains' slow level "
+                         "(off: the profile and the short offset)")
+    ap.add_argument("--level-tau", default="24h",
+                    help="the slow level's time constant for --side gains-level (pandas "
+                         "Timedelta, default 24h)")
+    ap.add_argument("--known", action="store_true",
+                    help="also replay with the measured inputs: the served / known-input ratio "
+                         "of each run (else from reproduce's results.json beside the model)")
     args = ap.parse_args()
+    global LEVEL_TAU, KNOWN
+    KNOWN = args.known
+    LEVEL_TAU = pd.Timedelta(args.level_tau)
     campaigns = {p.name: p for p in args.extra}
     if args.family is not None:
         doc = json.loads((args.family / "index.json").read_text())
@@ -158,7 +195,8 @@ def main() -> None:
             "young": ("steady filter", "young filter"),
             "young-std": ("young filter, steady std", "young filter and std"),
             "day-class": ("pooled days", "day classes"),
-            "weather-spread": ("model std", "with the weather's spread")}[args.side]
+            "weather-spread": ("model std", "with the weather's spread"),
+            "gains-level": ("profile and short offset", f"slow level {LEVEL_TAU}")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| working / other days | seconds off / on |")
     print("|---|---|---|---|---|---|---|")
@@ -169,8 +207,12 @@ def main() -> None:
         res = args.reports / name / "results.json"
         known = _find(json.loads(res.read_text()), "service_known_inputs") if res.is_file() \
             else None
-        ratio = (f"{off['mean'] / known['mean']:.3f} → {on['mean'] / known['mean']:.3f}"
-                 if known else "–")
+        if KNOWN:
+            ratio = (f"{off['mean'] / off['known']:.3f} → {on['mean'] / on['known']:.3f} "
+                     f"(known {off['known']:.3f} → {on['known']:.3f})")
+        else:
+            ratio = (f"{off['mean'] / known['mean']:.3f} → {on['mean'] / known['mean']:.3f}"
+                     if known else "–")
         zones = [f"{min(c[z] for z in c if z != 'all'):.3f}–"
                  f"{max(c[z] for z in c if z != 'all'):.3f}" for c in (cov_off, cov_on)]
         print(f"| {name} | {off['mean']:.3f} | **{on['mean']:.3f}** | {ratio} | "

@@ -551,7 +551,7 @@ class DayAheadGains:
             d = np.where(n_ok > 0, np.nansum(resid, axis=0) / np.maximum(n_ok, 1), 0.0)
         return d, newest
 
-    def issue(self, now, history: pd.DataFrame) -> pd.DataFrame:
+    def issue(self, now, history: pd.DataFrame, level=None) -> pd.DataFrame:
         """Issue f_IG for the next ``horizon`` intervals.
 
         Parameters
@@ -562,6 +562,12 @@ class DayAheadGains:
             Past per-step estimates f_IG [W/m²], indexed by interval-start stamps
             (tz-aware), one column per zone. Rows the issuer could not know at
             ``now`` are ignored.
+        level : array_like, shape (p,), optional
+            A slow level L [W/m²] of ``f_IG - f_hat`` (the streaming estimator's
+            exponentially weighted mean, :data:`~zonecast.estimator.streaming.GAINS_LEVEL_TAU`):
+            ``f(s_h) = f_hat(s_h) + L + (d - L) exp(-(s_h - now) / tau)``, the offset
+            decaying to the level instead of to the profile; ``d`` is L in a zone
+            without recent estimates. None: no level (the formula above).
 
         Returns
         -------
@@ -569,10 +575,23 @@ class DayAheadGains:
             Shape (horizon, p), indexed by the interval starts (tz of ``now``),
             same columns as ``history`` [W/m²].
         """
-        d, _ = self.offset(now, history)
+        d, newest = self.offset(now, history)
         now = pd.Timestamp(now)
         starts = pd.date_range(now, periods=self.horizon, freq=self.profile.step)
         lead = (starts - now) / self.tau
         base = np.nan_to_num(self.profile(starts))
-        f = base + np.exp(-np.asarray(lead, dtype=float))[:, None] * d[None, :]
+        decay = np.exp(-np.asarray(lead, dtype=float))[:, None]
+        if level is None:
+            f = base + decay * d[None, :]
+        else:
+            L = np.asarray(level, dtype=float)
+            if L.shape != d.shape:
+                raise GainsInputError(f"level must have shape {d.shape} (one per zone), got {L.shape}")
+            if newest is None:
+                d = L
+            else:  # a zone without a finite recent estimate: its offset is the level
+                known = history.loc[np.asarray(_as_times(history.index) <= now - self.profile.step)]
+                recent = known.loc[np.asarray(known.index > newest - self.window)]
+                d = np.where(np.isfinite(recent.to_numpy(dtype=float)).any(axis=0), d, L)
+            f = base + L[None, :] + decay * (d - L)[None, :]
         return pd.DataFrame(f, index=starts, columns=history.columns)

@@ -170,6 +170,14 @@ WEATHER_SPREAD = True
 #: "Cooling as the thermostat's answer"); the default of
 #: :attr:`OnlineEstimator.cooling_control`
 COOLING_CONTROL = True
+#: time constant of the served gains' slow level: an exponentially weighted mean over the
+#: per-step f_IG estimates of their difference from the weekly profile, added to the profile
+#: over the whole horizon (the short offset of :class:`~zonecast.estimator.gains.DayAheadGains`
+#: decays towards it, not towards the bare profile); None: no level (the profile alone, as
+#: before). f_IG holds the model's slow, weather-driven error beside the gains, which the
+#: profile fitted on the training weeks (other seasons) does not (docs/forecasts.md "The
+#: gains' slow level")
+GAINS_LEVEL_TAU: pd.Timedelta | None = None
 #: the controlled step's reheat is solved to this shortfall [K], in at most REHEAT_ITER
 #: exact steps with the last responses before they are recomputed
 REHEAT_TOL = 1e-9
@@ -357,6 +365,10 @@ class OnlineEstimator:
         starts = pd.date_range(t0, periods=HORIZON, freq=bundle.profile.step)
         self._decay = np.exp(-np.asarray((starts - t0) / self._dayahead.tau, dtype=float))
         self._profile = np.nan_to_num(bundle.profile.values)
+        #: the served gains' slow level (:data:`GAINS_LEVEL_TAU`): weight of a new step
+        self.level_tau = None if GAINS_LEVEL_TAU is None else pd.Timedelta(GAINS_LEVEL_TAU)
+        self._level_alpha = (0.0 if self.level_tau is None else
+                             float(-np.expm1(-pd.Timedelta(bundle.profile.step) / self.level_tau)))
         self._bin_days: dict[int, np.ndarray] = {}
         self._gig_cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         self._names = _input_names(bundle)
@@ -384,6 +396,7 @@ class OnlineEstimator:
         self._yf: YoungFilter | None = None  # the young filter of the current start
         self._observed = np.ones(self._nz, bool)  # zones observed in that update
         self._gains: deque[tuple[pd.Timestamp, np.ndarray]] = deque(maxlen=8)
+        self._level = np.zeros(self._nz)  # the gains' slow level [W/m2] (GAINS_LEVEL_TAU)
         self._inputs: deque[tuple[pd.Timestamp, np.ndarray]] = deque(maxlen=HORIZON)
         self.last_y = np.full(self._nz, np.nan)
         self.last_f = np.full(self._nz, np.nan)
@@ -541,6 +554,9 @@ class OnlineEstimator:
             self._since += 1
         self._gains.append((self.time, f))
         ok = np.isfinite(f)
+        if self._level_alpha:
+            resid = f - self._profile[self._bins(np.array([self.time.value]))[0]]
+            self._level[ok] += self._level_alpha * (resid[ok] - self._level[ok])
         self._online[ok] = f[ok]
         self.last_f = f
         self.time = t
@@ -1048,12 +1064,14 @@ class OnlineEstimator:
     def dayahead_gains(self) -> np.ndarray:
         """f_IG (96, n_zones) [W/m2] over the forecast intervals from the current time:
         :meth:`DayAheadGains.issue <zonecast.estimator.gains.DayAheadGains.issue>` with the
-        per-step estimates of the last two hours as history, on arrays (the same numbers;
-        tests/service compares them)."""
+        per-step estimates of the last two hours as history and the slow level
+        (:data:`GAINS_LEVEL_TAU`), on arrays (the same numbers; tests/service compares
+        them)."""
         t = self.time.value
         step = pd.Timedelta(self.bundle.profile.step).value
         base = self._profile[self._bins(t + step * np.arange(HORIZON, dtype=np.int64))]
-        d = np.zeros(self._nz)
+        level = self._level
+        d = level.copy()
         if self._gains:
             stamps = np.array([s.value for s, _ in self._gains], dtype=np.int64)
             known = stamps <= t - step
@@ -1064,7 +1082,9 @@ class OnlineEstimator:
                 resid = rows - self._profile[self._bins(stamps[recent])]
                 with np.errstate(invalid="ignore"):
                     n_ok = np.isfinite(resid).sum(axis=0)
-                    d = np.where(n_ok > 0, np.nansum(resid, axis=0) / np.maximum(n_ok, 1), 0.0)
+                    d = np.where(n_ok > 0, np.nansum(resid, axis=0) / np.maximum(n_ok, 1), level)
+        if self._level_alpha:
+            return base + level[None, :] + self._decay[:, None] * (d - level)[None, :]
         return base + self._decay[:, None] * d[None, :]
 
     # --- checkpoint --------------------------------------------------------------------
@@ -1080,6 +1100,7 @@ class OnlineEstimator:
                 "extra": extra or {}}
         arrays = {"pending": self._pending, "held": self._held, "online": self._online,
                   "last_y": self.last_y, "last_f": self.last_f, "observed": self._observed,
+                  "gains_level": self._level,
                   "gain_times": np.array([s.value for s, _ in self._gains], dtype=np.int64),
                   "input_times": np.array([s.value for s, _ in self._inputs], dtype=np.int64),
                   "gains": np.array([f for _, f in self._gains]).reshape(-1, self._nz),
@@ -1150,6 +1171,8 @@ class OnlineEstimator:
             self._young_seen = None if seen is None else min(int(seen), steps)
         if "observed" in arr:
             self._observed = arr["observed"].astype(bool)
+        if "gains_level" in arr and self._level_alpha:  # absent before the level: none
+            self._level = arr["gains_level"]
         if meta["started"]:
             self._x = arr["x"]
         # the input learners (absent from checkpoints before them: they start afresh)

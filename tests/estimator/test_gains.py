@@ -269,6 +269,32 @@ def test_day_ahead_limits():
     np.testing.assert_allclose(empty.to_numpy(), prof(starts))
 
 
+def test_day_ahead_level():
+    """With a level L the offset decays to L, not to the profile; no history: profile + L;
+    a zone whose recent estimates are all NaN starts at L; L = 0 is the plain issue."""
+    rng = np.random.default_rng(14)
+    hist = make_history(rng)
+    prof = G.fit_weekly_profile(hist.index, hist.to_numpy(), TZ)
+    now = pd.Timestamp("2024-05-15 08:00", tz=TZ)
+    starts = pd.date_range(now, periods=96, freq=STEP)
+    da = G.DayAheadGains(prof, tau="1h")
+    L = np.array([2.0, -1.0, 0.5])
+    d, _ = da.offset(now, hist)
+    out = da.issue(now, hist, level=L).to_numpy()
+    np.testing.assert_allclose(out[0], prof(starts[:1])[0] + d)
+    np.testing.assert_allclose(out[-1], prof(starts[-1:])[0] + L, atol=1e-9)
+    np.testing.assert_allclose(da.issue(now, hist, level=np.zeros(3)).to_numpy(),
+                               da.issue(now, hist).to_numpy())
+    empty = da.issue(now, hist.loc[hist.index > now], level=L)
+    np.testing.assert_allclose(empty.to_numpy(), prof(starts) + L)
+    holed = hist.copy()
+    holed.loc[holed.index > now - pd.Timedelta("3h"), "S"] = np.nan
+    got = da.issue(now, holed, level=L).to_numpy()
+    np.testing.assert_allclose(got[:, 1], prof(starts)[:, 1] + L[1])
+    with pytest.raises(ValueError, match=r"level must have shape \(3,\)"):
+        da.issue(now, hist, level=np.zeros(2))
+
+
 def test_errors_say_what_to_fix():
     rng = np.random.default_rng(13)
     M = cb_matrix(rng)

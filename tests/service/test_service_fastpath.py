@@ -81,6 +81,56 @@ def test_dayahead_gains_on_arrays_equal_dayahead_issue(bundle, telemetry):
     assert np.ptp(est.dayahead_gains(), axis=0).max() > 1.0  # the profile is not flat
 
 
+def test_gains_level_is_the_weighted_mean_of_the_residuals_and_issue_agrees(
+        bundle, telemetry, monkeypatch):
+    """With GAINS_LEVEL_TAU the served gains are the profile plus a slow level L (the
+    exponentially weighted mean of f_IG - profile over the per-step estimates) plus the
+    short offset decaying to L: the same numbers as ``DayAheadGains.issue(level=L)``; a
+    checkpoint keeps L; a restart forgets it."""
+    from zonecast.estimator import streaming
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    tau = pd.Timedelta("6h")
+    monkeypatch.setattr(streaming, "GAINS_LEVEL_TAU", tau)
+    tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:3 * 96]))
+    y = y.copy()
+    y[100:110, 2] = np.nan  # the per-step gains become NaN for a while
+    est, plain = OnlineEstimator(bundle), None
+    alpha = 1.0 - np.exp(-(pd.Timedelta(bundle.profile.step) / tau))
+    ref, seen, checked = np.zeros(len(bundle.zones)), 0, 0
+    for k in range(len(tt)):
+        est.advance(tt[k], u[k], v[k], y[k])
+        if not est.started:
+            continue
+        if len(est._gains) and est._gains[-1][0] != seen:
+            stamp, f = est._gains[-1]
+            seen = stamp
+            prof = np.nan_to_num(bundle.profile(pd.DatetimeIndex([stamp])))[0]
+            ok = np.isfinite(f)
+            ref[ok] += alpha * (f[ok] - prof[ok] - ref[ok])
+        np.testing.assert_allclose(est._level, ref, rtol=0, atol=1e-9)
+        history = pd.DataFrame([f for _, f in est._gains], columns=bundle.zones,
+                               index=pd.DatetimeIndex([s for s, _ in est._gains], tz="UTC"))
+        issued = est._dayahead.issue(est.time, history, level=est._level).to_numpy()
+        np.testing.assert_allclose(est.dayahead_gains(), issued, rtol=0, atol=1e-12)
+        checked += 1
+    assert checked > 250 and np.abs(ref).max() > 0.1
+    # far ahead the served gains are the profile plus the level
+    base = np.nan_to_num(bundle.profile(pd.date_range(est.time, periods=96, freq="15min")))
+    np.testing.assert_allclose(est.dayahead_gains()[-1], base[-1] + est._level, atol=1e-3)
+    # a checkpoint keeps the level; without the option the gains are the profile's
+    copy = OnlineEstimator(bundle)
+    copy.load_bytes(est.to_bytes())
+    assert np.array_equal(copy._level, est._level)
+    assert np.array_equal(copy.dayahead_gains(), est.dayahead_gains())
+    monkeypatch.setattr(streaming, "GAINS_LEVEL_TAU", None)
+    plain = OnlineEstimator(bundle)
+    plain.load_bytes(est.to_bytes())
+    assert np.abs(plain.dayahead_gains()[-1] - base[-1]).max() < 1e-2
+    est.reset()
+    assert not est._level.any()
+
+
 def test_npz_checkpoint_of_the_earlier_format_still_loads(bundle, telemetry):
     """Checkpoints stored before the raw format (an .npz with ISO time lists) resume. Their
     estimator had no young filter after a start (the format has no key for it), so they

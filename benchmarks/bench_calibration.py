@@ -6,7 +6,8 @@ forecast's run alone against the run and the weather-perturbed second run of the
 intervals' std (docs/forecasts.md "Intervals that know the weather's error").
 
     python benchmarks/bench_calibration.py [--zones 6] [--steps 4000]
-                                           [--model MODEL --telemetry CSV [--rows A:B]]
+                                           [--model MODEL --telemetry CSV [--rows A:B]
+                                            [--runner A:B]]
 
 Synthetic scores (standard normal errors, model std 0.3 K) on a 15-min grid from
 2015-01-01; the calendar is a Monday-to-Friday one in America/Chicago. The served forecast
@@ -92,6 +93,30 @@ def served(model: Path, telemetry: Path, rows: slice, reps: int = 20) -> tuple[f
     return out[0], out[1]
 
 
+def runner_steps(model: Path, telemetry: Path, rows: slice, cache: bool) -> tuple[float, int]:
+    """Mean seconds of a runner's step (``advance`` and the served ``forecast``) over
+    ``rows``, the served forecast at a step with a calibration forecast taken from it
+    (``cache``, the estimator's behaviour) or computed afresh; and the steps with one."""
+    from zonecast.estimator.artifact import load_model_file
+    from zonecast.estimator.streaming import OnlineEstimator, model_rows, telemetry_frame
+
+    bundle = load_model_file(model)
+    frame = telemetry_frame(telemetry, bundle)
+    r = model_rows(bundle, frame[frame.notna().any(axis=1)].iloc[rows])
+    est = OnlineEstimator(bundle)
+    due = 0
+    t0 = time.perf_counter()
+    for k in range(len(r.times)):
+        est.advance(r.times[k], r.u[k], r.v[k], r.y[k], r.reheat[k])
+        if est._due is not None and est._due[0][0] == est.time:
+            due += 1
+            if not cache:
+                est._due = None
+        if est.started:
+            est.forecast()
+    return (time.perf_counter() - t0) / len(r.times), due
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--zones", type=int, default=6)
@@ -99,6 +124,10 @@ def main() -> None:
     ap.add_argument("--model", type=Path)
     ap.add_argument("--telemetry", type=Path)
     ap.add_argument("--rows", default="5000:6500")
+    ap.add_argument("--runner", metavar="A:B",
+                    help="also time a runner's steps over telemetry rows A:B (advance and the "
+                         "served forecast each step), the served forecast at a due step afresh "
+                         "against taken from the calibration forecast")
     args = ap.parse_args()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; {args.zones} zones, "
           f"{args.steps} steps")
@@ -113,6 +142,14 @@ def main() -> None:
         run, both = served(args.model, args.telemetry, slice(a, b))
         print(f"\nserved forecast ({args.model}, rows {args.rows}): run {run * 1e3:.1f} ms; "
               f"run and the weather-perturbed run {both * 1e3:.1f} ms")
+        if args.runner:
+            a, b = (int(x) for x in args.runner.split(":"))
+            print("\n| runner step (advance and served forecast) | ms per step | steps with a "
+                  "calibration forecast |\n|---|---|---|")
+            for cache in (False, True):
+                sec, due = runner_steps(args.model, args.telemetry, slice(a, b), cache)
+                print(f"| {'served forecast reuses the calibration forecast' if cache else 'served forecast afresh'} "
+                      f"| {sec * 1e3:.1f} | {due} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -57,8 +57,12 @@ from zonecast.estimator.telemetry import load_telemetry
 from zonecast.estimator.weather_forecast import parse_weather_forecast
 from zonecast.testbed.forecasts import weather_forecasts
 
-from zonecast.jobs.reproduce import (_interval_coverage, has_discharge, measured_inputs,
-                                     validation_issues)
+from zonecast.jobs.reproduce import (
+    _interval_coverage,
+    has_discharge,
+    measured_inputs,
+    validation_issues,
+)
 
 
 def served(campaign: Path, model: Path, control: bool,

@@ -131,6 +131,43 @@ def test_gains_level_is_the_weighted_mean_of_the_residuals_and_issue_agrees(
     assert not est._level.any()
 
 
+def test_served_forecast_at_a_due_step_is_the_calibration_forecast(bundle, telemetry):
+    """At a step where a calibration forecast is kept, the served forecast reuses it (no
+    model run) and equals, bit for bit, the one computed afresh; a new weather forecast,
+    another control or the next step computes afresh."""
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:2 * 96]))
+    est = OnlineEstimator(bundle)
+    runs = []
+    real = est._run_forecast
+    est._run_forecast = lambda *a, **k: runs.append(1) or real(*a, **k)
+    due = 0
+    for k in range(len(tt)):
+        est.advance(tt[k], u[k], v[k], y[k])
+        if est._due is None or est._due[0][0] != est.time:
+            continue
+        due += 1
+        runs.clear()
+        cached = est.forecast()
+        assert not runs  # no model run
+        est._due = None
+        fresh = est.forecast()
+        assert runs
+        for name in ("mean", "std", "f_ig", "lower", "upper"):
+            assert np.array_equal(getattr(cached, name), getattr(fresh, name)), name
+    assert due >= 4
+    # another control than the calibration's, or a new weather forecast: afresh
+    est.advance(tt[-1] + pd.Timedelta("15min"), u[-1], v[-1], y[-1])
+    while est._due is None or est._due[0][0] != est.time:
+        est.advance(est.time + pd.Timedelta("15min"), u[-1], v[-1], y[-1])
+    runs.clear()
+    est.forecast(thermostat_reheat=not est.reheat_control)
+    assert runs
+    est.set_weather_forecast(None)
+    assert est._due is None
+
+
 def test_npz_checkpoint_of_the_earlier_format_still_loads(bundle, telemetry):
     """Checkpoints stored before the raw format (an .npz with ISO time lists) resume. Their
     estimator had no young filter after a start (the format has no key for it), so they

@@ -25,7 +25,15 @@ second per day class of the target (``streaming.DAY_CLASS_INTERVALS``; docs/fore
 defaults, the first with the intervals scaling the model's std alone, the second the std
 widened by the forecast's sensitivity to the weather forecast's learned error
 (``streaming.WEATHER_SPREAD``; docs/forecasts.md "Intervals that know the weather's
-error"). Every other side runs with the library's defaults for the young filter, the
+error"). ``--side gains-level``: both runs with the library's defaults, the second with
+the served gains' slow level (``streaming.GAINS_LEVEL_TAU`` = ``--level-tau``, default
+24 h; docs/forecasts.md "The gains' slow level"). ``--known`` also replays each run with
+the measured inputs (the served / known ratio of the same estimator). The served
+forecasts' weekly gains profile is re-estimated from the forecast study's training weeks
+(``--profile train``, the default since 2026-12-05) as in ``zonecast reproduce``'s model
+file; ``--profile file`` takes the model file's (``zonecast identify`` writes the profile of
+every whole week, the validation weeks included: the tables of the day classes and the
+weather's spread were measured so). Every other side runs with the library's defaults for the young filter, the
 day classes and the weather spread. The last column is the coverage of the targets on the
 site's working days and on its other days (weekends, holidays).
 
@@ -42,6 +50,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads on
 import argparse
 import json
 import platform
+import tempfile
 import time
 from pathlib import Path
 
@@ -50,6 +59,7 @@ import pandas as pd
 from zonecast.estimator import streaming
 from zonecast.estimator.constants import HORIZON, STEP
 from zonecast.estimator.evaluate import rms_by_zone
+from zonecast.estimator.forecast import week_split
 from zonecast.estimator.inputs_forecast import DayCalendar
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.site import load_site
@@ -100,6 +110,8 @@ def served(campaign: Path, model: Path, control: bool,
     try:
         t0 = time.perf_counter()
         pipe = Pipeline.from_model_file(model)
+        if PROFILE == "train":  # the validation weeks' own gains out of the profile
+            pipe = train_profile(pipe, data, model)
         times = [data.times[r] for r, _ in issues]
         fcs = pipe.forecast(campaign / "telemetry.csv", times, weather=weather)
         seconds = time.perf_counter() - t0
@@ -147,6 +159,20 @@ STEP_NS = STEP.value
 LEVEL_TAU = pd.Timedelta("24h")
 #: also the forecasts with the measured inputs (``--known``): the served / known ratio in-run
 KNOWN = False
+#: the served forecast's weekly gains profile: "train" (the training weeks', ``--profile``)
+#: or "file" (the model file's)
+PROFILE = "train"
+
+
+def train_profile(pipe: Pipeline, data, model: Path) -> Pipeline:
+    """``pipe`` with its weekly gains profile re-estimated from the forecast study's training
+    weeks only (as ``zonecast reproduce``'s model file; ``zonecast identify`` writes the
+    profile of every whole week, the validation weeks included)."""
+    pipe.weekly_profile(data, weeks=week_split(data, 0)["train"])
+    with tempfile.TemporaryDirectory() as tmp:
+        path = pipe.write_model_file(Path(tmp) / model.name,
+                                     extra={"profile_weeks": pipe.profile_weeks})
+        return Pipeline.from_model_file(path)
 
 
 def _find(doc, key):
@@ -181,9 +207,15 @@ def main() -> None:
     ap.add_argument("--known", action="store_true",
                     help="also replay with the measured inputs: the served / known-input ratio "
                          "of each run (else from reproduce's results.json beside the model)")
+    ap.add_argument("--profile", choices=("train", "file"), default="train",
+                    help="the weekly gains profile of the served forecasts: re-estimated from "
+                         "the forecast study's training weeks (default; as reproduce's model "
+                         "file) or the model file's (zonecast identify's: every whole week, "
+                         "the validation weeks' own gains included; the tables before "
+                         "2026-12-05)")
     args = ap.parse_args()
-    global LEVEL_TAU, KNOWN
-    KNOWN = args.known
+    global LEVEL_TAU, KNOWN, PROFILE
+    KNOWN, PROFILE = args.known, args.profile
     LEVEL_TAU = pd.Timedelta(args.level_tau)
     campaigns = {p.name: p for p in args.extra}
     if args.family is not None:

@@ -27,7 +27,10 @@ widened by the forecast's sensitivity to the weather forecast's learned error
 (``streaming.WEATHER_SPREAD``; docs/forecasts.md "Intervals that know the weather's
 error"). ``--side gains-level``: both runs with the library's defaults, the second with
 the served gains' slow level (``streaming.GAINS_LEVEL_TAU`` = ``--level-tau``, default
-24 h; docs/forecasts.md "The gains' slow level"). ``--known`` also replays each run with
+24 h; docs/forecasts.md "The gains' slow level"). ``--side spread-sides``: both runs with the
+library's defaults, the second with the weather perturbed both ways
+(``streaming.WEATHER_SPREAD_TWO_SIDED``; docs/forecasts.md "The weather's spread both
+ways"). ``--known`` also replays each run with
 the measured inputs (the served / known ratio of the same estimator). The served
 forecasts' weekly gains profile is re-estimated from the forecast study's training weeks
 (``--profile train``, the default since 2026-12-05) as in ``zonecast reproduce``'s model
@@ -89,7 +92,7 @@ def served(campaign: Path, model: Path, control: bool,
     nz = len(data.zones)
     before = (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
               streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
-              streaming.GAINS_LEVEL_TAU)
+              streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -105,8 +108,10 @@ def served(campaign: Path, model: Path, control: bool,
         streaming.DAY_CLASS_INTERVALS = control
     elif side == "weather-spread":  # the library's defaults but for the weather's spread
         streaming.WEATHER_SPREAD = control
-    else:  # gains-level: the library's defaults but for the served gains' slow level
+    elif side == "gains-level":  # the library's defaults but for the gains' slow level
         streaming.GAINS_LEVEL_TAU = LEVEL_TAU if control else None
+    else:  # spread-sides: the library's defaults but the weather's spread both ways
+        streaming.WEATHER_SPREAD_TWO_SIDED = control
     try:
         t0 = time.perf_counter()
         pipe = Pipeline.from_model_file(model)
@@ -126,7 +131,7 @@ def served(campaign: Path, model: Path, control: bool,
     finally:
         (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
          streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
-         streaming.GAINS_LEVEL_TAU) = before
+         streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED) = before
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
     for k, (r, stop) in enumerate(issues):
         fc = fcs[data.times[r]]
@@ -193,14 +198,15 @@ def main() -> None:
     ap.add_argument("--extra", type=Path, nargs="*", default=[])
     ap.add_argument("--only", nargs="*")
     ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std", "day-class",
-                                       "weather-spread", "gains-level"),
+                                       "weather-spread", "gains-level", "spread-sides"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
                          "filter after restarts (both controllers on), its forecast "
                          "std (the young filter on), the intervals' day classes, or the "
                          "weather's spread in the intervals, or the served gains' slow level "
-                         "(off: the profile and the short offset)")
+                         "(off: the profile and the short offset), or the weather's spread both "
+                         "ways")
     ap.add_argument("--level-tau", default="24h",
                     help="the slow level's time constant for --side gains-level (pandas "
                          "Timedelta, default 24h)")
@@ -232,7 +238,8 @@ def main() -> None:
             "young-std": ("young filter, steady std", "young filter and std"),
             "day-class": ("pooled days", "day classes"),
             "weather-spread": ("model std", "with the weather's spread"),
-            "gains-level": ("profile and short offset", f"slow level {LEVEL_TAU}")}[args.side]
+            "gains-level": ("profile and short offset", f"slow level {LEVEL_TAU}"),
+            "spread-sides": ("weather's spread one way", "both ways")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| working / other days | seconds off / on |")
     print("|---|---|---|---|---|---|---|")

@@ -164,6 +164,13 @@ DAY_CLASS_INTERVALS = True
 #: model's std in quadrature before the calibration scales it (docs/forecasts.md
 #: "Intervals that know the weather's error")
 WEATHER_SPREAD = True
+#: perturb the weather both ways (its learned error added and subtracted, the two changes'
+#: mean square in quadrature with the model's std: two sigma points) instead of one way
+#: (added): a thermostat that holds a room at its set point on a sunnier or warmer day
+#: lets it float on a duller or colder one, so the forecast's change is not symmetric
+#: (docs/forecasts.md "The weather's spread both ways"); the default of
+#: :attr:`OnlineEstimator.spread_two_sided`
+WEATHER_SPREAD_TWO_SIDED = False
 #: forecast the cooling of every VAV box as its room's thermostat does: the heat removal
 #: that holds each room's air at the cooling set point, none below it, wherever the
 #: reheat controller runs (chosen on the family's training members, docs/forecasts.md
@@ -376,6 +383,8 @@ class OnlineEstimator:
         #: the young filter after each start (:data:`YOUNG_FILTER`)
         self.young_filter = YOUNG_FILTER
         self.young_std = YOUNG_STD
+        #: the weather's spread both ways (:data:`WEATHER_SPREAD_TWO_SIDED`)
+        self.spread_two_sided = WEATHER_SPREAD_TWO_SIDED
         self.reset()
         self.steps = 0
         self.resets = 0
@@ -925,14 +934,16 @@ class OnlineEstimator:
         """What the calibration forecast kept at a due step (:meth:`_learn_inputs`) depends
         on besides the state: a served forecast with the same key at the same step is it."""
         return (self.time, self.steps, bool(control), self.hold_setpoints,
-                self.cooling_control, self.young_std, id(self.weather))
+                self.cooling_control, self.young_std, self.spread_two_sided, id(self.weather))
 
     def _served_std(self, ins: np.ndarray, f_ig: np.ndarray, control: bool,
                     mean: np.ndarray) -> np.ndarray:
         """Std (HORIZON, n_zones) [K] of a served forecast (inputs ``ins``, gains
         ``f_ig``, mean ``mean``) that the calibration scales: the model's, and with
         :attr:`weather_spread` in quadrature the change of the forecast when its weather
-        is perturbed by its learned error (:class:`WeatherSpread`)."""
+        is perturbed by its learned error (:class:`WeatherSpread`); with
+        :attr:`spread_two_sided` the mean square of the changes with the error added and
+        subtracted (the irradiance clipped at zero)."""
         std = self._forecast_std()
         if self.weather_spread is None:
             return std
@@ -943,7 +954,13 @@ class OnlineEstimator:
         pert[:, self._w_cols] += d
         # the same airflows as the run of ``mean`` just before: its air responses hold
         change = self._run_forecast(pert, f_ig, control=control, keep_responses=True) - mean
-        return np.sqrt(std ** 2 + change ** 2)
+        if not self.spread_two_sided:
+            return np.sqrt(std ** 2 + change ** 2)
+        pert[:, self._w_cols] = ins[:, self._w_cols] - d
+        sun = self._w_cols[1:]  # irradiance never below zero
+        pert[:, sun] = np.maximum(pert[:, sun], 0.0)
+        other = self._run_forecast(pert, f_ig, control=control, keep_responses=True) - mean
+        return np.sqrt(std ** 2 + 0.5 * (change ** 2 + other ** 2))
 
     def _horizon_var(self, own: bool = False) -> np.ndarray:
         """Output variances (HORIZON, n_zones) [K²] after 1..HORIZON predictions from the

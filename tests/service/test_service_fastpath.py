@@ -436,6 +436,41 @@ def test_served_interval_widens_by_the_forecasts_change_under_the_weathers_error
     assert np.array_equal(other.forecast().upper, fc.upper)
 
 
+def test_weather_spread_both_ways_is_two_sigma_points(bundle, telemetry):
+    """With spread_two_sided the std is sqrt(std^2 + (change+^2 + change-^2) / 2), the
+    weather perturbed up and down by its learned error (irradiance clipped at zero); a
+    forecast linear in the weather (no thermostat, no set-point band) gets what the
+    one-way spread gives."""
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:700]))
+    est = OnlineEstimator(bundle)
+    for k in range(len(tt)):
+        est.advance(tt[k], u[k], v[k], y[k])
+    ins, f_ig, control = est.forecast_inputs(), est.dayahead_gains(), est.reheat_control
+    w = est._w_cols
+    d = est.weather_spread.spread(ins[:, w])
+    est.spread_two_sided = True
+    mean = est._run_forecast(ins, f_ig, control=control)
+    up, down = ins.copy(), ins.copy()
+    up[:, w] += d
+    down[:, w] -= d
+    down[:, w[1:]] = np.maximum(down[:, w[1:]], 0.0)
+    cu = est._run_forecast(up, f_ig, control=control) - mean
+    cd = est._run_forecast(down, f_ig, control=control) - mean
+    want = np.sqrt(est._forecast_std() ** 2 + 0.5 * (cu ** 2 + cd ** 2))
+    np.testing.assert_allclose(est._served_std(ins, f_ig, control, mean), want)
+    assert np.abs(cd).max() > 0.01
+    # linear in the weather: both ways = one way
+    est.hold_setpoints = False
+    free = est._run_forecast(ins, f_ig, control=False)
+    two = est._served_std(ins, f_ig, False, free)
+    est.spread_two_sided = False
+    one = est._served_std(ins, f_ig, False, free)
+    assert (down[:, w[1:]] == ins[:, w[1:]] - d[:, 1:]).all()  # nothing clipped here
+    np.testing.assert_allclose(two, one, rtol=1e-9, atol=1e-12)
+
+
 def test_forecast_variants_of_one_replay_equal_separate_replays(bundle, telemetry):
     """offline_forecast_variants gives, variant for variant, bit for bit what a replay per
     variant (offline_forecasts) gives: the served forecast, persistence, and given inputs

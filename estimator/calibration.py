@@ -262,6 +262,14 @@ class IntervalCalibrator:
             # the pooled scores and level
             self.hist = np.tile(hist, (self.n_classes, 1, 1))
             self.levels = np.tile(level.reshape(1, -1)[-1:], (self.n_classes, 1))
+        elif (self.n_classes == 1 and hist.ndim == self.hist.ndim
+              and hist.shape[1:] == self.hist.shape[1:]
+              and hist.shape[0] % self.n_class_bins == 0):
+            # a checkpoint of the calibration by day class: the classes' weighted scores
+            # pooled, the adaptive level their mean
+            k = hist.shape[0] // self.n_class_bins
+            self.hist = hist.reshape((k, self.n_class_bins) + hist.shape[1:]).sum(axis=0)
+            self.levels = level.reshape(k, -1).mean(axis=0, keepdims=True)
         else:
             return False
         self.pending.clear()

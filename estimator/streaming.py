@@ -153,11 +153,13 @@ YOUNG_STEPS = 192
 #: the young filter's either way.
 YOUNG_STD = False
 #: calibrate the served intervals per day class of the target (the site's working days
-#: against weekends and holidays, :class:`~zonecast.estimator.inputs_forecast.DayCalendar`):
-#: pooled, they over-covered working days and under-covered weekends (docs/forecasts.md
-#: "Intervals by day class"); the default of the estimator's
+#: against weekends and holidays, :class:`~zonecast.estimator.inputs_forecast.DayCalendar`)
+#: instead of all days pooled: adopted on 2026-12-04 on a benchmark whose served forecasts
+#: used gains profiles that had seen the validation weeks; measured again without them
+#: (2026-12-05) it no longer met its rule (docs/forecasts.md "Intervals by day class"), so
+#: off: the default of the estimator's
 #: :class:`~zonecast.estimator.calibration.IntervalCalibrator`
-DAY_CLASS_INTERVALS = True
+DAY_CLASS_INTERVALS = False
 #: widen the served intervals by the forecast's sensitivity to the weather forecast's
 #: error: the forecast run again with the weather perturbed by its learned RMS error by
 #: lead (:class:`~zonecast.estimator.calibration.WeatherSpread`), the change added to the

@@ -378,6 +378,7 @@ def test_estimator_calibrates_by_the_sites_day_class_and_resumes_a_pooled_checkp
     from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
 
     tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:400]))
+    monkeypatch.setattr(streaming, "DAY_CLASS_INTERVALS", True)
     est = OnlineEstimator(bundle)
     cal = est.calibrator
     assert cal.n_classes == 2
@@ -399,6 +400,18 @@ def test_estimator_calibrates_by_the_sites_day_class_and_resumes_a_pooled_checkp
         assert np.array_equal(new.calibrator.hist[c * n:(c + 1) * n], old.calibrator.hist)
     assert np.array_equal(new.calibrator.levels, np.tile(old.calibrator.levels, (2, 1)))
     f = new.forecast()
+    assert np.all(np.isfinite(f.lower)) and np.all(f.upper > f.lower)
+    # and back: a day-class checkpoint resumes pooled (the classes' scores summed)
+    for k in range(len(tt) // 2):
+        new.advance(tt[-1] + (k + 1) * pd.Timedelta("15min"), u[k], v[k], y[k])
+    monkeypatch.setattr(streaming, "DAY_CLASS_INTERVALS", False)
+    back = OnlineEstimator(bundle)
+    back.load_bytes(new.to_bytes())
+    assert back.calibrator.n_classes == 1
+    np.testing.assert_allclose(back.calibrator.hist,
+                               new.calibrator.hist[:n] + new.calibrator.hist[n:])
+    np.testing.assert_allclose(back.calibrator.levels[0], new.calibrator.levels.mean(axis=0))
+    f = back.forecast()
     assert np.all(np.isfinite(f.lower)) and np.all(f.upper > f.lower)
 
 

@@ -527,8 +527,11 @@ class DayAheadGains:
         if self.horizon < 1:
             raise GainsInputError("horizon must be >= 1 step")
 
-    def offset(self, now, history: pd.DataFrame) -> tuple[np.ndarray, pd.Timestamp | None]:
-        """Recent offset d [W/m²] per zone and the newest stamp used (None if no data)."""
+    def offset(self, now, history: pd.DataFrame, fallback=None
+               ) -> tuple[np.ndarray, pd.Timestamp | None]:
+        """Recent offset d [W/m²] per zone and the newest stamp used (None if no data);
+        ``fallback`` (per zone, default 0) is d of a zone without a finite recent
+        estimate."""
         now = pd.Timestamp(now)
         if now.tzinfo is None:
             raise GainsTimeError("now must be a tz-aware timestamp")
@@ -540,15 +543,16 @@ class DayAheadGains:
         idx = _as_times(history.index, "history.index")
         step = self.profile.step
         known = np.asarray(idx <= now - step)
+        empty = np.zeros(p) if fallback is None else np.asarray(fallback, dtype=float)
         if not known.any():
-            return np.zeros(p), None
+            return empty.copy(), None
         past = history.loc[known]
         newest = idx[known].max()
         recent = past.loc[np.asarray(past.index > newest - self.window)]
         resid = recent.to_numpy(dtype=float) - np.nan_to_num(self.profile(recent.index))
         with np.errstate(invalid="ignore"):
             n_ok = np.isfinite(resid).sum(axis=0)
-            d = np.where(n_ok > 0, np.nansum(resid, axis=0) / np.maximum(n_ok, 1), 0.0)
+            d = np.where(n_ok > 0, np.nansum(resid, axis=0) / np.maximum(n_ok, 1), empty)
         return d, newest
 
     def issue(self, now, history: pd.DataFrame, level=None) -> pd.DataFrame:
@@ -575,23 +579,18 @@ class DayAheadGains:
             Shape (horizon, p), indexed by the interval starts (tz of ``now``),
             same columns as ``history`` [W/m²].
         """
-        d, newest = self.offset(now, history)
+        L = None if level is None else np.asarray(level, dtype=float)
+        p = self.profile.values.shape[1]
+        if L is not None and L.shape != (p,):
+            raise GainsInputError(f"level must have shape {(p,)} (one per zone), got {L.shape}")
+        d, _ = self.offset(now, history, fallback=L)  # a zone without estimates: d = L
         now = pd.Timestamp(now)
         starts = pd.date_range(now, periods=self.horizon, freq=self.profile.step)
         lead = (starts - now) / self.tau
         base = np.nan_to_num(self.profile(starts))
         decay = np.exp(-np.asarray(lead, dtype=float))[:, None]
-        if level is None:
+        if L is None:
             f = base + decay * d[None, :]
         else:
-            L = np.asarray(level, dtype=float)
-            if L.shape != d.shape:
-                raise GainsInputError(f"level must have shape {d.shape} (one per zone), got {L.shape}")
-            if newest is None:
-                d = L
-            else:  # a zone without a finite recent estimate: its offset is the level
-                known = history.loc[np.asarray(_as_times(history.index) <= now - self.profile.step)]
-                recent = known.loc[np.asarray(known.index > newest - self.window)]
-                d = np.where(np.isfinite(recent.to_numpy(dtype=float)).any(axis=0), d, L)
             f = base + L[None, :] + decay * (d - L)[None, :]
         return pd.DataFrame(f, index=starts, columns=history.columns)

@@ -612,18 +612,14 @@ class OnlineEstimator:
         if not self.started:
             raise ValueError("no forecast yet: the filter has not received a measurement")
         t = self.time
+        hit = None
         if inputs is None:
             control = self.reheat_control if thermostat_reheat is None else thermostat_reheat
-            hit = self._due if self._due is not None and self._due[0] == self._due_key(control) \
-                else None
-            if hit is not None:  # the calibration forecast of this step is the served one
-                _, ins, f_ig, mean, scale = hit
-                return Forecast(t, pd.date_range(t + STEP, periods=HORIZON, freq=STEP), mean,
-                                self._forecast_std(), f_ig, self.bundle.zones,
-                                self.bundle.version,
-                                halfwidth=self.calibrator.halfwidth(t.value // STEP.value, scale))
-            f_ig = self.dayahead_gains()
-            ins = self.forecast_inputs()
+            if self._due is not None and self._due[0] == self._due_key(control):
+                hit = self._due  # the calibration forecast of this step is the served one
+            else:
+                f_ig = self.dayahead_gains()
+                ins = self.forecast_inputs()
         else:
             f_ig = self.dayahead_gains()
             control = bool(thermostat_reheat)
@@ -632,10 +628,13 @@ class OnlineEstimator:
                 raise ValueError(f"inputs must be finite with shape ({HORIZON}, {self._nin}): "
                                  "u per box, then Ta, Ts, solE, solS, solW, solN per interval"
                                  + (", then the discharge-air rise per box" if self._rh else ""))
-        mean = self._run_forecast(ins, f_ig, control=control)
         std = self._forecast_std()
-        # the served inputs' weather is a forecast: its error widens the interval
-        scale = self._served_std(ins, f_ig, control, mean) if inputs is None else std
+        if hit is not None:
+            _, ins, f_ig, mean, scale = hit
+        else:
+            mean = self._run_forecast(ins, f_ig, control=control)
+            # the served inputs' weather is a forecast: its error widens the interval
+            scale = self._served_std(ins, f_ig, control, mean) if inputs is None else std
         times = pd.date_range(t + STEP, periods=HORIZON, freq=STEP)
         return Forecast(t, times, mean, std, f_ig, self.bundle.zones, self.bundle.version,
                         halfwidth=self.calibrator.halfwidth(t.value // STEP.value, scale))

@@ -30,7 +30,17 @@ the served gains' slow level (``streaming.GAINS_LEVEL_TAU`` = ``--level-tau``, d
 24 h; docs/forecasts.md "The gains' slow level"). ``--side spread-sides``: both runs with the
 library's defaults, the second with the weather perturbed both ways
 (``streaming.WEATHER_SPREAD_TWO_SIDED``; docs/forecasts.md "The weather's spread both
-ways"). ``--known`` also replays each run with
+ways"). ``--side closed-loop``: both runs with the library's defaults, the second with
+the model's std scaled by the share of a heat input the rooms' thermostats let through
+(``streaming.CLOSED_LOOP_STD``; docs/forecasts.md "Intervals that know the thermostat").
+``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
+each run's forecasts, intervals, measurements and target times (``.npz``) for analyses
+after the run (``benchmarks/coverage_analysis.py``). ``--stream FAMILY`` replays the
+members' telemetry from a family run with ``--continuous`` (every week from the first to
+the last, no gaps), with the campaign's model and profile, scored at the campaign's
+validation midnights (docs/forecasts.md "How precise a member's coverage is");
+``--all-midnights`` scores every local midnight of the stream instead (from its eighth
+day on, no experiment in the 24 h; the training weeks' too, whose gains the profile saw). ``--known`` also replays each run with
 the measured inputs (the served / known ratio of the same estimator). The served
 forecasts' weekly gains profile is re-estimated from the forecast study's training weeks
 (``--profile train``, the default since 2026-12-05) as in ``zonecast reproduce``'s model
@@ -85,14 +95,29 @@ def served(campaign: Path, model: Path, control: bool,
     ("cooling"), or with both on the young filter ("young"); and the coverage of the
     targets on working days and on other days."""
     site = load_site(campaign / "site.yaml")
-    frame = load_telemetry(campaign / "telemetry.csv", site).frame
     data = Pipeline.from_site(campaign / "site.yaml").data(campaign / "telemetry.csv")
-    weather = [parse_weather_forecast(b) for b in weather_forecasts(site, frame, seed=0)]
     issues = validation_issues(data, 0)
+    # the telemetry replayed: the campaign's, or (``--stream``) the same building operated
+    # without the campaign's gaps, scored at the same validation midnights and leads
+    src = campaign if STREAM is None else STREAM / campaign.name
+    frame = load_telemetry(src / "telemetry.csv", site).frame
+    weather = [parse_weather_forecast(b) for b in weather_forecasts(site, frame, seed=0)]
+    sdata = data  # the data the scored issues' rows index
+    if STREAM is not None:
+        sdata = Pipeline.from_site(src / "site.yaml").data(src / "telemetry.csv")
+        row_of = {t: i for i, t in enumerate(sdata.times)}
+        missing = [data.times[r] for r, _ in issues if data.times[r] not in row_of]
+        if missing:
+            raise SystemExit(f"{src}: no row at the validation midnight {missing[0]}")
+        # the campaign's validation midnights and leads, as rows of the stream
+        issues = ([(row_of[data.times[r]], row_of[data.times[r]] + stop - r)
+                   for r, stop in issues] if not ALL_MIDNIGHTS
+                  else stream_midnights(sdata, site))
     nz = len(data.zones)
     before = (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
               streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
-              streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED)
+              streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
+              streaming.CLOSED_LOOP_STD)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -110,52 +135,63 @@ def served(campaign: Path, model: Path, control: bool,
         streaming.WEATHER_SPREAD = control
     elif side == "gains-level":  # the library's defaults but for the gains' slow level
         streaming.GAINS_LEVEL_TAU = LEVEL_TAU if control else None
-    else:  # spread-sides: the library's defaults but the weather's spread both ways
+    elif side == "spread-sides":  # the library's defaults but the weather's spread both ways
         streaming.WEATHER_SPREAD_TWO_SIDED = control
+    elif side == "closed-loop":  # the library's defaults but the std of the held rooms
+        streaming.CLOSED_LOOP_STD = control
+    # "defaults": the library's defaults (one run, ``control`` ignored)
     try:
         t0 = time.perf_counter()
         pipe = Pipeline.from_model_file(model)
         if PROFILE == "train":  # the validation weeks' own gains out of the profile
             pipe = train_profile(pipe, data, model)
-        times = [data.times[r] for r, _ in issues]
-        fcs = pipe.forecast(campaign / "telemetry.csv", times, weather=weather)
+        times = [sdata.times[r] for r, _ in issues]
+        fcs = pipe.forecast(src / "telemetry.csv", times, weather=weather)
         seconds = time.perf_counter() - t0
         if KNOWN:  # the same estimator's forecasts with the measured inputs (reproduce's)
             rh = has_discharge(pipe.bundle)
-            measured = {data.times[r]: measured_inputs(data, r, r + HORIZON, rh)
+            measured = {sdata.times[r]: measured_inputs(sdata, r, r + HORIZON, rh)
                         for r, _ in issues}
             measured = {t: a for t, a in measured.items()
                         if len(a) == HORIZON and np.isfinite(a).all()}
-            known_fcs = pipe.forecast_variants(campaign / "telemetry.csv", times,
+            known_fcs = pipe.forecast_variants(src / "telemetry.csv", times,
                                                {"known": measured})["known"]
     finally:
         (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
          streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
-         streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED) = before
+         streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
+         streaming.CLOSED_LOOP_STD) = before
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
     for k, (r, stop) in enumerate(issues):
-        fc = fcs[data.times[r]]
+        fc = fcs[sdata.times[r]]
         n = min(HORIZON, stop - r - 1)
         pred[k], lo[k], hi[k] = fc.mean, fc.lower, fc.upper
-        meas[k, :n] = data.y[r + 1:r + 1 + n]
+        meas[k, :n] = sdata.y[r + 1:r + 1 + n]  # a stream's own readings (its sensor noise)
     rms = rms_by_zone(pred.reshape(-1, nz), meas.reshape(-1, nz), data.zones)
     if KNOWN:
         kp = np.full_like(pred, np.nan)
         for k, (r, _) in enumerate(issues):
-            if data.times[r] in known_fcs:
-                kp[k] = known_fcs[data.times[r]].mean
+            if sdata.times[r] in known_fcs:
+                kp[k] = known_fcs[sdata.times[r]].mean
         ok = np.isfinite(kp).all(axis=(1, 2))
         rms["known"] = rms_by_zone(kp[ok].reshape(-1, nz), meas[ok].reshape(-1, nz),
                                    data.zones)["mean"]
     # coverage by the targets' day class (the site's calendar)
     cal = DayCalendar.for_site(site)
-    targets = np.array([[data.times[r].value + (h + 1) * STEP_NS for h in range(HORIZON)]
+    targets = np.array([[sdata.times[r].value + (h + 1) * STEP_NS for h in range(HORIZON)]
                         for r, _ in issues])
     other = (cal.slots(targets.reshape(-1)) // cal.per_day).reshape(targets.shape) == 1
     inside = (meas >= lo) & (meas <= hi)
     seen = np.isfinite(meas)
     by_class = tuple(float((inside & seen & m[:, :, None]).sum() / max((seen & m[:, :, None]).sum(), 1))
                      for m in (~other, other))
+    if DUMP is not None:  # every served forecast of the run, for analyses after it
+        DUMP.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(DUMP / f"{campaign.name}-{side}-{'on' if control else 'off'}.npz",
+                            pred=pred, lower=lo, upper=hi, meas=meas, targets=targets,
+                            other_days=other, zones=np.array(data.zones),
+                            issue_weekday=np.array([sdata.times[r].tz_convert(site.timezone)
+                                                    .dayofweek for r, _ in issues]))
     return rms, _interval_coverage(lo, hi, meas, data.zones), seconds, by_class
 
 
@@ -164,9 +200,36 @@ STEP_NS = STEP.value
 LEVEL_TAU = pd.Timedelta("24h")
 #: also the forecasts with the measured inputs (``--known``): the served / known ratio in-run
 KNOWN = False
+#: a family folder of the same members operated without the campaign's gaps
+#: (``zonecast testbed family --continuous``; ``--stream``), or None
+STREAM: Path | None = None
+#: with STREAM: score every local midnight of the stream (``--all-midnights``), not only
+#: the campaign's validation midnights
+ALL_MIDNIGHTS = False
+#: folder for each run's forecasts, intervals and measurements (``--dump``), or None
+DUMP: Path | None = None
 #: the served forecast's weekly gains profile: "train" (the training weeks', ``--profile``)
 #: or "file" (the model file's)
 PROFILE = "train"
+
+
+def stream_midnights(sdata, site) -> list[tuple[int, int]]:
+    """(issue row, issue row + HORIZON + 1) at every local midnight of a stream from its
+    eighth day on (a week for the learners) whose next 24 h are all present and touch no
+    experiment (``--all-midnights``)."""
+    times = sdata.times
+    local = times.tz_convert(site.timezone)
+    exps = [(pd.Timestamp(e.start), pd.Timestamp(e.end)) for e in site.experiments]
+    day = pd.Timedelta("24h")
+    out = []
+    for r in np.flatnonzero((local.hour == 0) & (local.minute == 0)):
+        t = times[r]
+        if r < 7 * 96 or r + HORIZON >= len(times) or times[r + HORIZON] - t != day:
+            continue
+        if any(a < t + day and b > t for a, b in exps):
+            continue
+        out.append((int(r), int(r) + HORIZON + 1))
+    return out
 
 
 def train_profile(pipe: Pipeline, data, model: Path) -> Pipeline:
@@ -198,7 +261,8 @@ def main() -> None:
     ap.add_argument("--extra", type=Path, nargs="*", default=[])
     ap.add_argument("--only", nargs="*")
     ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std", "day-class",
-                                       "weather-spread", "gains-level", "spread-sides"),
+                                       "weather-spread", "gains-level", "spread-sides",
+                                       "closed-loop", "defaults"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
@@ -206,7 +270,22 @@ def main() -> None:
                          "std (the young filter on), the intervals' day classes, or the "
                          "weather's spread in the intervals, or the served gains' slow level "
                          "(off: the profile and the short offset), or the weather's spread both "
-                         "ways")
+                         "ways, or the model's std scaled by the thermostats' hold; "
+                         "'defaults': one run with the library's defaults")
+    ap.add_argument("--stream", type=Path,
+                    help="replay each member's telemetry from STREAM/<member> (the family run "
+                         "with --continuous: no gaps between the weeks), scored at the "
+                         "campaign's validation midnights with the campaign's model")
+    ap.add_argument("--on-only", action="store_true",
+                    help="run the side's second setting only (its first is known from an "
+                         "earlier run; the table repeats the second in both columns)")
+    ap.add_argument("--all-midnights", action="store_true",
+                    help="with --stream: score the served forecasts issued at every local "
+                         "midnight of the stream from its eighth day on (no experiment in "
+                         "their 24 h), not only at the campaign's validation midnights")
+    ap.add_argument("--dump", type=Path,
+                    help="write each run's forecasts, intervals, measurements and target times "
+                         "to DIR/<member>-<side>-<off|on>.npz")
     ap.add_argument("--level-tau", default="24h",
                     help="the slow level's time constant for --side gains-level (pandas "
                          "Timedelta, default 24h)")
@@ -220,8 +299,11 @@ def main() -> None:
                          "the validation weeks' own gains included; the tables before "
                          "2026-12-05)")
     args = ap.parse_args()
-    global LEVEL_TAU, KNOWN, PROFILE
-    KNOWN, PROFILE = args.known, args.profile
+    global LEVEL_TAU, KNOWN, PROFILE, DUMP, STREAM, ALL_MIDNIGHTS
+    KNOWN, PROFILE, DUMP, STREAM = args.known, args.profile, args.dump, args.stream
+    ALL_MIDNIGHTS = args.all_midnights
+    if ALL_MIDNIGHTS and STREAM is None:
+        ap.error("--all-midnights needs --stream")
     LEVEL_TAU = pd.Timedelta(args.level_tau)
     campaigns = {p.name: p for p in args.extra}
     if args.family is not None:
@@ -239,14 +321,21 @@ def main() -> None:
             "day-class": ("pooled days", "day classes"),
             "weather-spread": ("model std", "with the weather's spread"),
             "gains-level": ("profile and short offset", f"slow level {LEVEL_TAU}"),
-            "spread-sides": ("weather's spread one way", "both ways")}[args.side]
+            "spread-sides": ("weather's spread one way", "both ways"),
+            "closed-loop": ("model std", "scaled by the thermostats' hold"),
+            "defaults": ("defaults", "defaults (not run again)")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| working / other days | seconds off / on |")
     print("|---|---|---|---|---|---|---|")
     for name in names:
         model = args.reports / name / "model.json"
-        off, cov_off, s_off, cls_off = served(campaigns[name], model, False, args.side)
-        on, cov_on, s_on, cls_on = served(campaigns[name], model, True, args.side)
+        on_only = args.on_only and args.side != "defaults"
+        off, cov_off, s_off, cls_off = ((None,) * 4 if on_only
+                                        else served(campaigns[name], model, False, args.side))
+        on, cov_on, s_on, cls_on = ((off, cov_off, s_off, cls_off) if args.side == "defaults"
+                                    else served(campaigns[name], model, True, args.side))
+        if on_only:  # the off run is known from an earlier run: shown as the on run's
+            off, cov_off, s_off, cls_off = on, cov_on, s_on, cls_on
         res = args.reports / name / "results.json"
         known = _find(json.loads(res.read_text()), "service_known_inputs") if res.is_file() \
             else None

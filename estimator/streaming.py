@@ -173,6 +173,14 @@ WEATHER_SPREAD = True
 #: (docs/forecasts.md "The weather's spread both ways"); the default of
 #: :attr:`OnlineEstimator.spread_two_sided`
 WEATHER_SPREAD_TWO_SIDED = False
+#: scale the model's std of a controlled forecast by how much of an uncertain heat input
+#: its rooms' thermostats let through: the forecast run again with the gains raised and
+#: lowered by a probe (the weekly profile's spread), the rooms' change against the
+#: uncontrolled model's response to the same probe; a room held at a set point keeps
+#: little of the model's std (its measurement noise), a floating one all of it
+#: (docs/forecasts.md "Intervals that know the thermostat"); the default of
+#: :attr:`OnlineEstimator.closed_loop_std`
+CLOSED_LOOP_STD = False
 #: forecast the cooling of every VAV box as its room's thermostat does: the heat removal
 #: that holds each room's air at the cooling set point, none below it, wherever the
 #: reheat controller runs (chosen on the family's training members, docs/forecasts.md
@@ -387,6 +395,12 @@ class OnlineEstimator:
         self.young_std = YOUNG_STD
         #: the weather's spread both ways (:data:`WEATHER_SPREAD_TWO_SIDED`)
         self.spread_two_sided = WEATHER_SPREAD_TWO_SIDED
+        #: the model's std scaled by the thermostats' hold (:data:`CLOSED_LOOP_STD`)
+        self.closed_loop_std = CLOSED_LOOP_STD
+        #: the gains probe of :meth:`_closed_loop_factor` [W/m2]: the weekly profile's
+        #: spread over the week, pooled over the zones
+        prof = np.asarray(bundle.profile.values, dtype=float)
+        self._probe = float(np.sqrt(np.nanmean(np.nanvar(prof, axis=0)))) if prof.size else 0.0
         self.reset()
         self.steps = 0
         self.resets = 0
@@ -935,7 +949,8 @@ class OnlineEstimator:
         """What the calibration forecast kept at a due step (:meth:`_learn_inputs`) depends
         on besides the state: a served forecast with the same key at the same step is it."""
         return (self.time, self.steps, bool(control), self.hold_setpoints,
-                self.cooling_control, self.young_std, self.spread_two_sided, id(self.weather))
+                self.cooling_control, self.young_std, self.spread_two_sided,
+                self.closed_loop_std, id(self.weather))
 
     def _served_std(self, ins: np.ndarray, f_ig: np.ndarray, control: bool,
                     mean: np.ndarray) -> np.ndarray:
@@ -946,6 +961,12 @@ class OnlineEstimator:
         :attr:`spread_two_sided` the mean square of the changes with the error added and
         subtracted (the irradiance clipped at zero)."""
         std = self._forecast_std()
+        if self.closed_loop_std and control:
+            rho = self._closed_loop_factor(ins, f_ig, mean)
+            if rho is not None:
+                meas = np.diag(np.atleast_2d(self._steady.R)) if np.ndim(self._steady.R) == 2 \
+                    else np.asarray(self._steady.R, dtype=float)
+                std = np.sqrt(rho ** 2 * std ** 2 + (1.0 - rho ** 2) * meas[None, :])
         if self.weather_spread is None:
             return std
         d = self.weather_spread.spread(ins[:, self._w_cols])
@@ -962,6 +983,32 @@ class OnlineEstimator:
         pert[:, sun] = np.maximum(pert[:, sun], 0.0)
         other = self._run_forecast(pert, f_ig, control=control, keep_responses=True) - mean
         return np.sqrt(std ** 2 + 0.5 * (change ** 2 + other ** 2))
+
+    def _closed_loop_factor(self, ins: np.ndarray, f_ig: np.ndarray,
+                            mean: np.ndarray) -> np.ndarray | None:
+        """(HORIZON, n_zones) [-] in [0, 1]: the share of an uncertain heat input that the
+        controlled forecast ``mean`` (inputs ``ins``, gains ``f_ig``) lets through to each
+        zone's air, by lead. The gains are raised and lowered by the probe
+        :attr:`_probe` [W/m2] over the whole horizon and the controlled forecast run
+        again (the rooms' thermostats answer: a held room's air does not move, a
+        floating one's does); the root mean square of the two changes over the
+        uncontrolled model's response to the same probe (from a zero state, the same
+        airflows: the bilinear model is linear in the state and the forcing for given
+        airflows). 1 where that response is nil (the first step), None without a probe."""
+        if not self._probe > 0:
+            return None
+        m = self.bundle.model
+        nb = m.n_boxes
+        u = ins[:, :nb]
+        probe = np.full_like(f_ig, self._probe)
+        free = self._ladder.for_airflows(u).run(np.zeros(m.n), u, probe @ m.B_ig.T,
+                                                 np.zeros(len(u)))[1:] @ m.C.T
+        up = self._run_forecast(ins, f_ig + probe, control=True, keep_responses=True) - mean
+        down = self._run_forecast(ins, f_ig - probe, control=True, keep_responses=True) - mean
+        closed = np.sqrt(0.5 * (up ** 2 + down ** 2))
+        tiny = np.abs(free) <= 1e-9
+        rho = np.where(tiny, 1.0, closed / np.where(tiny, 1.0, np.abs(free)))
+        return np.clip(rho, 0.0, 1.0)
 
     def _horizon_var(self, own: bool = False) -> np.ndarray:
         """Output variances (HORIZON, n_zones) [K²] after 1..HORIZON predictions from the

@@ -501,6 +501,17 @@ def shorten_campaign(campaign: Campaign, n_weeks: int | None) -> Campaign:
                                          if week_of[d] in weeks])
 
 
+def continuous_campaign(campaign: Campaign) -> Campaign:
+    """Every week from the campaign's first to its last, the same excitation weekends: the
+    building operated without the campaign's gaps, as a service sees it (the served
+    forecast's calibration then learns from the weeks just before; docs/forecasts.md
+    "How precise a member's coverage is")."""
+    first, last = min(campaign.weeks), max(campaign.weeks)
+    weeks = [first + dt.timedelta(weeks=k) for k in range((last - first).days // 7 + 1)]
+    return Campaign(weeks=weeks, excitation_days=campaign.excitation_days,
+                    excitation_weekends=list(campaign.excitation_weekends))
+
+
 def _run_one(cfg: BuildingConfig, out: Path, run_seed: int) -> dict:
     """Run one member's campaign (in a worker process); never raises."""
     from zonecast.testbed.run import run_campaign
@@ -516,7 +527,8 @@ def _run_one(cfg: BuildingConfig, out: Path, run_seed: int) -> dict:
 
 
 def run_family(out: Path, n: int, seed: int, jobs: int = 1, weeks: int | None = None,
-               progress: Callable[[str], None] = lambda s: None) -> dict:
+               progress: Callable[[str], None] = lambda s: None, *,
+               continuous: bool = False, only: list[str] | None = None) -> dict:
     """Run the campaign of every member and write ``out/index.json``.
 
     Parameters
@@ -526,6 +538,9 @@ def run_family(out: Path, n: int, seed: int, jobs: int = 1, weeks: int | None = 
     n, seed : the family (:func:`family_members`).
     jobs : buildings simulated at once (worker processes).
     weeks : keep only this many campaign weeks (:func:`shorten_campaign`); None = all 11.
+    continuous : every week from the campaign's first to its last
+        (:func:`continuous_campaign`; not with ``weeks``).
+    only : run these members only (names); None = all.
     progress : called with one line per finished building.
 
     Returns
@@ -536,10 +551,21 @@ def run_family(out: Path, n: int, seed: int, jobs: int = 1, weeks: int | None = 
     """
     if jobs < 1:
         raise FamilyError(f"--jobs {jobs}: run at least one building at a time")
+    if continuous and weeks is not None:
+        raise FamilyError("--continuous runs every week from the first to the last; "
+                          "leave out --weeks")
     members = family_members(n, seed)
+    if only is not None:
+        unknown = sorted(set(only) - {m.name for m in members})
+        if unknown:
+            raise FamilyError(f"--only {', '.join(unknown)}: not members of the family "
+                              f"(n={n}, seed={seed})")
+        members = [m for m in members if m.name in only]
     configs = {}
     for m in members:
-        cfg = m.config.model_copy(update={"campaign": shorten_campaign(m.config.campaign, weeks)})
+        camp = (continuous_campaign(m.config.campaign) if continuous
+                else shorten_campaign(m.config.campaign, weeks))
+        cfg = m.config.model_copy(update={"campaign": camp})
         configs[m.name] = BuildingConfig.model_validate(cfg.model_dump())
     out = Path(out)
     for m in members:
@@ -547,7 +573,8 @@ def run_family(out: Path, n: int, seed: int, jobs: int = 1, weeks: int | None = 
         with open(out / m.name / "building.yaml", "w", encoding="utf-8") as fh:
             yaml.safe_dump(configs[m.name].model_dump(mode="json"), fh, sort_keys=False)
     first = configs[members[0].name].campaign
-    index = {"seed": seed, "n": n, "weeks": [w.isoformat() for w in first.weeks],
+    index = {"seed": seed, "n": n, "continuous": continuous,
+             "weeks": [w.isoformat() for w in first.weeks],
              "excitation_weekends": [d.isoformat() for d in first.excitation_weekends],
              "members": [{**m.record(), "status": "pending"} for m in members]}
     entry = {e["name"]: e for e in index["members"]}
@@ -560,7 +587,7 @@ def run_family(out: Path, n: int, seed: int, jobs: int = 1, weeks: int | None = 
         write_index()
         what = (f"{result['seconds']:.0f} s, EnergyPlus {result['energyplus_s']:.0f} s"
                 if result["status"] == "ok" else result["error"].splitlines()[0])
-        progress(f"[{k}/{n}] {m.name} ({m.role}) {result['status']}: {what}")
+        progress(f"[{k}/{len(members)}] {m.name} ({m.role}) {result['status']}: {what}")
 
     write_index()
     t0 = time.perf_counter()

@@ -157,12 +157,18 @@ def testbed_family(out: Annotated[Path, typer.Option(help="Output folder: one ca
                                                              "once.")] = 2,
                    weeks: Annotated[int | None, typer.Option(
                        min=1, help="Keep this many campaign weeks (excitation weeks first); "
-                                   "default all 11.")] = None) -> None:
+                                   "default all 11.")] = None,
+                   continuous: Annotated[bool, typer.Option(
+                       help="Every week from the campaign's first to its last (the "
+                            "building operated without the campaign's gaps).")] = False,
+                   only: Annotated[list[str] | None, typer.Option(
+                       help="Run this member only (repeatable).")] = None) -> None:
     """A family of virtual office floors (docs/testbed.md): office6 and n - 1 seeded
     variants, each with its campaign, and index.json with their parameters and roles."""
     from zonecast.testbed.family import run_family
     try:
-        index = run_family(out, n, seed, jobs=jobs, weeks=weeks, progress=typer.echo)
+        index = run_family(out, n, seed, jobs=jobs, weeks=weeks, progress=typer.echo,
+                           continuous=continuous, only=only)
     except ValueError as exc:
         _fail(exc)
     failed = [m["name"] for m in index["members"] if m["status"] != "ok"]

@@ -484,6 +484,44 @@ def test_weather_spread_both_ways_is_two_sigma_points(bundle, telemetry):
     np.testing.assert_allclose(two, one, rtol=1e-9, atol=1e-12)
 
 
+def test_closed_loop_factor_is_the_share_of_a_heat_probe_the_thermostats_let_through(
+        bundle, telemetry):
+    """The closed-loop factor is the rms change of the controlled forecast under the gains
+    raised and lowered by the probe over the uncontrolled model's response to it: 1 for a
+    forecast linear in the gains (no thermostat, no band), below 1 where the thermostats
+    hold a room, in [0, 1] everywhere; the served std is then
+    sqrt(rho^2 std^2 + (1 - rho^2) sigma_meas^2) before the weather's spread."""
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:700]))
+    est = OnlineEstimator(bundle)
+    for k in range(len(tt)):
+        est.advance(tt[k], u[k], v[k], y[k])
+    assert est._probe > 0
+    ins, f_ig = est.forecast_inputs(), est.dayahead_gains()
+    # linear: no set-point band, no thermostat
+    est.hold_setpoints = False
+    free = est._run_forecast(ins, f_ig, control=False)
+    rho = est._closed_loop_factor(ins, f_ig, free)
+    assert rho.shape == free.shape
+    np.testing.assert_allclose(rho, 1.0, atol=1e-6)
+    # with the thermostats: some room-steps held, all within [0, 1]
+    est.hold_setpoints = True
+    control = est.reheat_control
+    mean = est._run_forecast(ins, f_ig, control=control)
+    rho = est._closed_loop_factor(ins, f_ig, mean)
+    assert (rho >= 0).all() and (rho <= 1).all()
+    assert rho.min() < 0.5 and rho.max() > 0.9
+    # the served std uses it (weather's spread off to see the model's part alone)
+    est.weather_spread, est.closed_loop_std = None, True
+    meas = np.diag(est._steady.R)
+    std = est._forecast_std()
+    want = np.sqrt(rho ** 2 * std ** 2 + (1 - rho ** 2) * meas[None, :])
+    np.testing.assert_allclose(est._served_std(ins, f_ig, control, mean), want)
+    est.closed_loop_std = False
+    np.testing.assert_allclose(est._served_std(ins, f_ig, control, mean), std)
+
+
 def test_forecast_variants_of_one_replay_equal_separate_replays(bundle, telemetry):
     """offline_forecast_variants gives, variant for variant, bit for bit what a replay per
     variant (offline_forecasts) gives: the served forecast, persistence, and given inputs

@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 import itertools
 import sqlite3
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -14,9 +15,11 @@ from zonecast.testbed.effects import Effects
 from zonecast.testbed.family import (
     CLIMATES,
     FamilyError,
+    continuous_campaign,
     family_members,
     floor_plan,
     generate_family,
+    run_family,
     shorten_campaign,
     wall_u,
 )
@@ -184,6 +187,19 @@ def test_shorten_campaign_keeps_the_excitation_weeks_first():
     assert shorten_campaign(c, 4).weeks[0] == dt.date(2014, 9, 8)
     with pytest.raises(ValueError, match="choose 1 to 11"):
         shorten_campaign(c, 12)
+
+
+def test_continuous_campaign_fills_the_gaps_between_the_weeks():
+    c = OFFICE6.campaign
+    full = continuous_campaign(c)
+    assert full.weeks[0] == min(c.weeks) and full.weeks[-1] == max(c.weeks)
+    assert set(c.weeks) <= set(full.weeks)
+    assert all((b - a).days == 7 for a, b in zip(full.weeks, full.weeks[1:], strict=False))
+    assert full.excitation_weekends == c.excitation_weekends
+    with pytest.raises(FamilyError, match="leave out --weeks"):
+        run_family(Path("unused"), 2, 0, weeks=3, continuous=True)
+    with pytest.raises(FamilyError, match="not members"):
+        run_family(Path("unused"), 2, 0, only=["nobody"])
 
 
 def test_weekend_work_adds_weekend_people_and_leaves_the_rest_of_the_stream():

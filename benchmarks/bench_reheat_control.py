@@ -32,7 +32,7 @@ library's defaults, the second with the weather perturbed both ways
 (``streaming.WEATHER_SPREAD_TWO_SIDED``; docs/forecasts.md "The weather's spread both
 ways"). ``--side closed-loop``: both runs with the library's defaults, the second with
 the model's std scaled by the share of a heat input the rooms' thermostats let through
-(``streaming.CLOSED_LOOP_STD``; docs/forecasts.md "Intervals that know the thermostat").
+(``streaming.CLOSED_LOOP_STD``; docs/forecasts.md "How precise a member's coverage is").
 ``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
 each run's forecasts, intervals, measurements and target times (``.npz``) for analyses
 after the run (``benchmarks/coverage_analysis.py``). ``--stream FAMILY`` replays the

@@ -180,8 +180,8 @@ WEATHER_SPREAD_TWO_SIDED = False
 #: lowered by a probe (the weekly profile's spread), the rooms' change against the
 #: uncontrolled model's response to the same probe; a room held at a set point keeps
 #: little of the model's std (its measurement noise), a floating one all of it
-#: (docs/forecasts.md "Intervals that know the thermostat"); the default of
-#: :attr:`OnlineEstimator.closed_loop_std`
+#: (docs/forecasts.md "How precise a member's coverage is", its last paragraph); the
+#: default of :attr:`OnlineEstimator.closed_loop_std`
 CLOSED_LOOP_STD = False
 #: forecast the cooling of every VAV box as its room's thermostat does: the heat removal
 #: that holds each room's air at the cooling set point, none below it, wherever the

@@ -33,14 +33,18 @@ library's defaults, the second with the weather perturbed both ways
 ways"). ``--side closed-loop``: both runs with the library's defaults, the second with
 the model's std scaled by the share of a heat input the rooms' thermostats let through
 (``streaming.CLOSED_LOOP_STD``; docs/forecasts.md "How precise a member's coverage is").
-``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
+``--side monday-fill``: both runs with the library's defaults, the first with the
+profile's empty day (Monday, each week's warm-up) filled from every other day, the second
+from the days of its operating day's class (``forecast.PROFILE_FILL``, ``--fill OFF ON``,
+default ``all operating``; docs/forecasts.md "Monday's gains"). ``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
 each run's forecasts, intervals, measurements and target times (``.npz``) for analyses
 after the run (``benchmarks/coverage_analysis.py``). ``--stream FAMILY`` replays the
 members' telemetry from a family run with ``--continuous`` (every week from the first to
 the last, no gaps), with the campaign's model and profile, scored at the campaign's
 validation midnights (docs/forecasts.md "How precise a member's coverage is");
 ``--all-midnights`` scores every local midnight of the stream instead (from its eighth
-day on, no experiment in the 24 h; the training weeks' too, whose gains the profile saw). ``--known`` also replays each run with
+day on, no experiment in the 24 h; the training weeks' too, whose gains the profile saw),
+``--issue-weekdays 0`` only those that start a Monday. ``--known`` also replays each run with
 the measured inputs (the served / known ratio of the same estimator). The served
 forecasts' weekly gains profile is re-estimated from the forecast study's training weeks
 (``--profile train``, the default since 2026-12-05) as in ``zonecast reproduce``'s model
@@ -69,6 +73,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from zonecast.estimator import forecast as forecast_module
 from zonecast.estimator import streaming
 from zonecast.estimator.constants import HORIZON, STEP
 from zonecast.estimator.evaluate import rms_by_zone
@@ -112,12 +117,12 @@ def served(campaign: Path, model: Path, control: bool,
         # the campaign's validation midnights and leads, as rows of the stream
         issues = ([(row_of[data.times[r]], row_of[data.times[r]] + stop - r)
                    for r, stop in issues] if not ALL_MIDNIGHTS
-                  else stream_midnights(sdata, site))
+                  else stream_midnights(sdata, site, ISSUE_WEEKDAYS))
     nz = len(data.zones)
     before = (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
               streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
               streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
-              streaming.CLOSED_LOOP_STD)
+              streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -139,6 +144,8 @@ def served(campaign: Path, model: Path, control: bool,
         streaming.WEATHER_SPREAD_TWO_SIDED = control
     elif side == "closed-loop":  # the library's defaults but the std of the held rooms
         streaming.CLOSED_LOOP_STD = control
+    elif side == "monday-fill":  # the library's defaults but how the profile's empty day
+        forecast_module.PROFILE_FILL = FILLS[control]  # is filled (read by train_profile)
     # "defaults": the library's defaults (one run, ``control`` ignored)
     try:
         t0 = time.perf_counter()
@@ -160,7 +167,7 @@ def served(campaign: Path, model: Path, control: bool,
         (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
          streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
          streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
-         streaming.CLOSED_LOOP_STD) = before
+         streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL) = before
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
     for k, (r, stop) in enumerate(issues):
         fc = fcs[sdata.times[r]]
@@ -191,7 +198,7 @@ def served(campaign: Path, model: Path, control: bool,
                             pred=pred, lower=lo, upper=hi, meas=meas, targets=targets,
                             other_days=other, zones=np.array(data.zones),
                             issue_weekday=np.array([sdata.times[r].tz_convert(site.timezone)
-                                                    .dayofweek for r, _ in issues]))
+                                                    .day_of_week for r, _ in issues]))
     return rms, _interval_coverage(lo, hi, meas, data.zones), seconds, by_class
 
 
@@ -206,6 +213,11 @@ STREAM: Path | None = None
 #: with STREAM: score every local midnight of the stream (``--all-midnights``), not only
 #: the campaign's validation midnights
 ALL_MIDNIGHTS = False
+#: ``--side monday-fill``: the profile's fill off and on (``--fill``;
+#: ``forecast.PROFILE_FILL``)
+FILLS = ("all", "operating")
+#: with ALL_MIDNIGHTS: the local weekdays of the issues scored (``--issue-weekdays``), or None
+ISSUE_WEEKDAYS: list[int] | None = None
 #: folder for each run's forecasts, intervals and measurements (``--dump``), or None
 DUMP: Path | None = None
 #: the served forecast's weekly gains profile: "train" (the training weeks', ``--profile``)
@@ -213,10 +225,11 @@ DUMP: Path | None = None
 PROFILE = "train"
 
 
-def stream_midnights(sdata, site) -> list[tuple[int, int]]:
+def stream_midnights(sdata, site, weekdays=None) -> list[tuple[int, int]]:
     """(issue row, issue row + HORIZON + 1) at every local midnight of a stream from its
     eighth day on (a week for the learners) whose next 24 h are all present and touch no
-    experiment (``--all-midnights``)."""
+    experiment (``--all-midnights``); with ``weekdays`` only the midnights that start those
+    local weekdays (0 = Monday; ``--issue-weekdays``)."""
     times = sdata.times
     local = times.tz_convert(site.timezone)
     exps = [(pd.Timestamp(e.start), pd.Timestamp(e.end)) for e in site.experiments]
@@ -227,6 +240,8 @@ def stream_midnights(sdata, site) -> list[tuple[int, int]]:
         if r < 7 * 96 or r + HORIZON >= len(times) or times[r + HORIZON] - t != day:
             continue
         if any(a < t + day and b > t for a, b in exps):
+            continue
+        if weekdays is not None and local[r].day_of_week not in weekdays:
             continue
         out.append((int(r), int(r) + HORIZON + 1))
     return out
@@ -262,7 +277,7 @@ def main() -> None:
     ap.add_argument("--only", nargs="*")
     ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std", "day-class",
                                        "weather-spread", "gains-level", "spread-sides",
-                                       "closed-loop", "defaults"),
+                                       "closed-loop", "monday-fill", "defaults"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
@@ -270,7 +285,8 @@ def main() -> None:
                          "std (the young filter on), the intervals' day classes, or the "
                          "weather's spread in the intervals, or the served gains' slow level "
                          "(off: the profile and the short offset), or the weather's spread both "
-                         "ways, or the model's std scaled by the thermostats' hold; "
+                         "ways, or the model's std scaled by the thermostats' hold, or the "
+                         "profile's empty day (Monday) filled from every day or its own class; "
                          "'defaults': one run with the library's defaults")
     ap.add_argument("--stream", type=Path,
                     help="replay each member's telemetry from STREAM/<member> (the family run "
@@ -283,6 +299,13 @@ def main() -> None:
                     help="with --stream: score the served forecasts issued at every local "
                          "midnight of the stream from its eighth day on (no experiment in "
                          "their 24 h), not only at the campaign's validation midnights")
+    ap.add_argument("--issue-weekdays", type=int, nargs="*",
+                    help="with --all-midnights: score only the midnights that start these "
+                         "local weekdays (0 = Monday)")
+    ap.add_argument("--fill", nargs=2, default=["all", "operating"],
+                    choices=("all", "day", "operating"), metavar=("OFF", "ON"),
+                    help="--side monday-fill: the profile's empty-day fills compared "
+                         "(forecast.PROFILE_FILL; default: all operating)")
     ap.add_argument("--dump", type=Path,
                     help="write each run's forecasts, intervals, measurements and target times "
                          "to DIR/<member>-<side>-<off|on>.npz")
@@ -299,11 +322,17 @@ def main() -> None:
                          "the validation weeks' own gains included; the tables before "
                          "2026-12-05)")
     args = ap.parse_args()
-    global LEVEL_TAU, KNOWN, PROFILE, DUMP, STREAM, ALL_MIDNIGHTS
+    global LEVEL_TAU, KNOWN, PROFILE, DUMP, STREAM, ALL_MIDNIGHTS, ISSUE_WEEKDAYS, FILLS
+    FILLS = tuple(args.fill)
     KNOWN, PROFILE, DUMP, STREAM = args.known, args.profile, args.dump, args.stream
-    ALL_MIDNIGHTS = args.all_midnights
+    ALL_MIDNIGHTS, ISSUE_WEEKDAYS = args.all_midnights, args.issue_weekdays
     if ALL_MIDNIGHTS and STREAM is None:
         ap.error("--all-midnights needs --stream")
+    if ISSUE_WEEKDAYS is not None and not ALL_MIDNIGHTS:
+        ap.error("--issue-weekdays needs --all-midnights")
+    if args.side == "monday-fill" and PROFILE != "train":
+        ap.error("--side monday-fill needs --profile train (the model file's profile is "
+                 "filled when it was written)")
     LEVEL_TAU = pd.Timedelta(args.level_tau)
     campaigns = {p.name: p for p in args.extra}
     if args.family is not None:
@@ -323,6 +352,7 @@ def main() -> None:
             "gains-level": ("profile and short offset", f"slow level {LEVEL_TAU}"),
             "spread-sides": ("weather's spread one way", "both ways"),
             "closed-loop": ("model std", "scaled by the thermostats' hold"),
+            "monday-fill": (f"empty day: {FILLS[0]}", f"{FILLS[1]}"),
             "defaults": ("defaults", "defaults (not run again)")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| working / other days | seconds off / on |")

@@ -20,6 +20,7 @@ the measured ones (as the paper's forecasts; no weather or HVAC forecast is mode
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -159,26 +160,63 @@ def track_week(model: BilinearModel, data: ModelData, rows) -> WeekTrack:
     return WeekTrack(a + day, track_gains(model, data, a + day, b - 1, x0))
 
 
-def fill_profile(profile: WeeklyProfile) -> WeeklyProfile:
+#: how :meth:`Pipeline.weekly_profile <zonecast.estimator.pipeline.Pipeline.weekly_profile>`
+#: fills an empty day of the profile (Monday, each tracked week's warm-up day):
+#: ``"operating"`` from the days of its operating day's class (the site's working days or
+#: the others; an operating day runs from the thermostat's occupied start to the next
+#: one's, so a Monday's small hours follow a weekend day), ``"day"`` by the calendar
+#: day's class, ``"all"`` from every day with data (before 2026-12-05).
+#: ``--side monday-fill`` of benchmarks/bench_reheat_control.py compares them.
+PROFILE_FILL = "day"
+
+
+def fill_profile(profile: WeeklyProfile, working_days: Sequence[int] | None = None,
+                 day_start: float = 0.0) -> WeeklyProfile:
     """Bins without data take the mean of the same time of day over the days that have it.
 
-    Weeks tracked from their second day leave the first day's bins empty; a forecast and
-    the day-ahead offset need a value there (a workday takes the other days' mean).
+    Weeks tracked from their second day leave the first day's bins (Monday's) empty; a
+    forecast and the day-ahead offset need a value there. With ``working_days`` (local
+    weekdays, 0 = Monday; the site's thermostat calendar) an empty bin takes the mean of
+    the same time of day over the days of its own class, working or not, when any of them
+    has data: a Monday filled from Tuesday to Sunday would carry two weekend days' gains
+    into a working day (a third of its occupied gains missing). Without ``working_days``,
+    or when no day of the class has data, every day with data counts.
+
+    ``day_start`` [h, local] is where an operating day begins (the thermostat's occupied
+    start): a bin before it belongs to the previous day's class. The small hours' f_IG
+    after an occupied day carry the heat its rooms stored (positive), after a weekend day
+    not: Monday 00:00-07:00 is filled from Sunday's small hours, not Tuesday's to
+    Friday's (docs/forecasts.md "Monday's gains").
     """
     per_day = int(pd.Timedelta("1D") / profile.step)
     v = profile.values.reshape(7, per_day, -1)
-    tod = _nanmean0(v)
-    filled = np.where(np.isnan(v), tod[None], v).reshape(profile.values.shape)
+    fill = np.broadcast_to(_nanmean0(v)[None], v.shape).copy()
+    if working_days is not None:
+        work = np.isin(np.arange(7), list(working_days))
+        start = int(np.clip(round(day_start * per_day / 24), 0, per_day))
+        # class of each (day, bin): the calendar day's, or the day before's before start
+        cls = np.repeat(work[:, None], per_day, axis=1)
+        cls[:, :start] = np.roll(work, 1)[:, None]
+        for c in (True, False):
+            sel = cls == c  # (7, per_day)
+            vals = np.where(sel[:, :, None], v, np.nan)
+            tod = _nanmean0(vals)  # (per_day, p)
+            own = np.where(np.isnan(tod)[None], fill, tod[None])
+            fill = np.where(sel[:, :, None], own, fill)
+    filled = np.where(np.isnan(v), fill, v).reshape(profile.values.shape)
     return WeeklyProfile(np.nan_to_num(filled), profile.counts, profile.timezone, profile.step)
 
 
-def fixed_profile(data: ModelData, tracks: list[WeekTrack]) -> WeeklyProfile:
+def fixed_profile(data: ModelData, tracks: list[WeekTrack],
+                  working_days: Sequence[int] | None = None,
+                  day_start: float = 0.0) -> WeeklyProfile:
     """Paper Eq:fixed_ig: the mean of the weeks' f_IG on the local time-of-week axis
-    (empty bins filled by :func:`fill_profile`)."""
+    (empty bins filled by :func:`fill_profile`, by day class with ``working_days``)."""
     rows = np.concatenate([t.rows for t in tracks])
     f = np.concatenate([t.track.f_ig for t in tracks])
     step = data.times[1] - data.times[0]
-    return fill_profile(fit_weekly_profile(data.times[rows], f, data.timezone, step=step))
+    return fill_profile(fit_weekly_profile(data.times[rows], f, data.timezone, step=step),
+                        working_days, day_start)
 
 
 # --------------------------------------------------------------------------- filter

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from zonecast.estimator import forecast as forecast_module
 from zonecast.estimator.artifact import (
     ModelBundle,
     NoiseSettings,
@@ -37,6 +38,7 @@ from zonecast.estimator.forecast import Forecast, fixed_profile, track_week, who
 from zonecast.estimator.gains import WeeklyProfile
 from zonecast.estimator.identify import IdentificationResult, excitation_saturdays, identify
 from zonecast.estimator.idf import Building, read_building
+from zonecast.estimator.inputs_forecast import DayCalendar
 from zonecast.estimator.model import BilinearModel
 from zonecast.estimator.priors import CONVECTIVE_FILMS, Prior, building_priors
 from zonecast.estimator.rc.network import ModelOptions, RCStructure, build_structure
@@ -533,7 +535,15 @@ class Pipeline:
         for i, w in enumerate(weeks):
             progress(f"week {i + 1}/{len(weeks)}")
             tracks.append(track_week(fitted, data, w["rows"]))
-        self.profile = fixed_profile(data, tracks)
+        # an empty day (Monday, each week's warm-up) is filled from its own day class
+        mode = forecast_module.PROFILE_FILL
+        if mode not in ("operating", "day", "all"):
+            raise PipelineError(f"forecast.PROFILE_FILL {mode!r}: use 'operating', 'day' or "
+                                "'all'")
+        th = self.site.thermostat
+        classes = None if mode == "all" else DayCalendar.for_site(self.site).working_days
+        start = th.occupied_hours[0] if mode == "operating" and th is not None else 0.0
+        self.profile = fixed_profile(data, tracks, classes, start)
         self.profile_weeks = [w["start"] for w in weeks]
         self._bundle = None
         return self.profile

@@ -358,3 +358,30 @@ def test_structure_files_without_the_horizontal_column_still_load(vb, bundle, tm
         np.savez(fh, **arrays)
     with pytest.raises(ValueError, match="B_v has 5 columns"):
         load_structure(tmp_path / "bad.npz")
+
+
+@pytest.mark.parametrize("mode", ["operating", "day", "all"])
+def test_weekly_profile_fills_the_empty_day_by_the_sites_calendar(vb, monkeypatch, mode):
+    """Pipeline.weekly_profile hands the site's thermostat working days and occupied start
+    to fixed_profile as forecast.PROFILE_FILL says; an unknown mode is an error."""
+    from zonecast.estimator import forecast, pipeline
+
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    data = pipe.data(pipe.telemetry(vb))
+    seen = {}
+
+    def capture(d, tracks, working_days=None, day_start=0.0):
+        seen.update(days=working_days, start=day_start, n=len(tracks))
+        return "profile"
+
+    monkeypatch.setattr(pipeline, "track_week", lambda *a, **k: None)
+    monkeypatch.setattr(pipeline, "fixed_profile", capture)
+    monkeypatch.setattr(forecast, "PROFILE_FILL", mode)
+    assert pipe.weekly_profile(data) == "profile"
+    th = pipe.site.thermostat
+    assert seen["n"] == 3
+    assert seen["days"] == (None if mode == "all" else th.working_days)
+    assert seen["start"] == (th.occupied_hours[0] if mode == "operating" else 0.0)
+    monkeypatch.setattr(forecast, "PROFILE_FILL", "weekday")
+    with pytest.raises(PipelineError, match="PROFILE_FILL 'weekday': use 'operating'"):
+        pipe.weekly_profile(data)

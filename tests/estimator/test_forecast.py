@@ -7,12 +7,13 @@ from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.forecast import (
     Z90,
     WeekTrack,
+    fill_profile,
     fixed_profile,
     issue_forecast,
     online_paper_predictions,
     week_split,
 )
-from zonecast.estimator.gains import fit_weekly_profile
+from zonecast.estimator.gains import WeeklyProfile, fit_weekly_profile
 from zonecast.estimator.internal_gains import track_gains
 from zonecast.estimator.rc.network import ModelOptions as _Options
 from zonecast.estimator.telemetry import segments_of
@@ -89,6 +90,52 @@ def test_fixed_profile_of_identical_weeks_is_the_injected_gains(model):
     rows1, pred = online_paper_predictions(model, tracks[0])
     err = pred - d.y[rows1]
     assert np.abs(err).max() < 0.2  # only the 15-min change of f_IG is missed
+
+
+def test_an_empty_day_is_filled_from_its_own_day_class():
+    """Monday (each tracked week's warm-up day) has no data: with the working days it takes
+    the other working days' mean by time of day, not a mean that counts the weekend."""
+    per_day = 96
+    tod = np.sin(np.linspace(0, np.pi, per_day))  # a day's shape
+    level = np.array([np.nan, 10, 12, 14, 16, 1, 3])  # Monday empty, weekend low
+    values = (level[:, None] * tod[None]).reshape(-1, 1)
+    counts = np.isfinite(values).astype(int)
+    prof = WeeklyProfile(values, counts, TZ)
+    by_class = fill_profile(prof, working_days=[0, 1, 2, 3, 4]).values.reshape(7, per_day)
+    np.testing.assert_allclose(by_class[0], 13 * tod)  # Tue-Fri mean
+    np.testing.assert_allclose(by_class[1:], (level[1:, None] * tod[None]))  # data kept
+    pooled = fill_profile(prof).values.reshape(7, per_day)
+    np.testing.assert_allclose(pooled[0], 56 / 6 * tod)  # every day with data
+    # an empty weekend day takes the other weekend day's; a class without any data the
+    # every-day mean
+    level2 = np.array([10, 10, 12, 14, 16, 1, np.nan])
+    v2 = (level2[:, None] * tod[None]).reshape(-1, 1)
+    filled = fill_profile(WeeklyProfile(v2, np.isfinite(v2).astype(int), TZ),
+                          working_days=range(5)).values.reshape(7, per_day)
+    np.testing.assert_allclose(filled[6], 1 * tod)
+    only_work = np.where(np.arange(7)[:, None] < 5, 5.0, np.nan) * np.ones((7, per_day))
+    filled = fill_profile(WeeklyProfile(only_work.reshape(-1, 1), np.ones((672, 1), int), TZ),
+                          working_days=range(5)).values.reshape(7, per_day)
+    np.testing.assert_allclose(filled[5:], 5.0)
+
+
+def test_an_empty_mondays_small_hours_follow_the_weekend():
+    """With the operating day starting at 07:00, Monday's bins before 07:00 belong to
+    Sunday's operating day: filled from Sunday's small hours (the only other day after a
+    non-working day), Monday's later bins from Tuesday to Friday."""
+    per_day, start = 96, 28  # 07:00
+    level = np.array([np.nan, 10, 12, 14, 16, 1, 3.0])
+    values = np.repeat(level[:, None], per_day, axis=1)
+    before = np.nan_to_num(np.roll(level, 1), nan=11.0)  # Monday's level had it been seen
+    values[1:, :start] += 100 * before[1:, None]  # small hours: the day before's
+    prof = WeeklyProfile(values.reshape(-1, 1), np.ones((672, 1), int), TZ)
+    out = fill_profile(prof, working_days=range(5), day_start=7.0).values.reshape(7, per_day)
+    np.testing.assert_allclose(out[0, :start], values[6, :start])  # Sunday's small hours
+    np.testing.assert_allclose(out[0, start:], 13.0)  # Tuesday to Friday
+    np.testing.assert_allclose(out[1:], values[1:])
+    # day_start 0: the calendar day's class for every bin (Tuesday to Friday all day)
+    by_day = fill_profile(prof, working_days=range(5)).values.reshape(7, per_day)
+    np.testing.assert_allclose(by_day[0], values[1:5].mean(axis=0))
 
 
 @pytest.mark.parametrize("corrupt", [1e6, np.nan])

@@ -167,7 +167,7 @@ def track_week(model: BilinearModel, data: ModelData, rows) -> WeekTrack:
 #: one's, so a Monday's small hours follow a weekend day), ``"day"`` by the calendar
 #: day's class, ``"all"`` from every day with data (before 2026-12-05).
 #: ``--side monday-fill`` of benchmarks/bench_reheat_control.py compares them.
-PROFILE_FILL = "day"
+PROFILE_FILL = "operating"
 
 
 def fill_profile(profile: WeeklyProfile, working_days: Sequence[int] | None = None,

@@ -36,7 +36,13 @@ the model's std scaled by the share of a heat input the rooms' thermostats let t
 ``--side monday-fill``: both runs with the library's defaults, the first with the
 profile's empty day (Monday, each week's warm-up) filled from every other day, the second
 from the days of its operating day's class (``forecast.PROFILE_FILL``, ``--fill OFF ON``,
-default ``all operating``; docs/forecasts.md "Monday's gains"). ``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
+default ``all operating``; docs/forecasts.md "Monday's gains"). ``--side deadband``: both
+runs with the library's defaults, the second with the boxes inside the dead band throttled
+to their learned minimum airflow (``streaming.DEADBAND_CONTROL``; docs/forecasts.md "The
+dead band's airflow"). ``--side learn-empty``: both runs with the library's defaults, the
+second with the profile's empty bins (Monday) learned from the building's own per-step
+gains as it operates (``streaming.PROFILE_LEARN_EMPTY``; docs/forecasts.md "Monday's gains
+from Mondays"). ``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
 each run's forecasts, intervals, measurements and target times (``.npz``) for analyses
 after the run (``benchmarks/coverage_analysis.py``). ``--stream FAMILY`` replays the
 members' telemetry from a family run with ``--continuous`` (every week from the first to
@@ -122,7 +128,8 @@ def served(campaign: Path, model: Path, control: bool,
     before = (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
               streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
               streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
-              streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL)
+              streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
+              streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -146,6 +153,10 @@ def served(campaign: Path, model: Path, control: bool,
         streaming.CLOSED_LOOP_STD = control
     elif side == "monday-fill":  # the library's defaults but how the profile's empty day
         forecast_module.PROFILE_FILL = FILLS[control]  # is filled (read by train_profile)
+    elif side == "deadband":  # the library's defaults but the dead band's airflow
+        streaming.DEADBAND_CONTROL = control
+    elif side == "learn-empty":  # the library's defaults but the profile's empty bins
+        streaming.PROFILE_LEARN_EMPTY = control  # learned online
     # "defaults": the library's defaults (one run, ``control`` ignored)
     try:
         t0 = time.perf_counter()
@@ -167,7 +178,8 @@ def served(campaign: Path, model: Path, control: bool,
         (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
          streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
          streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
-         streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL) = before
+         streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
+         streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY) = before
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
     for k, (r, stop) in enumerate(issues):
         fc = fcs[sdata.times[r]]
@@ -277,7 +289,8 @@ def main() -> None:
     ap.add_argument("--only", nargs="*")
     ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std", "day-class",
                                        "weather-spread", "gains-level", "spread-sides",
-                                       "closed-loop", "monday-fill", "defaults"),
+                                       "closed-loop", "monday-fill", "deadband", "learn-empty",
+                                       "defaults"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
@@ -353,6 +366,8 @@ def main() -> None:
             "spread-sides": ("weather's spread one way", "both ways"),
             "closed-loop": ("model std", "scaled by the thermostats' hold"),
             "monday-fill": (f"empty day: {FILLS[0]}", f"{FILLS[1]}"),
+            "deadband": ("learned airflow", "throttled in the dead band"),
+            "learn-empty": ("empty bins filled", "and learned online"),
             "defaults": ("defaults", "defaults (not run again)")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| working / other days | seconds off / on |")

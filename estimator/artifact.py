@@ -12,7 +12,9 @@ EnergyPlus file nor EnergyPlus itself::
      "structure_sha256": "...",                # of the .npz bytes; checked when loading
      "parameters": {"gamma_EW": 25.0, ...},    # optional; missing names -> start values
      "weekly_profile": {"zones": ["NW", ...],  # optional; null -> zeros
-                        "values": [[...], ...]},   # 672 rows x n_zones [W/m2]
+                        "values": [[...], ...],    # 672 rows x n_zones [W/m2]
+                        "counts": [[...], ...]},   # optional: weeks behind each value
+                                                   # (0: filled, forecast.fill_profile)
      "noise": {"sigma_air": 0.3, ...} | null,  # optional filter noise [K]
      "model_options": {"window_solar": "surfaces", "floor_share": 0.25,
                        "roof_solar": "mean"}}
@@ -207,6 +209,19 @@ def _profile(doc: dict, zones: list[str], timezone: str, path: Path, notes: list
     if nan:
         notes.append(f"weekly profile: {nan} empty bins count as 0")
     counts = np.isfinite(values).astype(int)
+    if wp.get("counts") is not None:  # the weeks behind each value (0: a filled bin)
+        try:
+            given = np.asarray(wp["counts"], dtype=float)
+        except (TypeError, ValueError):
+            raise ModelFileError(f"{path}: weekly_profile.counts must be a list of number "
+                                 "rows") from None
+        if given.shape != values.shape or not np.isfinite(given).all() or (given < 0).any() \
+                or (given != np.round(given)).any():
+            raise ModelFileError(f"{path}: weekly_profile.counts must be whole numbers >= 0 "
+                                 f"of the values' shape ({n_bins}, {len(zones)}); got shape "
+                                 f"{given.shape}")
+        counts = np.where(np.isfinite(values), given[:, [names.index(z) for z in zones]],
+                          0).astype(int)
     return WeeklyProfile(values, counts, timezone)
 
 

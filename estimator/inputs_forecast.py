@@ -38,7 +38,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 import pandas as pd
 
-__all__ = ["INPUT_FORECAST_DEFAULTS", "DayCalendar", "HvacInputForecaster"]
+__all__ = ["INPUT_FORECAST_DEFAULTS", "AirflowFloor", "DayCalendar", "HvacInputForecaster"]
 
 _DAY_NS = 86_400 * 10**9
 
@@ -259,4 +259,77 @@ class HvacInputForecaster:
         for k in self._KEYS:
             setattr(self, k, new[k])
         self.updates = int(np.asarray(arrays.get(f"{prefix}updates", [0]))[0])
+        return True
+
+
+class AirflowFloor:
+    """Each VAV box's minimum airflow while its air handler runs, learned from its own
+    readings: the lowest of the daily minima over the last ``days`` days of the rows
+    :meth:`update` is given (the served forecast gives the working days' occupied rows).
+
+    A box's minimum is a setting of its controller (its minimum-flow fraction), which no
+    site description states; a box in the thermostat's dead band sits at it. A day's
+    minimum is above it when the room needed cooling all day (a hot day, a core room), so
+    the floor is the lowest daily minimum of the window, not their mean; a day without
+    a row of a box leaves that box's minimum unknown (NaN) for the day. Rows where a box
+    reads no airflow (its air handler off) or NaN teach nothing.
+
+    Parameters
+    ----------
+    n_boxes : int
+    days : int
+        Days kept [d].
+    """
+
+    def __init__(self, n_boxes: int, days: int = 14):
+        if days < 1:
+            raise ValueError(f"days {days}: keep at least one day")
+        self.n_boxes, self.days = int(n_boxes), int(days)
+        self.ring = np.full((self.days, self.n_boxes), np.nan)  # daily minima, oldest first
+        self.today = np.full(self.n_boxes, np.nan)               # running minimum of the day
+        self.day = np.array([-1], dtype=np.int64)               # the local day of ``today``
+
+    def update(self, day: int, u: np.ndarray) -> None:
+        """Learn one row of local day ``day`` (any increasing day number) with airflows
+        ``u`` (n_boxes,) [kg/s]; a new day closes the running one into the window."""
+        day = int(day)
+        if day != self.day[0]:
+            if self.day[0] >= 0:  # days without rows between stay unknown
+                gap = day - int(self.day[0]) if day > self.day[0] else 1
+                self.ring = np.roll(self.ring, -gap, axis=0)
+                self.ring[max(self.days - gap, 0):] = np.nan
+                if gap <= self.days:  # the closed day is still inside the window
+                    self.ring[self.days - gap] = self.today
+            self.today = np.full(self.n_boxes, np.nan)
+            self.day[0] = day
+        u = np.asarray(u, dtype=float)
+        ok = np.isfinite(u) & (u > 0)
+        self.today = np.where(ok, np.fmin(self.today, u), self.today)
+
+    def floor(self) -> np.ndarray:
+        """(n_boxes,) [kg/s]: the lowest closed daily minimum of the window; NaN for a
+        box without a closed day in it (the running day counts once it is closed)."""
+        seen = np.isfinite(self.ring).any(axis=0)
+        out = np.full(self.n_boxes, np.nan)
+        out[seen] = np.nanmin(self.ring[:, seen], axis=0)
+        return out
+
+    # --- state ------------------------------------------------------------------------
+    def state_arrays(self, prefix: str = "afl_") -> dict[str, np.ndarray]:
+        """The learned state as named arrays (bitwise round trip with
+        :meth:`load_state_arrays`)."""
+        return {f"{prefix}ring": self.ring, f"{prefix}today": self.today,
+                f"{prefix}day": self.day}
+
+    def load_state_arrays(self, arrays: Mapping[str, np.ndarray], prefix: str = "afl_") -> bool:
+        """Restore :meth:`state_arrays`; returns False (state untouched) when ``arrays``
+        holds none, or ones of another shape (a checkpoint of another model)."""
+        keys = [f"{prefix}{k}" for k in ("ring", "today", "day")]
+        if not all(k in arrays for k in keys):
+            return False
+        ring, today = (np.array(arrays[k], dtype=float) for k in keys[:2])
+        if ring.shape != self.ring.shape or today.shape != self.today.shape:
+            return False
+        self.ring, self.today = ring, today
+        self.day = np.array(arrays[keys[2]], dtype=np.int64).reshape(1)
         return True

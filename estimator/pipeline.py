@@ -566,7 +566,8 @@ class Pipeline:
         structure = self.structure()
         if weekly_profile is None and self.profile is not None:
             weekly_profile = {"zones": list(self.site.zones),
-                              "values": self.profile.values.tolist()}
+                              "values": self.profile.values.tolist(),
+                              "counts": np.asarray(self.profile.counts).astype(int).tolist()}
         info: dict = {}
         if self.identification is not None:
             info["identification"] = self.identification.to_dict()

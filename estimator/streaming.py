@@ -52,8 +52,10 @@ a temperature above the cooling or below the heating set point is the set point,
 the boxes hold while they have the capacity), the band keeping the previous set point for
 :data:`HOLD_RECOVERY_H` after each set-point step; the boxes with a discharge-air point then
 reheat inside the forecast as their rooms' thermostats do (:data:`REHEAT_CONTROL`), rather
-than by their learned rise, and every box cools its room to the cooling set point
-(:data:`COOLING_CONTROL`). ``std`` is the model's: ``sqrt(v_h)``,
+than by their learned rise, every box cools its room to the cooling set point
+(:data:`COOLING_CONTROL`), and a box cooling a room below that set point is throttled
+towards its learned minimum airflow, as in the thermostat's dead band
+(:data:`DEADBAND_CONTROL`). ``std`` is the model's: ``sqrt(v_h)``,
 with ``v_h`` the variance of ``C x`` after h steps of the nominal model from the
 steady-state posterior covariance (state uncertainty; measurement noise not added; the
 same table gives the state's standard deviation after steps without measurements); the
@@ -102,6 +104,7 @@ from zonecast.estimator.gains import (
 )
 from zonecast.estimator.inputs_forecast import (
     INPUT_FORECAST_DEFAULTS,
+    AirflowFloor,
     DayCalendar,
     HvacInputForecaster,
 )
@@ -189,6 +192,25 @@ CLOSED_LOOP_STD = False
 #: "Cooling as the thermostat's answer"); the default of
 #: :attr:`OnlineEstimator.cooling_control`
 COOLING_CONTROL = True
+#: forecast the airflow of a VAV box inside its room's thermostat dead band as the
+#: thermostat's answer too: a room whose air ends a step below the cooling set point while
+#: its boxes run above their minimum airflow (learned from their own working-day readings,
+#: :class:`~zonecast.estimator.inputs_forecast.AirflowFloor`) has that extra cooling taken
+#: back, down to the minimum, until its air reaches the set point (a box above its minimum
+#: is one cooling its room to the set point); wherever the cooling controller runs
+#: (docs/forecasts.md "The dead band's airflow"; chosen on the family's training members);
+#: the default of :attr:`OnlineEstimator.deadband_control`
+DEADBAND_CONTROL = True
+#: learn the weekly profile's empty bins (no identification week had data there: each
+#: tracked week's warm-up day, Monday, filled by :func:`~zonecast.estimator.forecast.fill_profile`)
+#: from the building's own per-step f_IG estimates as it operates: a bin's value is the
+#: mean of its online estimates and the fill, the fill weighing PROFILE_FILL_WEIGHT weeks
+#: (docs/forecasts.md "Monday's gains from Mondays"); needs a model file with the
+#: profile's counts; the default of :attr:`OnlineEstimator.profile_learn`
+PROFILE_LEARN_EMPTY = False
+PROFILE_FILL_WEIGHT = 1.0
+#: days of readings the airflow floor keeps [d]
+AIRFLOW_FLOOR_DAYS = 14
 #: time constant of the served gains' slow level: an exponentially weighted mean over the
 #: per-step f_IG estimates of their difference from the weekly profile, added to the profile
 #: over the whole horizon (the short offset of :class:`~zonecast.estimator.gains.DayAheadGains`
@@ -581,6 +603,8 @@ class OnlineEstimator:
         else:
             self._since += 1
         self._gains.append((self.time, f))
+        if self.profile_learn:
+            self._learn_profile(self.time.value, f)
         ok = np.isfinite(f)
         if self._level_alpha:
             resid = f - self._profile[self._bins(np.array([self.time.value]))[0]]
@@ -672,8 +696,10 @@ class OnlineEstimator:
                 else None)
         cooling = control and self.cooling_control and self._cool.any()
         if control and band is not None and (cooling or (self._rh and self._coil.any())):
+            floor = (self.airflow_floor.floor() if cooling and self.deadband_control
+                     else None)
             xs = self._controlled_run(stepper, u, forcing, v[:, 1], ins[:, nb + NV:], band[0],
-                                      band[1] if cooling else None,
+                                      band[1] if cooling else None, floor,
                                       keep_responses=keep_responses)
         else:
             if self._rh:  # the boxes' discharge-air rise (docs/model.md "Discharge air")
@@ -687,7 +713,7 @@ class OnlineEstimator:
 
     def _controlled_run(self, stepper, u: np.ndarray, forcing: np.ndarray, ts: np.ndarray,
                         rise: np.ndarray, heat: np.ndarray,
-                        cool: np.ndarray | None = None, *,
+                        cool: np.ndarray | None = None, floor: np.ndarray | None = None, *,
                         keep_responses: bool = False) -> np.ndarray:
         """States (HORIZON + 1, n) [degC] of a forecast in which the boxes with a
         discharge-air point reheat as their rooms' thermostats do (docs/forecasts.md
@@ -703,7 +729,15 @@ class OnlineEstimator:
         step above it is cooled by its running boxes (every VAV box of the site, coil or
         not) to the set point: a common fall r <= 0 of their discharge air, the heat
         c_p u r the extra airflow of a VAV box would remove (docs/forecasts.md "Cooling
-        as the thermostat's answer"); solved with the heated rooms."""
+        as the thermostat's answer"); solved with the heated rooms.
+
+        With ``cool`` and ``floor`` (n_boxes,) [kg/s], each box's minimum airflow (NaN:
+        unknown), a room not heated whose air ends a step below the cooling set point while
+        its boxes run above their floors gets a common rise r >= 0 that brings it to the set
+        point, at most the heat the airflow above the floors removes,
+        r <= sum_b w_b (u_b - floor_b)+ (T_room - T_s)+ / sum_b w_b u_b (w_b = -Bxu_b): the
+        box throttled towards its minimum inside the dead band (docs/forecasts.md "The dead
+        band's airflow")."""
         m = self.bundle.model
         coil = self._coil
         if rise.shape[1] != m.n_boxes:  # a site without discharge-air points
@@ -714,6 +748,14 @@ class OnlineEstimator:
         kinds = [(0, heat, 1.0)] + ([(1, cool, -1.0)] if cool is not None else [])
         can = [((u * self._ctl[k]["boxes"]) @ self._ctl[k]["rb"] > 0)
                & np.isfinite(sp)[:, None] for k, sp, _ in kinds]
+        if cool is not None and floor is not None and np.isfinite(floor).any():
+            # the dead band: airflow above a known floor of a cooling box (H, n_boxes)
+            slack = np.where(np.isfinite(floor) & self._cool, np.maximum(u - floor, 0.0), 0.0)
+            w = -self._bxu * self._ctl[1]["boxes"]
+            ease = {"slack": slack @ (w[:, None] * self._ctl[1]["rb"]),   # (H, rooms)
+                    "flow": (u * w) @ self._ctl[1]["rb"]}
+            kinds.append((2, cool, 1.0))
+            can.append((ease["slack"] > 0) & np.isfinite(cool)[:, None])
         H = len(u)
         xs = np.empty((H + 1, m.n))
         xs[0] = x = self._x
@@ -721,13 +763,23 @@ class OnlineEstimator:
             self._air_resp[1][:] = False
 
         def short(xr, j):
-            """Per kind (kind, rooms needing control at step j, signed need [K])."""
+            """Per kind (kind, rooms needing control at step j, signed need [K], the
+            largest r of each (inf: none))."""
             out = []
             for (k, sp, sign), ok in zip(kinds, can):
                 need = sp[j] - xr[k]
-                sel = np.flatnonzero((sign * need > 1e-6) & ok[j])
+                pick = (sign * need > 1e-6) & ok[j]
+                hi = None
+                if k == 2:  # not the rooms heated at this step; r up to the slack's heat
+                    if out and out[0][0] == 0:
+                        pick &= ~np.isin(self._ctl[2]["rooms"],
+                                         self._ctl[0]["rooms"][out[0][1]])
+                    hi = (ease["slack"][j] * np.maximum(xr[k] - ts[j], 0.0)
+                          / np.where(ease["flow"][j] > 0, ease["flow"][j], np.inf))
+                sel = np.flatnonzero(pick)
                 if len(sel):
-                    out.append((k, sel, need[sel]))
+                    out.append((k, sel, need[sel],
+                                np.full(len(sel), np.inf) if hi is None else hi[sel]))
             return out
 
         h = 0
@@ -762,11 +814,12 @@ class OnlineEstimator:
     def _control_step(self, stepper, x0: np.ndarray, free: np.ndarray, u: np.ndarray,
                       forcing: np.ndarray, ts: float, sels: list) -> np.ndarray:
         """x(k+1) [degC] of one controlled step from ``x0``. ``sels``: per kind (0 heat,
-        1 cool) the rooms needing control (indices into that kind's rooms) and their
-        signed need [K] (set point minus the air at the step's end without control,
-        ``free``). Their rises r solve M r = need, M the rooms' one-step air responses
-        Gamma(u) R to a unit rise; a heated room's r is then clipped at >= 0, a cooled
-        room's at <= 0 (a neighbour's heat or cooling was enough).
+        1 cool, 2 the dead band's throttling) the rooms needing control (indices into that
+        kind's rooms), their signed need [K] (set point minus the air at the step's end
+        without control, ``free``) and their largest r [K] (inf: none). Their rises r
+        solve M r = need, M the rooms' one-step air responses Gamma(u) R to a unit rise;
+        a heated (throttled) room's r is then clipped at >= 0, a cooled room's at <= 0 (a
+        neighbour's heat or cooling was enough), and at the largest r.
 
         M is not formed at every step (``ExactStepper.columns`` costs a step per room):
         r is found by Newton steps with the responses last computed for these rooms in
@@ -779,12 +832,13 @@ class OnlineEstimator:
         equals offline bit for bit)."""
         # a rise r of room i's boxes forces only its air state: g_i r [K/s], with
         # g_i = sum of -Bxu_b u_b over its boxes of that kind (model.reheat_forcing)
-        rows = np.concatenate([self._ctl[k]["rooms"][sel] for k, sel, _ in sels])
+        rows = np.concatenate([self._ctl[k]["rooms"][sel] for k, sel, _, _ in sels])
         g = np.concatenate([(-self._bxu * u) @ self._ctl[k]["rb"][:, sel]
-                            for k, sel, _ in sels])
-        need = np.concatenate([nd for _, _, nd in sels])
-        sign = np.concatenate([np.full(len(sel), 1.0 if k == 0 else -1.0)
-                               for k, sel, _ in sels])
+                            for k, sel, _, _ in sels])
+        need = np.concatenate([nd for _, _, nd, _ in sels])
+        sign = np.concatenate([np.full(len(sel), -1.0 if k == 1 else 1.0)
+                               for k, sel, _, _ in sels])
+        hi = np.concatenate([h for _, _, _, h in sels])
         G, known = self._air_resp  # (n, rooms) columns of unit air forcing, where known
         slots = self._air_slot[rows]
         if not known[slots].all():
@@ -806,8 +860,9 @@ class OnlineEstimator:
                     self._air_responses(stepper, u, rows)
                     continue
             break
-        if (sign * r < 0).any():  # a neighbour's heat (or cooling) is enough
-            f[rows] = forcing[rows] + sign * np.maximum(sign * r, 0.0) * g
+        rc = np.minimum(sign * np.maximum(sign * r, 0.0), hi)
+        if (rc != r).any():  # a neighbour's heat (or cooling) is enough, or r is at its most
+            f[rows] = forcing[rows] + rc * g
             x = stepper.step(x0, u, f, ts)
         return x
 
@@ -862,6 +917,14 @@ class OnlineEstimator:
                                              shrink=[d["sigma0"]] + [d["sigma0_solar"]] * 4,
                                              nonnegative=nonneg)
         self.weather_fb = DiurnalWeather(self.calendar.per_day)
+        # the profile's empty bins, learned online (PROFILE_LEARN_EMPTY)
+        prof = self.bundle.profile
+        self.profile_learn = PROFILE_LEARN_EMPTY
+        self._fill = np.nan_to_num(prof.values)
+        self._empty = np.asarray(prof.counts) == 0
+        self._pf_sum = np.zeros_like(self._fill)
+        self._pf_n = np.zeros_like(self._fill)
+        self._profile = self._fill.copy()
         cal = self.calendar
         self.calibrator = IntervalCalibrator(
             self._nz, HORIZON, cal.per_day, step_ns=STEP.value,
@@ -905,7 +968,16 @@ class OnlineEstimator:
                       "rb": ((rob[:, None] == rooms[None, :]) & mask[:, None]).astype(float)}
                      for mask, rooms in ((self._coil, self._coil_rooms),
                                          (self._cool, cool_rooms))]
+        self._ctl.append(self._ctl[1])  # the dead band's throttling: the cooling boxes
         self._bxu = np.asarray(self.bundle.model._bxu, dtype=float)
+        # each box's minimum airflow, learned on the working days' occupied rows
+        self.deadband_control = DEADBAND_CONTROL
+        self.airflow_floor = AirflowFloor(self.bundle.model.n_boxes, AIRFLOW_FLOOR_DAYS)
+        th = site.thermostat
+        per_h = self.calendar.per_day / 24.0
+        self._occ_tod = ((-1, -1) if th is None else
+                         (round(th.occupied_hours[0] * per_h),
+                          round(th.occupied_hours[1] * per_h)))
         # one-step responses Gamma(u) e_i (n, rooms) to unit forcing of the controlled
         # rooms' air states (slot per state) last computed in the current controlled run,
         # and which are set (:meth:`_control_step`)
@@ -927,8 +999,13 @@ class OnlineEstimator:
         operating = not any(a <= tn < b for a, b in self._experiments)
         if operating:
             self.inputs_fc.update(tn, inputs[self._wx_cols], inputs[self._hv_cols])
-            tod = int(self.calendar.slots([tn])[0]) % self.calendar.per_day
+            slot = int(self.calendar.slots([tn])[0])
+            tod = slot % self.calendar.per_day
             self.weather_fb.update(tod, inputs[nb], inputs[nb + 2:nb + NV])
+            if slot < self.calendar.per_day and self._occ_tod[0] <= tod < self._occ_tod[1]:
+                # a working day's occupied row; the day: its local midnight's UTC date
+                day = (tn - tod * self.calendar.step_ns) // _DAY_NS
+                self.airflow_floor.update(day, inputs[:nb])
         k = tn // STEP.value
         steady = np.sqrt(np.maximum(self._steady.horizon_var, 0.0))
         if self.weather_spread is not None:
@@ -947,11 +1024,28 @@ class OnlineEstimator:
                 if self.weather_spread is not None:
                     self.weather_spread.add(k, ins[:, self._w_cols])
 
+    def _learn_profile(self, tn: int, f: np.ndarray) -> None:
+        """One per-step f_IG estimate ``f`` (n_zones,) [W/m2] of the interval from ``tn``
+        [ns] into the profile's empty bins (:data:`PROFILE_LEARN_EMPTY`): the bin's value
+        becomes (W fill + sum of its estimates) / (W + their number), W =
+        :data:`PROFILE_FILL_WEIGHT`. Rows inside the site's experiments teach nothing."""
+        if any(a <= tn < b for a, b in self._experiments):
+            return
+        b = int(self._bins(np.array([tn], dtype=np.int64))[0])
+        sel = self._empty[b] & np.isfinite(f)
+        if sel.any():
+            self._pf_sum[b, sel] += f[sel]
+            self._pf_n[b, sel] += 1.0
+            w = PROFILE_FILL_WEIGHT
+            self._profile[b, sel] = ((w * self._fill[b, sel] + self._pf_sum[b, sel])
+                                     / (w + self._pf_n[b, sel]))
+
     def _due_key(self, control: bool) -> tuple:
         """What the calibration forecast kept at a due step (:meth:`_learn_inputs`) depends
         on besides the state: a served forecast with the same key at the same step is it."""
         return (self.time, self.steps, bool(control), self.hold_setpoints,
-                self.cooling_control, self.young_std, self.spread_two_sided,
+                self.cooling_control, self.deadband_control, self.young_std,
+                self.spread_two_sided,
                 self.closed_loop_std, id(self.weather))
 
     def _served_std(self, ins: np.ndarray, f_ig: np.ndarray, control: bool,
@@ -1194,6 +1288,8 @@ class OnlineEstimator:
             arrays["x"] = self._x
         arrays.update(self.inputs_fc.state_arrays())
         arrays.update(self.weather_fb.state_arrays())
+        arrays.update(self.airflow_floor.state_arrays())
+        arrays.update({"pf_sum": self._pf_sum, "pf_n": self._pf_n})
         arrays.update(self.calibrator.state_arrays())
         if self.weather_spread is not None:
             arrays.update(self.weather_spread.state_arrays())
@@ -1264,6 +1360,12 @@ class OnlineEstimator:
         self._init_input_forecasts()
         self.inputs_fc.load_state_arrays(arr)
         self.weather_fb.load_state_arrays(arr)
+        self.airflow_floor.load_state_arrays(arr)
+        if "pf_sum" in arr and arr["pf_sum"].shape == self._fill.shape:
+            self._pf_sum, self._pf_n = arr["pf_sum"], arr["pf_n"]
+            w, seen = PROFILE_FILL_WEIGHT, self._empty & (self._pf_n > 0)
+            self._profile[seen] = ((w * self._fill[seen] + self._pf_sum[seen])
+                                   / (w + self._pf_n[seen]))
         self.calibrator.load_state_arrays(arr)
         if self.weather_spread is not None:
             self.weather_spread.load_state_arrays(arr)

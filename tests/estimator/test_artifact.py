@@ -385,3 +385,32 @@ def test_weekly_profile_fills_the_empty_day_by_the_sites_calendar(vb, monkeypatc
     monkeypatch.setattr(forecast, "PROFILE_FILL", "weekday")
     with pytest.raises(PipelineError, match="PROFILE_FILL 'weekday': use 'operating'"):
         pipe.weekly_profile(data)
+
+
+def test_weekly_profile_counts_round_trip_and_bad_counts_say_so(vb, tmp_path):
+    """A model file keeps the weeks behind each profile value (0: a bin fill_profile
+    filled); a file without them counts every finite value as seen; bad counts are an
+    error naming the field."""
+    from zonecast.estimator.artifact import ModelFileError, load_model_file, write_model_file
+
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    zones = list(pipe.site.zones)
+    values = np.full((672, len(zones)), 2.0)
+    counts = np.full((672, len(zones)), 3)
+    counts[:96] = 0  # Monday filled
+    kw = {"structure": pipe.structure(), "room_volume": pipe.room_volume}
+    # zones in another order: the counts follow their columns
+    order = zones[::-1]
+    write_model_file(tmp_path / "m.json", vb / "site.yaml",
+                     weekly_profile={"zones": order, "values": values.tolist(),
+                                     "counts": counts[:, ::-1].tolist()}, **kw)
+    np.testing.assert_array_equal(load_model_file(tmp_path / "m.json").profile.counts, counts)
+    write_model_file(tmp_path / "old.json", vb / "site.yaml",
+                     weekly_profile={"zones": zones, "values": values.tolist()}, **kw)
+    assert (load_model_file(tmp_path / "old.json").profile.counts == 1).all()
+    for bad in (counts[:10].tolist(), (counts - 4).tolist(), (counts + 0.5).tolist()):
+        write_model_file(tmp_path / "bad.json", vb / "site.yaml",
+                         weekly_profile={"zones": zones, "values": values.tolist(),
+                                         "counts": bad}, **kw)
+        with pytest.raises(ModelFileError, match="weekly_profile.counts must be whole"):
+            load_model_file(tmp_path / "bad.json")

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from zonecast.estimator.calibration import IntervalCalibrator
-from zonecast.estimator.inputs_forecast import DayCalendar, HvacInputForecaster
+from zonecast.estimator.inputs_forecast import AirflowFloor, DayCalendar, HvacInputForecaster
 from zonecast.estimator.weather_forecast import (
     DiurnalWeather,
     WeatherForecastError,
@@ -349,3 +349,43 @@ def test_site_thermostat_holidays_reach_the_calendar(site_dict, tmp_path):
     cal = DayCalendar.for_site(load_site(write_site(tmp_path, site_dict)))
     monday, tuesday = _grid("2015-05-25", 2)[[40, 136]]
     assert cal.slots([monday])[0] == 96 + 40 and cal.slots([tuesday])[0] == 40
+
+
+def test_airflow_floor_is_the_lowest_closed_daily_minimum_in_its_window():
+    fl = AirflowFloor(2, days=3)
+    assert np.isnan(fl.floor()).all()  # nothing learned
+    fl.update(10, [0.5, 0.0])   # box 1 off: teaches nothing
+    fl.update(10, [0.3, np.nan])
+    assert np.isnan(fl.floor()).all()  # the running day counts once closed
+    fl.update(11, [0.4, 0.2])
+    np.testing.assert_array_equal(fl.floor()[:1], [0.3])
+    assert np.isnan(fl.floor()[1])  # box 1 had no reading on day 10
+    fl.update(12, [0.6, 0.7])
+    np.testing.assert_array_equal(fl.floor(), [0.3, 0.2])
+    fl.update(13, [0.6, 0.7])   # the window: the last three closed days (10, 11, 12)
+    np.testing.assert_array_equal(fl.floor(), [0.3, 0.2])
+    fl.update(14, [0.6, 0.7])   # day 10 leaves it
+    np.testing.assert_array_equal(fl.floor(), [0.4, 0.2])
+    fl.update(20, [0.9, 0.9])   # six days without rows: every closed day is out
+    assert np.isnan(fl.floor()).all()
+    fl.update(21, [0.9, 0.9])
+    np.testing.assert_array_equal(fl.floor(), [0.9, 0.9])
+    with pytest.raises(ValueError, match="at least one day"):
+        AirflowFloor(2, days=0)
+
+
+def test_airflow_floor_state_round_trips_bitwise():
+    rng = np.random.default_rng(3)
+    a, b = AirflowFloor(4), AirflowFloor(4)
+    for day in range(20):
+        for _ in range(5):
+            a.update(day, rng.uniform(0, 1, 4))
+    assert b.load_state_arrays(a.state_arrays())
+    for day in (20, 21):
+        u = rng.uniform(0, 1, 4)
+        a.update(day, u)
+        b.update(day, u)
+    np.testing.assert_array_equal(a.floor(), b.floor())
+    assert np.isfinite(a.floor()).all()
+    assert not AirflowFloor(3).load_state_arrays(a.state_arrays())  # another model's boxes
+    assert not AirflowFloor(4).load_state_arrays({})

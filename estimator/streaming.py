@@ -1036,9 +1036,14 @@ class OnlineEstimator:
         if sel.any():
             self._pf_sum[b, sel] += f[sel]
             self._pf_n[b, sel] += 1.0
-            w = PROFILE_FILL_WEIGHT
-            self._profile[b, sel] = ((w * self._fill[b, sel] + self._pf_sum[b, sel])
-                                     / (w + self._pf_n[b, sel]))
+            self._blend_profile((b, sel))
+
+    def _blend_profile(self, where) -> None:
+        """The served profile's learned empty bins at ``where`` (an index of the
+        (bins, zones) arrays): (W fill + sum of estimates) / (W + their number)."""
+        w = PROFILE_FILL_WEIGHT
+        self._profile[where] = ((w * self._fill[where] + self._pf_sum[where])
+                                / (w + self._pf_n[where]))
 
     def _due_key(self, control: bool) -> tuple:
         """What the calibration forecast kept at a due step (:meth:`_learn_inputs`) depends
@@ -1363,9 +1368,7 @@ class OnlineEstimator:
         self.airflow_floor.load_state_arrays(arr)
         if "pf_sum" in arr and arr["pf_sum"].shape == self._fill.shape:
             self._pf_sum, self._pf_n = arr["pf_sum"], arr["pf_n"]
-            w, seen = PROFILE_FILL_WEIGHT, self._empty & (self._pf_n > 0)
-            self._profile[seen] = ((w * self._fill[seen] + self._pf_sum[seen])
-                                   / (w + self._pf_n[seen]))
+            self._blend_profile(self._empty & (self._pf_n > 0))
         self.calibrator.load_state_arrays(arr)
         if self.weather_spread is not None:
             self.weather_spread.load_state_arrays(arr)

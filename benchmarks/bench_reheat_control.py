@@ -42,7 +42,10 @@ to their learned minimum airflow (``streaming.DEADBAND_CONTROL``; docs/forecasts
 dead band's airflow"). ``--side learn-empty``: both runs with the library's defaults, the
 second with the profile's empty bins (Monday) learned from the building's own per-step
 gains as it operates (``streaming.PROFILE_LEARN_EMPTY``; docs/forecasts.md "Monday's gains
-from Mondays"). ``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
+from Mondays"). ``--side after-off``: both runs with the library's defaults, the second
+with the intervals calibrated on a day class of their own for the working days after a
+day off (``streaming.AFTER_OFF_INTERVALS``; docs/forecasts.md "The day after a day off").
+``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
 each run's forecasts, intervals, measurements and target times (``.npz``) for analyses
 after the run (``benchmarks/coverage_analysis.py``). ``--stream FAMILY`` replays the
 members' telemetry from a family run with ``--continuous`` (every week from the first to
@@ -58,7 +61,8 @@ file; ``--profile file`` takes the model file's (``zonecast identify`` writes th
 every whole week, the validation weeks included: the tables of the day classes and the
 weather's spread were measured so). Every other side runs with the library's defaults for the young filter, the
 day classes and the weather spread. The last column is the coverage of the targets on the
-site's working days and on its other days (weekends, holidays).
+site's working days, on its other days (weekends, holidays) and on the working days after
+a day off (Mondays, the day after a holiday).
 
 ``--reports`` is a ``bench_family.py --out`` folder (``<name>/model.json``,
 ``<name>/results.json``); campaigns are ``--family/<name>`` or the ``--extra`` folders.
@@ -129,7 +133,8 @@ def served(campaign: Path, model: Path, control: bool,
               streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
               streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
               streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
-              streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY)
+              streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY,
+              streaming.AFTER_OFF_INTERVALS)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -157,6 +162,8 @@ def served(campaign: Path, model: Path, control: bool,
         streaming.DEADBAND_CONTROL = control
     elif side == "learn-empty":  # the library's defaults but the profile's empty bins
         streaming.PROFILE_LEARN_EMPTY = control  # learned online
+    elif side == "after-off":  # the library's defaults but a day class of the intervals
+        streaming.AFTER_OFF_INTERVALS = control  # for the working day after a day off
     # "defaults": the library's defaults (one run, ``control`` ignored)
     try:
         t0 = time.perf_counter()
@@ -179,7 +186,8 @@ def served(campaign: Path, model: Path, control: bool,
          streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
          streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
          streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
-         streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY) = before
+         streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY,
+         streaming.AFTER_OFF_INTERVALS) = before
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
     for k, (r, stop) in enumerate(issues):
         fc = fcs[sdata.times[r]]
@@ -199,11 +207,12 @@ def served(campaign: Path, model: Path, control: bool,
     cal = DayCalendar.for_site(site)
     targets = np.array([[sdata.times[r].value + (h + 1) * STEP_NS for h in range(HORIZON)]
                         for r, _ in issues])
-    other = (cal.slots(targets.reshape(-1)) // cal.per_day).reshape(targets.shape) == 1
+    klass = cal.interval_classes(targets.reshape(-1)).reshape(targets.shape)
+    other = klass == 1
     inside = (meas >= lo) & (meas <= hi)
     seen = np.isfinite(meas)
     by_class = tuple(float((inside & seen & m[:, :, None]).sum() / max((seen & m[:, :, None]).sum(), 1))
-                     for m in (~other, other))
+                     for m in (~other, other, klass == 2))
     if DUMP is not None:  # every served forecast of the run, for analyses after it
         DUMP.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(DUMP / f"{campaign.name}-{side}-{'on' if control else 'off'}.npz",
@@ -290,7 +299,7 @@ def main() -> None:
     ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std", "day-class",
                                        "weather-spread", "gains-level", "spread-sides",
                                        "closed-loop", "monday-fill", "deadband", "learn-empty",
-                                       "defaults"),
+                                       "after-off", "defaults"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
@@ -368,9 +377,10 @@ def main() -> None:
             "monday-fill": (f"empty day: {FILLS[0]}", f"{FILLS[1]}"),
             "deadband": ("learned airflow", "throttled in the dead band"),
             "learn-empty": ("empty bins filled", "and learned online"),
+            "after-off": ("working and other days", "and the day after a day off"),
             "defaults": ("defaults", "defaults (not run again)")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
-          "| working / other days | seconds off / on |")
+          "| working / other days / after a day off | seconds off / on |")
     print("|---|---|---|---|---|---|---|")
     for name in names:
         model = args.reports / name / "model.json"
@@ -394,7 +404,8 @@ def main() -> None:
                  f"{max(c[z] for z in c if z != 'all'):.3f}" for c in (cov_off, cov_on)]
         print(f"| {name} | {off['mean']:.3f} | **{on['mean']:.3f}** | {ratio} | "
               f"{cov_off['all']:.3f} ({zones[0]}) → {cov_on['all']:.3f} ({zones[1]}) | "
-              f"{cls_off[0]:.3f} / {cls_off[1]:.3f} → {cls_on[0]:.3f} / {cls_on[1]:.3f} | "
+              f"{cls_off[0]:.3f} / {cls_off[1]:.3f} / {cls_off[2]:.3f} → "
+              f"{cls_on[0]:.3f} / {cls_on[1]:.3f} / {cls_on[2]:.3f} | "
               f"{s_off:.0f} / {s_on:.0f} |", flush=True)
 
 

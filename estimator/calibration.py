@@ -262,6 +262,27 @@ class IntervalCalibrator:
             # the pooled scores and level
             self.hist = np.tile(hist, (self.n_classes, 1, 1))
             self.levels = np.tile(level.reshape(1, -1)[-1:], (self.n_classes, 1))
+        elif (1 < self.n_classes and hist.ndim == self.hist.ndim
+              and hist.shape[1:] == self.hist.shape[1:]
+              and hist.shape[0] % self.n_class_bins == 0
+              and hist.shape[0] // self.n_class_bins > 1):
+            # a checkpoint with another number of day classes (the day after a day off
+            # with its own or not): the classes both have kept; a new class starts from
+            # the first class's (working days') scores and level, a class no longer kept
+            # gives its scores to the first class
+            k = hist.shape[0] // self.n_class_bins
+            hist = hist.reshape((k, self.n_class_bins) + hist.shape[1:])
+            lv = (level.reshape(k, -1) if level.size == k * self.nz
+                  else np.tile(level.reshape(1, -1)[-1:], (k, 1)))
+            if k < self.n_classes:
+                hist = np.concatenate([hist] + [hist[:1]] * (self.n_classes - k))
+                lv = np.concatenate([lv] + [lv[:1]] * (self.n_classes - k))
+            else:
+                extra = hist[self.n_classes:].sum(axis=0)
+                hist = hist[:self.n_classes].copy()
+                hist[0] += extra
+            self.hist = hist.reshape(self.hist.shape)
+            self.levels = lv[:self.n_classes].copy()
         elif (self.n_classes == 1 and hist.ndim == self.hist.ndim
               and hist.shape[1:] == self.hist.shape[1:]
               and hist.shape[0] % self.n_class_bins == 0):

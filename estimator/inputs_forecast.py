@@ -74,7 +74,7 @@ class DayCalendar:
         self.working_days = sorted({int(d) for d in working_days})
         self.holidays = sorted({pd.Timestamp(d).date() for d in holidays})
         self._hol = np.array([np.datetime64(d, "D") for d in self.holidays], dtype="datetime64[D]")
-        self._days: dict[int, np.ndarray] = {}
+        self._days: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     @property
     def n_slots(self) -> int:
@@ -89,25 +89,35 @@ class DayCalendar:
             return cls(site.timezone, site.step)
         return cls(site.timezone, site.step, th.working_days, th.holidays)
 
-    def _compute(self, times: pd.DatetimeIndex) -> np.ndarray:
+    def _off(self, dow: np.ndarray, dates: np.ndarray) -> np.ndarray:
+        """Whether local dates (their weekdays ``dow``, 0 = Monday) are not working days."""
+        off = ~np.isin(dow, self.working_days)
+        if len(self._hol):
+            off |= np.isin(dates, self._hol)
+        return off
+
+    def _compute(self, times: pd.DatetimeIndex) -> tuple[np.ndarray, np.ndarray]:
+        """Slots of ``times`` and whether each lies on a working day that follows a day
+        off (the previous local date not a working day)."""
         local = times.tz_convert(self.timezone)
         sec = ((np.asarray(local.hour, dtype=np.int64) * 60 + np.asarray(local.minute, np.int64))
                * 60 + np.asarray(local.second, np.int64))
         tod = np.minimum(sec * 10**9 // self.step_ns, self.per_day - 1)
         dates = np.asarray(local.tz_localize(None).normalize(), dtype="datetime64[D]")
-        off = ~np.isin(np.asarray(local.day_of_week), self.working_days)
-        if len(self._hol):
-            off |= np.isin(dates, self._hol)
-        return off.astype(np.int64) * self.per_day + tod
+        dow = np.asarray(local.day_of_week)
+        off = self._off(dow, dates)
+        after_off = ~off & self._off((dow - 1) % 7, dates - np.timedelta64(1, "D"))
+        return off.astype(np.int64) * self.per_day + tod, after_off
 
-    def slots(self, times_ns) -> np.ndarray:
-        """Slot (day class x per_day + local interval of the day) of UTC times given as
-        ns since the epoch; grid times are cached a UTC day at a time."""
+    def _lookup(self, times_ns) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_compute` of UTC times given as ns since the epoch; grid times are cached
+        a UTC day at a time."""
         t = np.asarray(times_ns, dtype=np.int64).reshape(-1)
         if np.any(t % self.step_ns):
             return self._compute(pd.DatetimeIndex(t, tz="UTC"))
         days = t // _DAY_NS
         out = np.empty(len(t), dtype=np.int64)
+        after = np.empty(len(t), dtype=bool)
         for day in np.unique(days):
             hit = self._days.get(int(day))
             if hit is None:
@@ -117,8 +127,25 @@ class DayCalendar:
                                         tz="UTC")
                 hit = self._days[int(day)] = self._compute(grid)
             sel = days == day
-            out[sel] = hit[(t[sel] - day * _DAY_NS) // self.step_ns]
-        return out
+            i = (t[sel] - day * _DAY_NS) // self.step_ns
+            out[sel], after[sel] = hit[0][i], hit[1][i]
+        return out, after
+
+    def slots(self, times_ns) -> np.ndarray:
+        """Slot (day class x per_day + local interval of the day) of UTC times given as
+        ns since the epoch."""
+        return self._lookup(times_ns)[0]
+
+    #: classes of :meth:`interval_classes`
+    n_interval_classes = 3
+
+    def interval_classes(self, times_ns) -> np.ndarray:
+        """Day class of UTC times (ns since the epoch) for the interval calibration: 0 a
+        working day, 1 a weekend day or holiday, 2 a working day after a day off (the
+        first day the HVAC runs its occupied schedule after floating; its forecasts err
+        most: docs/forecasts.md "The day after a day off")."""
+        slot, after = self._lookup(times_ns)
+        return np.where(after, 2, slot // self.per_day)
 
 
 class HvacInputForecaster:

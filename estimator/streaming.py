@@ -165,6 +165,11 @@ YOUNG_STD = False
 #: |coverage - 0.90| 0.0255 -> 0.0155) and is on again since the twenty-eighth session
 #: (docs/forecasts.md "How precise a member's coverage is")
 DAY_CLASS_INTERVALS = True
+#: with DAY_CLASS_INTERVALS: a third class for the working days that follow a day off
+#: (Monday, the day after a holiday): the HVAC's first occupied day after the building
+#: floated, whose forecasts err more than the other working days' (docs/forecasts.md
+#: "The day after a day off"; measured, off)
+AFTER_OFF_INTERVALS = False
 #: widen the served intervals by the forecast's sensitivity to the weather forecast's
 #: error: the forecast run again with the weather perturbed by its learned RMS error by
 #: lead (:class:`~zonecast.estimator.calibration.WeatherSpread`), the change added to the
@@ -894,6 +899,16 @@ class OnlineEstimator:
         return self._band_cache
 
     # --- input forecasts (docs/forecasts.md "Served forecast") ---------------------------
+    def _interval_classes(self) -> dict:
+        """The interval calibration's day classes (DAY_CLASS_INTERVALS,
+        AFTER_OFF_INTERVALS): keyword arguments of :class:`IntervalCalibrator`."""
+        cal = self.calendar
+        if not DAY_CLASS_INTERVALS:
+            return {}
+        if AFTER_OFF_INTERVALS:
+            return {"day_class": cal.interval_classes, "n_classes": cal.n_interval_classes}
+        return {"day_class": lambda t: cal.slots(t) // cal.per_day, "n_classes": cal.n_classes}
+
     def _init_input_forecasts(self) -> None:
         """The learners that live across filter restarts: HVAC inputs by time of week,
         the weather fallback, the interval calibration; and the weather forecast in use."""
@@ -928,8 +943,7 @@ class OnlineEstimator:
         cal = self.calendar
         self.calibrator = IntervalCalibrator(
             self._nz, HORIZON, cal.per_day, step_ns=STEP.value,
-            **({"day_class": lambda t: cal.slots(t) // cal.per_day,
-                "n_classes": cal.n_classes} if DAY_CLASS_INTERVALS else {}))
+            **self._interval_classes())
         # the weather channels of the inputs: Ta, then the facades' and the horizontal sun
         self._w_cols = np.array([nb] + list(range(nb + 2, nb + NV)))
         self.weather_spread = (WeatherSpread(len(self._w_cols), HORIZON, cal.per_day,

@@ -48,6 +48,34 @@ def test_calendar_day_classes_and_holidays():
     assert cal.slots(t[:5] + 1).tolist() == s[:5].tolist()
 
 
+def test_calendar_interval_classes_mark_the_working_day_after_a_day_off():
+    """0 working day, 1 day off, 2 a working day whose previous local date was off: Monday
+    after a weekend, Tuesday after a Monday holiday; not Wednesday."""
+    cal = DayCalendar(TZ, "15min", holidays=["2015-05-25"])
+    t = _grid("2015-05-22", 6)  # Friday .. Wednesday; Monday 25 is Memorial Day
+    c = cal.interval_classes(t).reshape(6, 96)
+    assert (c == np.array([0, 1, 1, 1, 2, 0])[:, None]).all()
+    # the calibration's classes agree with the slots' day class except for class 2
+    np.testing.assert_array_equal(np.where(c == 2, 0, c).ravel(), cal.slots(t) // 96)
+    # off-grid times, and a week of Saturday-to-Wednesday working days
+    assert cal.interval_classes(t[:5] + 1).tolist() == c[0, :5].tolist()
+    odd = DayCalendar(TZ, "15min", working_days=[5, 6, 0, 1, 2])
+    d = odd.interval_classes(_grid("2015-05-21", 3)).reshape(3, 96)[:, 0]  # Thu, Fri, Sat
+    assert d.tolist() == [1, 1, 2]
+
+
+def test_calendar_interval_classes_follow_local_dates_across_dst():
+    """The Monday after the spring change (a 23-h Sunday) is class 2 from its first local
+    interval to its last, the Sunday class 1."""
+    cal = DayCalendar(TZ, "15min")
+    start = pd.Timestamp("2015-03-07", tz=TZ).tz_convert("UTC").value  # Saturday 00:00 local
+    t = start + STEP * np.arange(96 * 3 - 4)  # Saturday, Sunday (23 h), Monday
+    local = pd.DatetimeIndex(t, tz="UTC").tz_convert(TZ)
+    c = cal.interval_classes(t)
+    assert (c[local.day_of_week == 0] == 2).all() and (local.day_of_week == 0).sum() == 96
+    assert (c[local.day_of_week >= 5] == 1).all()
+
+
 def test_forecaster_learns_a_known_weekly_pattern_exactly():
     """Noise-free data of a per-slot linear law in outdoor temperature: after two weeks the
     forecast reproduces it at new outdoor temperatures (shrinkage vanishing)."""
@@ -265,6 +293,32 @@ def test_day_class_calibration_starts_from_a_pooled_checkpoint():
         part = new.hist[c * new.n_class_bins:(c + 1) * new.n_class_bins]
         assert np.array_equal(part, old.hist)
     assert len(new.pending) == len(old.pending)
+
+
+def test_day_class_calibration_resumes_a_checkpoint_with_another_class_count():
+    """Two classes into three: the kept classes bitwise, the new one from the first class's
+    scores and level; three into two: the third's scores added to the first class's."""
+    three = DayCalendar(TZ, "15min").interval_classes
+    two = IntervalCalibrator(2, 96, 96, gamma=0.01, day_class=_weekend_class, n_classes=2)
+    rng = np.random.default_rng(3)
+    std = np.ones((96, 2))
+    for k in range(96 * 8):
+        two.resolve(k, rng.standard_normal(2) * (1 + int(_weekend_class([k * STEP])[0])), std)
+        if two.due(k):
+            two.add_forecast(k, np.zeros((96, 2)))
+    n = two.n_class_bins
+    new = IntervalCalibrator(2, 96, 96, gamma=0.01, day_class=three, n_classes=3)
+    assert new.load_state_arrays(two.state_arrays())
+    assert np.array_equal(new.hist[:2 * n], two.hist)
+    assert np.array_equal(new.hist[2 * n:], two.hist[:n])
+    assert np.array_equal(new.levels, np.vstack([two.levels, two.levels[:1]]))
+    assert len(new.pending) == len(two.pending)
+    new.hist[2 * n:] *= 0.5  # the third class's own scores
+    back = IntervalCalibrator(2, 96, 96, gamma=0.01, day_class=_weekend_class, n_classes=2)
+    assert back.load_state_arrays(new.state_arrays())
+    np.testing.assert_allclose(back.hist[:n], new.hist[:n] + new.hist[2 * n:])
+    assert np.array_equal(back.hist[n:], new.hist[n:2 * n])
+    assert np.array_equal(back.levels, new.levels[:2])
 
 
 def test_day_class_needs_its_count():

@@ -415,6 +415,41 @@ def test_estimator_calibrates_by_the_sites_day_class_and_resumes_a_pooled_checkp
     assert np.all(np.isfinite(f.lower)) and np.all(f.upper > f.lower)
 
 
+def test_estimator_calibrates_the_day_after_a_day_off_apart_when_asked(bundle, telemetry,
+                                                                       monkeypatch):
+    """With AFTER_OFF_INTERVALS the calibration has a third class for the working days after a
+    day off (the site calendar's), the estimator scores into it on Mondays, and a two-class
+    checkpoint resumes with its classes kept."""
+    from zonecast.estimator import streaming
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+
+    tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:800]))
+    monkeypatch.setattr(streaming, "DAY_CLASS_INTERVALS", True)
+    monkeypatch.setattr(streaming, "AFTER_OFF_INTERVALS", False)
+    old = OnlineEstimator(bundle)
+    for k in range(len(tt)):
+        old.advance(tt[k], u[k], v[k], y[k])
+    monkeypatch.setattr(streaming, "AFTER_OFF_INTERVALS", True)
+    est = OnlineEstimator(bundle)
+    cal = est.calibrator
+    assert cal.n_classes == 3
+    step = streaming.STEP.value
+    tz = bundle.site.timezone
+    for day, c in (("2015-05-16", 1), ("2015-05-18", 2), ("2015-05-19", 0)):
+        assert cal.class_of(pd.Timestamp(f"{day} 12:00", tz=tz).value // step) == c
+    for k in range(len(tt)):
+        est.advance(tt[k], u[k], v[k], y[k])
+    n = cal.n_class_bins
+    local = pd.DatetimeIndex(tt).tz_convert(tz)
+    assert (local.day_of_week == 0).any() and cal.hist[2 * n:].sum() > 0
+    resumed = OnlineEstimator(bundle)
+    resumed.load_bytes(old.to_bytes())
+    assert np.array_equal(resumed.calibrator.hist[:2 * n], old.calibrator.hist)
+    assert np.array_equal(resumed.calibrator.hist[2 * n:], old.calibrator.hist[:n])
+    f = resumed.forecast()
+    assert np.all(np.isfinite(f.lower)) and np.all(f.upper > f.lower)
+
+
 def test_served_interval_widens_by_the_forecasts_change_under_the_weathers_error(
         bundle, telemetry):
     """The served forecast's interval scales sqrt(std^2 + change^2), the change being the

@@ -142,8 +142,8 @@ class DayCalendar:
     def interval_classes(self, times_ns) -> np.ndarray:
         """Day class of UTC times (ns since the epoch) for the interval calibration: 0 a
         working day, 1 a weekend day or holiday, 2 a working day after a day off (the
-        first day the HVAC runs its occupied schedule after floating; its forecasts err
-        most: docs/forecasts.md "The day after a day off")."""
+        first day the HVAC runs its occupied schedule after floating: docs/forecasts.md
+        "The day after a day off")."""
         slot, after = self._lookup(times_ns)
         return np.where(after, 2, slot // self.per_day)
 

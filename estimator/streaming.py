@@ -167,8 +167,8 @@ YOUNG_STD = False
 DAY_CLASS_INTERVALS = True
 #: with DAY_CLASS_INTERVALS: a third class for the working days that follow a day off
 #: (Monday, the day after a holiday): the HVAC's first occupied day after the building
-#: floated, whose forecasts err more than the other working days' (docs/forecasts.md
-#: "The day after a day off"; measured, off)
+#: floated (docs/forecasts.md "The day after a day off"; measured on the 12 training
+#: members and rejected by its rule: Monday's coverage rises, Tuesday's falls, so off)
 AFTER_OFF_INTERVALS = False
 #: widen the served intervals by the forecast's sensitivity to the weather forecast's
 #: error: the forecast run again with the weather perturbed by its learned RMS error by
@@ -211,7 +211,8 @@ DEADBAND_CONTROL = True
 #: from the building's own per-step f_IG estimates as it operates: a bin's value is the
 #: mean of its online estimates and the fill, the fill weighing PROFILE_FILL_WEIGHT weeks
 #: (docs/forecasts.md "Monday's gains from Mondays"); needs a model file with the
-#: profile's counts; the default of :attr:`OnlineEstimator.profile_learn`
+#: profile's counts; the default of :attr:`OnlineEstimator.profile_learn`; measured on the
+#: 12 training members and rejected by its rule (the coverage falls), so off
 PROFILE_LEARN_EMPTY = False
 PROFILE_FILL_WEIGHT = 1.0
 #: days of readings the airflow floor keeps [d]

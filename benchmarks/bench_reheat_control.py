@@ -53,7 +53,8 @@ the last, no gaps), with the campaign's model and profile, scored at the campaig
 validation midnights (docs/forecasts.md "How precise a member's coverage is");
 ``--all-midnights`` scores every local midnight of the stream instead (from its eighth
 day on, no experiment in the 24 h; the training weeks' too, whose gains the profile saw),
-``--issue-weekdays 0`` only those that start a Monday. ``--known`` also replays each run with
+``--issue-weekdays 0`` only those that start a Monday, ``--issue-hours 0 6 12 18`` at those
+local hours of every day instead of midnight alone. ``--known`` also replays each run with
 the measured inputs (the served / known ratio of the same estimator). The served
 forecasts' weekly gains profile is re-estimated from the forecast study's training weeks
 (``--profile train``, the default since 2026-12-05) as in ``zonecast reproduce``'s model
@@ -127,7 +128,7 @@ def served(campaign: Path, model: Path, control: bool,
         # the campaign's validation midnights and leads, as rows of the stream
         issues = ([(row_of[data.times[r]], row_of[data.times[r]] + stop - r)
                    for r, stop in issues] if not ALL_MIDNIGHTS
-                  else stream_midnights(sdata, site, ISSUE_WEEKDAYS))
+                  else stream_midnights(sdata, site, ISSUE_WEEKDAYS, ISSUE_HOURS))
     nz = len(data.zones)
     before = (streaming.REHEAT_CONTROL, streaming.COOLING_CONTROL, streaming.YOUNG_FILTER,
               streaming.YOUNG_STD, streaming.DAY_CLASS_INTERVALS, streaming.WEATHER_SPREAD,
@@ -219,7 +220,9 @@ def served(campaign: Path, model: Path, control: bool,
                             pred=pred, lower=lo, upper=hi, meas=meas, targets=targets,
                             other_days=other, zones=np.array(data.zones),
                             issue_weekday=np.array([sdata.times[r].tz_convert(site.timezone)
-                                                    .day_of_week for r, _ in issues]))
+                                                    .day_of_week for r, _ in issues]),
+                            issue_hour=np.array([sdata.times[r].tz_convert(site.timezone).hour
+                                                 for r, _ in issues]))
     return rms, _interval_coverage(lo, hi, meas, data.zones), seconds, by_class
 
 
@@ -239,6 +242,9 @@ ALL_MIDNIGHTS = False
 FILLS = ("all", "operating")
 #: with ALL_MIDNIGHTS: the local weekdays of the issues scored (``--issue-weekdays``), or None
 ISSUE_WEEKDAYS: list[int] | None = None
+#: with ALL_MIDNIGHTS: the local hours of the issues scored (``--issue-hours``; midnight alone
+#: by default)
+ISSUE_HOURS: tuple[int, ...] = (0,)
 #: folder for each run's forecasts, intervals and measurements (``--dump``), or None
 DUMP: Path | None = None
 #: the served forecast's weekly gains profile: "train" (the training weeks', ``--profile``)
@@ -246,17 +252,18 @@ DUMP: Path | None = None
 PROFILE = "train"
 
 
-def stream_midnights(sdata, site, weekdays=None) -> list[tuple[int, int]]:
+def stream_midnights(sdata, site, weekdays=None, hours=(0,)) -> list[tuple[int, int]]:
     """(issue row, issue row + HORIZON + 1) at every local midnight of a stream from its
     eighth day on (a week for the learners) whose next 24 h are all present and touch no
     experiment (``--all-midnights``); with ``weekdays`` only the midnights that start those
-    local weekdays (0 = Monday; ``--issue-weekdays``)."""
+    local weekdays (0 = Monday; ``--issue-weekdays``); with ``hours`` every local hour of
+    those (``--issue-hours``; the weekday is the issue's)."""
     times = sdata.times
     local = times.tz_convert(site.timezone)
     exps = [(pd.Timestamp(e.start), pd.Timestamp(e.end)) for e in site.experiments]
     day = pd.Timedelta("24h")
     out = []
-    for r in np.flatnonzero((local.hour == 0) & (local.minute == 0)):
+    for r in np.flatnonzero(np.isin(local.hour, list(hours)) & (local.minute == 0)):
         t = times[r]
         if r < 7 * 96 or r + HORIZON >= len(times) or times[r + HORIZON] - t != day:
             continue
@@ -324,6 +331,10 @@ def main() -> None:
     ap.add_argument("--issue-weekdays", type=int, nargs="*",
                     help="with --all-midnights: score only the midnights that start these "
                          "local weekdays (0 = Monday)")
+    ap.add_argument("--issue-hours", type=int, nargs="+", default=[0],
+                    help="with --all-midnights: issue at these local hours of every day "
+                         "(default: 0, midnight alone); the coverage by issue hour is in the "
+                         "--dump files (benchmarks/coverage_analysis.py)")
     ap.add_argument("--fill", nargs=2, default=["all", "operating"],
                     choices=("all", "day", "operating"), metavar=("OFF", "ON"),
                     help="--side monday-fill: the profile's empty-day fills compared "
@@ -344,10 +355,16 @@ def main() -> None:
                          "the validation weeks' own gains included; the tables before "
                          "2026-12-05)")
     args = ap.parse_args()
-    global LEVEL_TAU, KNOWN, PROFILE, DUMP, STREAM, ALL_MIDNIGHTS, ISSUE_WEEKDAYS, FILLS
+    global LEVEL_TAU, KNOWN, PROFILE, DUMP, STREAM, ALL_MIDNIGHTS, ISSUE_WEEKDAYS, FILLS, \
+        ISSUE_HOURS
     FILLS = tuple(args.fill)
     KNOWN, PROFILE, DUMP, STREAM = args.known, args.profile, args.dump, args.stream
     ALL_MIDNIGHTS, ISSUE_WEEKDAYS = args.all_midnights, args.issue_weekdays
+    ISSUE_HOURS = tuple(args.issue_hours)
+    if not all(0 <= h < 24 for h in ISSUE_HOURS):
+        ap.error("--issue-hours takes local hours 0..23")
+    if ISSUE_HOURS != (0,) and not ALL_MIDNIGHTS:
+        ap.error("--issue-hours needs --all-midnights")
     if ALL_MIDNIGHTS and STREAM is None:
         ap.error("--all-midnights needs --stream")
     if ISSUE_WEEKDAYS is not None and not ALL_MIDNIGHTS:

@@ -13,7 +13,10 @@ run:
   campaign's validation weeks have none on Monday, so that column is empty there, and
   Tuesday's is the first after the gap between weeks);
 - ``c90``: the factor on every half-width (about the interval's centre) that would have
-  given 0.90 over the run, i.e. how far off the calibration's width was.
+  given 0.90 over the run, i.e. how far off the calibration's width was;
+- when the run issued at several local hours (``bench_reheat_control.py --issue-hours``), a
+  second table: the coverage by the issue's local hour, over the whole day ahead and in
+  its three 8-h thirds of lead.
 
     python benchmarks/coverage_analysis.py DIR [DIR ...] [--pattern GLOB] [--boot 2000]
 """
@@ -54,7 +57,16 @@ def coverage_stats(run: dict, n_boot: int = 2000, seed: int = 0) -> dict:
            else np.arange(len(n_ok)) % 6 + 1)
     by_day = [n_in[pos == d].sum() / n_ok[pos == d].sum() if n_ok[pos == d].sum() else np.nan
               for d in range(7)]
-    return {"coverage": cov, "se": boot.std(ddof=1), "by_day": by_day,
+    # by the issue's local hour (runs with several issue hours), whole day and 8-h thirds
+    hours = run["issue_hour"] if "issue_hour" in run else np.zeros(len(n_ok), int)
+    third = np.arange(meas.shape[1]) * 3 // meas.shape[1]
+    by_hour = {}
+    for hr in np.unique(hours):
+        f = hours == hr
+        cells = [(inside[f][:, third == t].sum(), ok[f][:, third == t].sum()) for t in range(3)]
+        by_hour[int(hr)] = (n_in[f].sum() / max(n_ok[f].sum(), 1),
+                            *(a / max(b, 1) for a, b in cells))
+    return {"coverage": cov, "se": boot.std(ddof=1), "by_day": by_day, "by_hour": by_hour,
             "range90": tuple(np.quantile(boot, [0.05, 0.95])),
             "zones": (per_zone.min(), per_zone.max()),
             "working": (inside & work).sum() / max(work.sum(), 1),
@@ -83,6 +95,18 @@ def main() -> None:
               f"{s['zones'][0]:.3f}–{s['zones'][1]:.3f} | "
               f"{s['working']:.3f} / {s['other']:.3f} | {s['c90']:.3f} | "
               f"{' '.join(f'{v:.2f}' if np.isfinite(v) else '–' for v in s['by_day'])} |")
+    if any(len(r["by_hour"]) > 1 for r in rows):
+        hrs = sorted({h for r in rows for h in r["by_hour"]})
+        print("\n| run | " + " | ".join(f"issued {h:02d} h: day (0–8 / 8–16 / 16–24 h)"
+                                       for h in hrs) + " |")
+        print("|---|" + "---|" * len(hrs))
+        for f, r in zip(files, rows):
+            cells = [r["by_hour"].get(h) for h in hrs]
+            print(f"| {f.stem} | " + " | ".join(
+                "–" if c is None else f"{c[0]:.3f} ({c[1]:.2f} / {c[2]:.2f} / {c[3]:.2f})"
+                for c in cells) + " |")
+        med = [np.median([r["by_hour"][h][0] for r in rows if h in r["by_hour"]]) for h in hrs]
+        print("median by issue hour: " + ", ".join(f"{h:02d} h {m:.3f}" for h, m in zip(hrs, med)))
     cov = np.array([r["coverage"] for r in rows])
     se = np.array([r["se"] for r in rows])
     c90 = np.array([r["c90"] for r in rows])

@@ -45,6 +45,11 @@ gains as it operates (``streaming.PROFILE_LEARN_EMPTY``; docs/forecasts.md "Mond
 from Mondays"). ``--side after-off``: both runs with the library's defaults, the second
 with the intervals calibrated on a day class of their own for the working days after a
 day off (``streaming.AFTER_OFF_INTERVALS``; docs/forecasts.md "The day after a day off").
+``--side aci-feedback``: both with the library's defaults, the first with the adaptive
+level's misses judged against the quantiles when the measurement arrives, the second
+against the interval each forecast was served with (``streaming.ACI_FEEDBACK``;
+docs/forecasts.md "The adaptive level's feedback"); one replay gives both (a shadow
+calibrator beside the estimator's: the calibration changes no forecast, only its interval).
 ``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
 each run's forecasts, intervals, measurements and target times (``.npz``) for analyses
 after the run (``benchmarks/coverage_analysis.py``). ``--stream FAMILY`` replays the
@@ -86,6 +91,7 @@ import numpy as np
 import pandas as pd
 from zonecast.estimator import forecast as forecast_module
 from zonecast.estimator import streaming
+from zonecast.estimator.calibration import IntervalCalibrator
 from zonecast.estimator.constants import HORIZON, STEP
 from zonecast.estimator.evaluate import rms_by_zone
 from zonecast.estimator.forecast import week_split
@@ -135,7 +141,7 @@ def served(campaign: Path, model: Path, control: bool,
               streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
               streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
               streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY,
-              streaming.AFTER_OFF_INTERVALS)
+              streaming.AFTER_OFF_INTERVALS, streaming.ACI_FEEDBACK)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -165,7 +171,14 @@ def served(campaign: Path, model: Path, control: bool,
         streaming.PROFILE_LEARN_EMPTY = control  # learned online
     elif side == "after-off":  # the library's defaults but a day class of the intervals
         streaming.AFTER_OFF_INTERVALS = control  # for the working day after a day off
+    elif side == "aci-feedback":  # the library's defaults but the adaptive level's feedback
+        streaming.ACI_FEEDBACK = "served" if control else "current"
     # "defaults": the library's defaults (one run, ``control`` ignored)
+    shadow = side == "aci-feedback" and not control  # the served feedback beside, same replay
+    if side == "aci-feedback" and control and campaign.name in _SHADOW_RUNS:
+        return _SHADOW_RUNS.pop(campaign.name)
+    shadow_hw: dict[int, np.ndarray] = {}
+    patched = _shadow_calibrator(shadow_hw) if shadow else None
     try:
         t0 = time.perf_counter()
         pipe = Pipeline.from_model_file(model)
@@ -188,13 +201,20 @@ def served(campaign: Path, model: Path, control: bool,
          streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
          streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
          streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY,
-         streaming.AFTER_OFF_INTERVALS) = before
+         streaming.AFTER_OFF_INTERVALS, streaming.ACI_FEEDBACK) = before
+        if patched is not None:
+            for name, fn in patched.items():
+                setattr(IntervalCalibrator, name, fn)
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
+    lo2, hi2 = np.full_like(lo, np.nan), np.full_like(hi, np.nan)
     for k, (r, stop) in enumerate(issues):
         fc = fcs[sdata.times[r]]
         n = min(HORIZON, stop - r - 1)
         pred[k], lo[k], hi[k] = fc.mean, fc.lower, fc.upper
         meas[k, :n] = sdata.y[r + 1:r + 1 + n]  # a stream's own readings (its sensor noise)
+        if shadow:
+            hw = shadow_hw[sdata.times[r].value // STEP_NS]
+            lo2[k], hi2[k] = fc.mean - hw, fc.mean + hw
     rms = rms_by_zone(pred.reshape(-1, nz), meas.reshape(-1, nz), data.zones)
     if KNOWN:
         kp = np.full_like(pred, np.nan)
@@ -204,6 +224,56 @@ def served(campaign: Path, model: Path, control: bool,
         ok = np.isfinite(kp).all(axis=(1, 2))
         rms["known"] = rms_by_zone(kp[ok].reshape(-1, nz), meas[ok].reshape(-1, nz),
                                    data.zones)["mean"]
+    if shadow:  # the served feedback's run: the same forecasts, its own intervals
+        _SHADOW_RUNS[campaign.name] = _scored(campaign, site, sdata, issues, data.zones, side,
+                                              True, pred, lo2, hi2, meas, dict(rms), seconds)
+    return _scored(campaign, site, sdata, issues, data.zones, side, control, pred, lo, hi,
+                   meas, rms, seconds)
+
+
+#: ``--side aci-feedback``: the served feedback's results of a member, computed in the
+#: current feedback's replay by a shadow calibrator (the calibration changes no forecast
+#: mean, only the intervals, so one replay gives both)
+_SHADOW_RUNS: dict[str, tuple] = {}
+
+
+def _shadow_calibrator(store: dict[int, np.ndarray]) -> dict:
+    """Patch :class:`IntervalCalibrator` so that each instance runs a shadow with
+    ``feedback="served"`` on the same forecasts and scores, and each served half-width's
+    shadow is kept in ``store`` by grid step. Returns the original methods to restore."""
+    orig = {n: getattr(IntervalCalibrator, n)
+            for n in ("__init__", "add_forecast", "resolve", "halfwidth", "load_state_arrays")}
+
+    def init(self, *a, **kw):
+        orig["__init__"](self, *a, **kw)
+        sh = IntervalCalibrator.__new__(IntervalCalibrator)
+        orig["__init__"](sh, *a, **dict(kw, feedback="served"))
+        self._shadow = sh
+
+    def add_forecast(self, step_index, mean, std=None):
+        orig["add_forecast"](self._shadow, step_index, mean, std)
+        return orig["add_forecast"](self, step_index, mean, std)
+
+    def resolve(self, step_index, y, std):
+        orig["resolve"](self._shadow, step_index, y, std)
+        return orig["resolve"](self, step_index, y, std)
+
+    def halfwidth(self, step_index, std):
+        store[int(step_index)] = orig["halfwidth"](self._shadow, step_index, std)
+        return orig["halfwidth"](self, step_index, std)
+
+    def load_state_arrays(self, arrays, prefix="cal_"):
+        raise RuntimeError("the aci-feedback shadow does not restore checkpoints")
+
+    for name, fn in (("__init__", init), ("add_forecast", add_forecast), ("resolve", resolve),
+                     ("halfwidth", halfwidth), ("load_state_arrays", load_state_arrays)):
+        setattr(IntervalCalibrator, name, fn)
+    return orig
+
+
+def _scored(campaign, site, sdata, issues, zones, side, control, pred, lo, hi, meas, rms,
+            seconds):
+    """served()'s results of one run's forecasts and intervals (and its ``--dump``)."""
     # coverage by the targets' day class (the site's calendar)
     cal = DayCalendar.for_site(site)
     targets = np.array([[sdata.times[r].value + (h + 1) * STEP_NS for h in range(HORIZON)]
@@ -218,12 +288,12 @@ def served(campaign: Path, model: Path, control: bool,
         DUMP.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(DUMP / f"{campaign.name}-{side}-{'on' if control else 'off'}.npz",
                             pred=pred, lower=lo, upper=hi, meas=meas, targets=targets,
-                            other_days=other, zones=np.array(data.zones),
+                            other_days=other, zones=np.array(zones),
                             issue_weekday=np.array([sdata.times[r].tz_convert(site.timezone)
                                                     .day_of_week for r, _ in issues]),
                             issue_hour=np.array([sdata.times[r].tz_convert(site.timezone).hour
                                                  for r, _ in issues]))
-    return rms, _interval_coverage(lo, hi, meas, data.zones), seconds, by_class
+    return rms, _interval_coverage(lo, hi, meas, zones), seconds, by_class
 
 
 STEP_NS = STEP.value
@@ -306,7 +376,7 @@ def main() -> None:
     ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std", "day-class",
                                        "weather-spread", "gains-level", "spread-sides",
                                        "closed-loop", "monday-fill", "deadband", "learn-empty",
-                                       "after-off", "defaults"),
+                                       "after-off", "aci-feedback", "defaults"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
@@ -395,6 +465,7 @@ def main() -> None:
             "deadband": ("learned airflow", "throttled in the dead band"),
             "learn-empty": ("empty bins filled", "and learned online"),
             "after-off": ("working and other days", "and the day after a day off"),
+            "aci-feedback": ("level moved by the current interval", "by the served interval"),
             "defaults": ("defaults", "defaults (not run again)")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| working / other days / after a day off | seconds off / on |")

@@ -30,7 +30,13 @@ rescales it by lead time from the errors the building's own served forecasts mad
   2021): after each scored error, level += gamma (miss - (1 - target)), with miss = 1 when
   the error lay outside the interval then served (per day class and zone). A window of
   harder (or easier) days than the present would otherwise widen (narrow) the intervals
-  for as long as it lasts.
+  for as long as it lasts. "Then served" is the interval of the forecast's issue
+  (``feedback="served"``: each kept forecast keeps the score quantiles it was issued
+  with). Until 2026-12-05 a miss was judged against the quantiles at the time of the
+  measurement (``feedback="current"``), which by a 24-h lead have already widened on the
+  same forecast's earlier errors: the calibration counted about 0.90 of its errors inside
+  while the intervals as served covered 0.86 (docs/forecasts.md "The adaptive level's
+  feedback").
 
 Until a bin has ``min_weight`` scores the model's own z_0.9 = 1.645 is used.
 
@@ -51,7 +57,7 @@ __all__ = ["CALIBRATION_DEFAULTS", "IntervalCalibrator", "WeatherSpread"]
 #: window chosen on office6's training weeks; gamma re-chosen on the validation weeks of the
 #: family's training buildings (docs/forecasts.md "Served forecast")
 CALIBRATION_DEFAULTS = {"window_days": 7.0, "cadence": 8, "tod_bins": 12, "level": 0.9,
-                        "min_weight": 30.0, "gamma": 0.001}
+                        "min_weight": 30.0, "gamma": 0.001, "feedback": "current"}
 
 _EDGES = np.geomspace(1e-2, 1e2, 51)  # score bins; below/above go to the first/last
 _DAY_NS = 86_400 * 10**9
@@ -106,6 +112,11 @@ class IntervalCalibrator:
         None: one class (the calibration before 2026-12-04).
     n_classes : int
         Day classes ``day_class`` returns.
+    feedback : {"served", "current"}
+        Which interval the adaptive level's miss is judged against: the one the forecast
+        was issued with ("served", adaptive conformal inference as published), or the
+        one the quantiles give when the measurement arrives ("current", before
+        2026-12-05).
     """
 
     def __init__(self, n_zones: int, horizon: int, steps_per_day: int, *,
@@ -118,9 +129,12 @@ class IntervalCalibrator:
                  lead_edges=(0, 8, 32), step_ns: int = 900 * 10**9,
                  z_default: float = 1.6448536269514722,
                  day_class: Callable[[np.ndarray], np.ndarray] | None = None,
-                 n_classes: int = 1):
+                 n_classes: int = 1, feedback: str = CALIBRATION_DEFAULTS["feedback"]):
         if not 0 < level < 1:
             raise ValueError("level must lie in (0, 1)")
+        if feedback not in ("served", "current"):
+            raise ValueError(f"feedback must be 'served' or 'current', got {feedback!r}")
+        self.feedback = feedback
         if n_classes < 1 or (day_class is None) != (n_classes == 1):
             raise ValueError("give day_class with n_classes > 1, or neither")
         self.nz, self.horizon, self.cadence = int(n_zones), int(horizon), int(cadence)
@@ -138,9 +152,10 @@ class IntervalCalibrator:
         self.hist = np.zeros((self.n_bins, self.nz, len(_EDGES) + 1))
         #: adaptive level per day class and zone
         self.levels = np.full((self.n_classes, self.nz), self.target)
-        # (issue step, mean, std or None: the std given to resolve)
-        self.pending: deque[tuple[int, np.ndarray, np.ndarray | None]] = deque(
-            maxlen=horizon // cadence + 1)
+        # (issue step, mean, std or None: the std given to resolve, the score quantiles
+        # (horizon, n_zones) it was issued with or None: the quantiles when scored)
+        self.pending: deque[tuple[int, np.ndarray, np.ndarray | None, np.ndarray | None]] = \
+            deque(maxlen=horizon // cadence + 1)
         self._q: np.ndarray | None = None
 
     def bins(self, step_index: int, leads: np.ndarray) -> np.ndarray:
@@ -179,9 +194,13 @@ class IntervalCalibrator:
                      std: np.ndarray | None = None) -> None:
         """Keep a forecast issued at step ``step_index`` (mean (horizon, n_zones) [degC]);
         ``std`` (horizon, n_zones) [K] the model std it was issued with (default: the std
-        :meth:`resolve` is given)."""
+        :meth:`resolve` is given). With ``feedback="served"`` it keeps the score quantiles
+        of its interval too (those :meth:`halfwidth` gives at this step)."""
+        issued = None
+        if self.feedback == "served":
+            issued = self.quantiles()[self.bins(step_index, np.arange(1, self.horizon + 1))]
         self.pending.append((int(step_index), np.array(mean, dtype=float),
-                             None if std is None else np.array(std, dtype=float)))
+                             None if std is None else np.array(std, dtype=float), issued))
 
     def resolve(self, step_index: int, y: np.ndarray, std: np.ndarray) -> int:
         """Score the kept forecasts against y at step ``step_index`` (decays the histograms
@@ -194,7 +213,7 @@ class IntervalCalibrator:
         if ok.any():
             zones = np.flatnonzero(ok)
             q = self.quantiles()
-            for k0, mean, own in self.pending:
+            for k0, mean, own, issued in self.pending:
                 h = step_index - k0
                 if 1 <= h <= self.horizon:
                     sd = std if own is None else own
@@ -203,7 +222,8 @@ class IntervalCalibrator:
                                              np.array([h]))[0]) + c * self.n_class_bins
                     self.hist[b, zones, np.searchsorted(_EDGES, s)] += 1.0
                     if self.gamma > 0:
-                        miss = (s > q[b, zones]).astype(float)
+                        served = q[b, zones] if issued is None else issued[h - 1, zones]
+                        miss = (s > served).astype(float)
                         self.levels[c, zones] = np.clip(
                             self.levels[c, zones] + self.gamma * (miss - (1.0 - self.target)),
                             0.5, 0.995)
@@ -240,13 +260,16 @@ class IntervalCalibrator:
 
     # --- state ------------------------------------------------------------------------
     def state_arrays(self, prefix: str = "cal_") -> dict[str, np.ndarray]:
-        steps = np.array([k for k, _, _ in self.pending], dtype=np.int64)
-        means = np.array([m for _, m, _ in self.pending]).reshape(-1, self.horizon, self.nz)
+        steps = np.array([k for k, *_ in self.pending], dtype=np.int64)
+        means = np.array([m for _, m, *_ in self.pending]).reshape(-1, self.horizon, self.nz)
         nan = np.full((self.horizon, self.nz), np.nan)
-        stds = np.array([nan if s is None else s for _, _, s in self.pending]).reshape(
+        stds = np.array([nan if s is None else s for _, _, s, _ in self.pending]).reshape(
+            -1, self.horizon, self.nz)
+        issued = np.array([nan if q is None else q for *_, q in self.pending]).reshape(
             -1, self.horizon, self.nz)
         return {f"{prefix}hist": self.hist, f"{prefix}level": self.levels,
-                f"{prefix}steps": steps, f"{prefix}means": means, f"{prefix}stds": stds}
+                f"{prefix}steps": steps, f"{prefix}means": means, f"{prefix}stds": stds,
+                f"{prefix}issued_q": issued}
 
     def load_state_arrays(self, arrays: Mapping[str, np.ndarray], prefix: str = "cal_") -> bool:
         if f"{prefix}hist" not in arrays:
@@ -295,9 +318,14 @@ class IntervalCalibrator:
             return False
         self.pending.clear()
         stds = arrays.get(f"{prefix}stds")  # absent in checkpoints before it
+        # absent before 2026-12-05 (or kept with feedback "current"): judged by the
+        # quantiles when scored
+        issued = arrays.get(f"{prefix}issued_q") if self.feedback == "served" else None
         for i, (k, m) in enumerate(zip(arrays[f"{prefix}steps"], arrays[f"{prefix}means"])):
             sd = None if stds is None or np.isnan(stds[i]).all() else np.array(stds[i], float)
-            self.pending.append((int(k), np.array(m, float), sd))
+            q = (None if issued is None or np.isnan(issued[i]).all()
+                 else np.array(issued[i], float))
+            self.pending.append((int(k), np.array(m, float), sd, q))
         self._q = None
         return True
 

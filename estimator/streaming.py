@@ -170,6 +170,11 @@ DAY_CLASS_INTERVALS = True
 #: floated (docs/forecasts.md "The day after a day off"; measured on the 12 training
 #: members and rejected by its rule: Monday's coverage rises, Tuesday's falls, so off)
 AFTER_OFF_INTERVALS = False
+#: the interval a calibration forecast's error is judged against when the adaptive level
+#: moves (:class:`~zonecast.estimator.calibration.IntervalCalibrator` ``feedback``):
+#: "current", the quantiles when the measurement arrives (until 2026-12-05), or "served",
+#: those the forecast was issued with (docs/forecasts.md "The adaptive level's feedback")
+ACI_FEEDBACK = "current"
 #: widen the served intervals by the forecast's sensitivity to the weather forecast's
 #: error: the forecast run again with the weather perturbed by its learned RMS error by
 #: lead (:class:`~zonecast.estimator.calibration.WeatherSpread`), the change added to the
@@ -943,7 +948,7 @@ class OnlineEstimator:
         self._profile = self._fill.copy()
         cal = self.calendar
         self.calibrator = IntervalCalibrator(
-            self._nz, HORIZON, cal.per_day, step_ns=STEP.value,
+            self._nz, HORIZON, cal.per_day, step_ns=STEP.value, feedback=ACI_FEEDBACK,
             **self._interval_classes())
         # the weather channels of the inputs: Ta, then the facades' and the horizontal sun
         self._w_cols = np.array([nb] + list(range(nb + 2, nb + NV)))

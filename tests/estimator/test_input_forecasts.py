@@ -205,7 +205,7 @@ def test_calibrated_intervals_cover_on_stationary_errors():
     for k in range(96 * 40):
         y = truth + sigma * rng.standard_normal(nz)
         if k > 96 * 20:
-            for k0, mean, _ in cal.pending:
+            for k0, mean, *_ in cal.pending:
                 h = k - k0
                 if 1 <= h <= H:
                     hw = cal.halfwidth(k0, std)[h - 1]
@@ -239,7 +239,7 @@ def _run_two_laws(cal, sigma_work, sigma_off, days, rng):
         c = int(_weekend_class([k * 900 * 10**9])[0])
         y = np.array([20.0 + (sigma_off if c else sigma_work) * rng.standard_normal()])
         if k > 96 * days // 2:
-            for k0, mean, _ in cal.pending:
+            for k0, mean, *_ in cal.pending:
                 h = k - k0
                 if 1 <= h <= H:
                     hits[c] += float(abs(y[0] - mean[h - 1, 0]) <= cal.halfwidth(k0, std)[h - 1, 0])
@@ -248,6 +248,71 @@ def _run_two_laws(cal, sigma_work, sigma_off, days, rng):
         if cal.due(k):
             cal.add_forecast(k, np.full((H, 1), 20.0))
     return hits / n
+
+
+def _served_coverage(feedback: str, seed: int = 0, days: int = 90) -> float:
+    """Coverage of the intervals as served (each forecast's half-widths fixed when it was
+    issued) on errors whose scale changes from day to day (lognormal, sd 0.6 in log),
+    after a month of learning; the adaptive level's step small enough never to clip."""
+    rng = np.random.default_rng(seed)
+    H = 96
+    cal = IntervalCalibrator(1, H, 96, window_days=7, gamma=0.0002, feedback=feedback)
+    std = np.full((H, 1), 0.2)
+    day_scale = np.exp(0.6 * rng.standard_normal(days + 2))
+    served, hits, n = {}, 0, 0
+    for k in range(96 * days):
+        y = np.array([20.0 + day_scale[k // 96] * rng.standard_normal()])
+        if k > 96 * 30:
+            for k0, mean, *_ in cal.pending:
+                h = k - k0
+                if 1 <= h <= H:
+                    hits += int(abs(y[0] - mean[h - 1, 0]) <= served[k0][h - 1, 0])
+                    n += 1
+        cal.resolve(k, y, std)
+        if cal.due(k):
+            served[k] = cal.halfwidth(k, std)
+            cal.add_forecast(k, np.full((H, 1), 20.0))
+    return hits / n
+
+
+def test_adaptive_level_judged_by_the_served_interval_covers_as_served():
+    """Adaptive conformal inference needs the miss of the interval as served: judged by
+    the quantiles when the measurement arrives, which by then have widened on the same
+    bad day's earlier errors, the level settles too low and the served intervals cover
+    less than 90 %; judged by each forecast's own issued quantiles they cover 90 %."""
+    served = _served_coverage("served")
+    current = _served_coverage("current")
+    assert abs(served - 0.90) <= 0.01
+    assert current < served - 0.005
+
+
+def test_issued_quantiles_survive_a_checkpoint_and_old_checkpoints_still_load():
+    rng = np.random.default_rng(1)
+    H, nz = 96, 2
+    cal = IntervalCalibrator(nz, H, 96, feedback="served")
+    std = np.full((H, nz), 0.3)
+    for k in range(297):  # the last step issues a forecast: its quantiles are today's
+        cal.resolve(k, 20.0 + 0.3 * rng.standard_normal(nz), std)
+        if cal.due(k):
+            cal.add_forecast(k, np.full((H, nz), 20.0))
+    arrays = cal.state_arrays()
+    k0, _, _, issued = cal.pending[-1]
+    assert k0 == 296
+    np.testing.assert_array_equal(issued, cal.halfwidth(k0, np.ones((H, nz))))
+    assert not np.all(issued == cal.z_default)  # learned, not the default
+    other = IntervalCalibrator(nz, H, 96, feedback="served")
+    assert other.load_state_arrays(arrays)
+    for (_, _, _, a), (_, _, _, b) in zip(cal.pending, other.pending, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # a checkpoint from before the issued quantiles were kept: judged by the current ones
+    old = {k: v for k, v in arrays.items() if k != "cal_issued_q"}
+    assert other.load_state_arrays(old)
+    assert all(q is None for *_, q in other.pending)
+    y = np.full(nz, 20.5)
+    cal.resolve(300, y, std)
+    other.resolve(300, y, std)  # runs without the issued quantiles
+    with pytest.raises(ValueError, match="feedback must be 'served' or 'current'"):
+        IntervalCalibrator(nz, H, 96, feedback="issued")
 
 
 def test_day_classes_calibrate_working_days_and_weekends_apart():

@@ -50,6 +50,8 @@ level's misses judged against the quantiles when the measurement arrives, the se
 against the interval each forecast was served with (``streaming.ACI_FEEDBACK``;
 docs/forecasts.md "The adaptive level's feedback"); one replay gives both (a shadow
 calibrator beside the estimator's: the calibration changes no forecast, only its interval).
+``--side interval-scale``: the same, the second with the level fixed and a factor on the
+half-width moved by the served intervals' misses (``streaming.INTERVAL_ADAPT``).
 ``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
 each run's forecasts, intervals, measurements and target times (``.npz``) for analyses
 after the run (``benchmarks/coverage_analysis.py``). ``--stream FAMILY`` replays the
@@ -141,7 +143,8 @@ def served(campaign: Path, model: Path, control: bool,
               streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
               streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
               streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY,
-              streaming.AFTER_OFF_INTERVALS, streaming.ACI_FEEDBACK)
+              streaming.AFTER_OFF_INTERVALS, streaming.ACI_FEEDBACK,
+              streaming.INTERVAL_ADAPT)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -173,12 +176,15 @@ def served(campaign: Path, model: Path, control: bool,
         streaming.AFTER_OFF_INTERVALS = control  # for the working day after a day off
     elif side == "aci-feedback":  # the library's defaults but the adaptive level's feedback
         streaming.ACI_FEEDBACK = "served" if control else "current"
+    elif side == "interval-scale":  # the library's defaults but the misses move a factor
+        streaming.INTERVAL_ADAPT = "scale" if control else "level"
     # "defaults": the library's defaults (one run, ``control`` ignored)
-    shadow = side == "aci-feedback" and not control  # the served feedback beside, same replay
-    if side == "aci-feedback" and control and campaign.name in _SHADOW_RUNS:
+    # the second setting's calibrator beside the first's, in the same replay
+    shadow = side in SHADOW_SIDES and not control
+    if side in SHADOW_SIDES and control and campaign.name in _SHADOW_RUNS:
         return _SHADOW_RUNS.pop(campaign.name)
     shadow_hw: dict[int, np.ndarray] = {}
-    patched = _shadow_calibrator(shadow_hw) if shadow else None
+    patched = _shadow_calibrator(shadow_hw, SHADOW_SIDES[side]) if shadow else None
     try:
         t0 = time.perf_counter()
         pipe = Pipeline.from_model_file(model)
@@ -201,7 +207,8 @@ def served(campaign: Path, model: Path, control: bool,
          streaming.GAINS_LEVEL_TAU, streaming.WEATHER_SPREAD_TWO_SIDED,
          streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
          streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY,
-         streaming.AFTER_OFF_INTERVALS, streaming.ACI_FEEDBACK) = before
+         streaming.AFTER_OFF_INTERVALS, streaming.ACI_FEEDBACK,
+         streaming.INTERVAL_ADAPT) = before
         if patched is not None:
             for name, fn in patched.items():
                 setattr(IntervalCalibrator, name, fn)
@@ -231,23 +238,26 @@ def served(campaign: Path, model: Path, control: bool,
                    meas, rms, seconds)
 
 
-#: ``--side aci-feedback``: the served feedback's results of a member, computed in the
-#: current feedback's replay by a shadow calibrator (the calibration changes no forecast
-#: mean, only the intervals, so one replay gives both)
+#: sides whose two settings differ in the interval calibration alone: the second
+#: setting's calibrator (these keyword arguments) runs as a shadow in the first's replay
+#: (the calibration changes no forecast mean, only the intervals, so one replay gives both)
+SHADOW_SIDES = {"aci-feedback": {"feedback": "served"},
+                "interval-scale": {"feedback": "served", "adapt": "scale"}}
+#: a shadow side's second results per member, made in the first setting's run
 _SHADOW_RUNS: dict[str, tuple] = {}
 
 
-def _shadow_calibrator(store: dict[int, np.ndarray]) -> dict:
+def _shadow_calibrator(store: dict[int, np.ndarray], shadow_kw: dict) -> dict:
     """Patch :class:`IntervalCalibrator` so that each instance runs a shadow with
-    ``feedback="served"`` on the same forecasts and scores, and each served half-width's
-    shadow is kept in ``store`` by grid step. Returns the original methods to restore."""
+    ``shadow_kw`` on the same forecasts and scores, and each served half-width's shadow
+    is kept in ``store`` by grid step. Returns the original methods to restore."""
     orig = {n: getattr(IntervalCalibrator, n)
             for n in ("__init__", "add_forecast", "resolve", "halfwidth", "load_state_arrays")}
 
     def init(self, *a, **kw):
         orig["__init__"](self, *a, **kw)
         sh = IntervalCalibrator.__new__(IntervalCalibrator)
-        orig["__init__"](sh, *a, **dict(kw, feedback="served"))
+        orig["__init__"](sh, *a, **dict(kw, **shadow_kw))
         self._shadow = sh
 
     def add_forecast(self, step_index, mean, std=None):
@@ -376,7 +386,8 @@ def main() -> None:
     ap.add_argument("--side", choices=("reheat", "cooling", "young", "young-std", "day-class",
                                        "weather-spread", "gains-level", "spread-sides",
                                        "closed-loop", "monday-fill", "deadband", "learn-empty",
-                                       "after-off", "aci-feedback", "defaults"),
+                                       "after-off", "aci-feedback", "interval-scale",
+                                       "defaults"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
@@ -466,6 +477,7 @@ def main() -> None:
             "learn-empty": ("empty bins filled", "and learned online"),
             "after-off": ("working and other days", "and the day after a day off"),
             "aci-feedback": ("level moved by the current interval", "by the served interval"),
+            "interval-scale": ("level moved", "a factor moved, level fixed"),
             "defaults": ("defaults", "defaults (not run again)")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| working / other days / after a day off | seconds off / on |")

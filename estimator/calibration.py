@@ -36,7 +36,17 @@ rescales it by lead time from the errors the building's own served forecasts mad
   measurement (``feedback="current"``), which by a 24-h lead have already widened on the
   same forecast's earlier errors: the calibration counted about 0.90 of its errors inside
   while the intervals as served covered 0.86 (docs/forecasts.md "The adaptive level's
-  feedback").
+  feedback");
+- ``adapt="scale"`` keeps the level at the target and tracks a factor on the served
+  half-width instead: log factor += eta (miss - (1 - target)) per scored error, per day
+  class and zone, the miss judged against the served interval (quantile tracking in log
+  space, Angelopoulos, Candès and Tibshirani 2023, "Conformal PID control"). Unlike a
+  level, which stops at 0.995 (a level of 1 would be an interval as wide as the largest
+  score), the factor has no bound short of its numerical guard, so a run of days worse
+  than the window's scores is paid back and the served intervals cover the target over
+  time; with the level adapted and its misses judged as served the level sat at 0.995 a
+  tenth of the time on a training member and the intervals covered 0.877
+  (docs/forecasts.md "The adaptive level's feedback").
 
 Until a bin has ``min_weight`` scores the model's own z_0.9 = 1.645 is used.
 
@@ -57,7 +67,11 @@ __all__ = ["CALIBRATION_DEFAULTS", "IntervalCalibrator", "WeatherSpread"]
 #: window chosen on office6's training weeks; gamma re-chosen on the validation weeks of the
 #: family's training buildings (docs/forecasts.md "Served forecast")
 CALIBRATION_DEFAULTS = {"window_days": 7.0, "cadence": 8, "tod_bins": 12, "level": 0.9,
-                        "min_weight": 30.0, "gamma": 0.001, "feedback": "current"}
+                        "min_weight": 30.0, "gamma": 0.001, "feedback": "current",
+                        "adapt": "level", "eta": 0.0035}
+#: guard on the log factor of ``adapt="scale"`` (a factor of 1 / 148 .. 148; never reached
+#: on the family: docs/forecasts.md)
+_LOG_SCALE_GUARD = 5.0
 
 _EDGES = np.geomspace(1e-2, 1e2, 51)  # score bins; below/above go to the first/last
 _DAY_NS = 86_400 * 10**9
@@ -117,6 +131,12 @@ class IntervalCalibrator:
         was issued with ("served", adaptive conformal inference as published), or the
         one the quantiles give when the measurement arrives ("current", before
         2026-12-05).
+    adapt : {"level", "scale"}
+        What the misses move: the quantile's level (``gamma``; adaptive conformal
+        inference) or a factor on the half-width (``eta``; quantile tracking in log
+        space, the level fixed at ``level``; needs ``feedback="served"``).
+    eta : float
+        Step of the log factor per scored error [-] (``adapt="scale"``).
     """
 
     def __init__(self, n_zones: int, horizon: int, steps_per_day: int, *,
@@ -129,12 +149,19 @@ class IntervalCalibrator:
                  lead_edges=(0, 8, 32), step_ns: int = 900 * 10**9,
                  z_default: float = 1.6448536269514722,
                  day_class: Callable[[np.ndarray], np.ndarray] | None = None,
-                 n_classes: int = 1, feedback: str = CALIBRATION_DEFAULTS["feedback"]):
+                 n_classes: int = 1, feedback: str = CALIBRATION_DEFAULTS["feedback"],
+                 adapt: str = CALIBRATION_DEFAULTS["adapt"],
+                 eta: float = CALIBRATION_DEFAULTS["eta"]):
         if not 0 < level < 1:
             raise ValueError("level must lie in (0, 1)")
         if feedback not in ("served", "current"):
             raise ValueError(f"feedback must be 'served' or 'current', got {feedback!r}")
-        self.feedback = feedback
+        if adapt not in ("level", "scale"):
+            raise ValueError(f"adapt must be 'level' or 'scale', got {adapt!r}")
+        if adapt == "scale" and feedback != "served":
+            raise ValueError("adapt='scale' judges each miss by the served interval: give "
+                             "feedback='served'")
+        self.feedback, self.adapt, self.eta = feedback, adapt, float(eta)
         if n_classes < 1 or (day_class is None) != (n_classes == 1):
             raise ValueError("give day_class with n_classes > 1, or neither")
         self.nz, self.horizon, self.cadence = int(n_zones), int(horizon), int(cadence)
@@ -152,6 +179,8 @@ class IntervalCalibrator:
         self.hist = np.zeros((self.n_bins, self.nz, len(_EDGES) + 1))
         #: adaptive level per day class and zone
         self.levels = np.full((self.n_classes, self.nz), self.target)
+        #: log factor on the served half-width per day class and zone (adapt="scale")
+        self.log_scale = np.zeros((self.n_classes, self.nz))
         # (issue step, mean, std or None: the std given to resolve, the score quantiles
         # (horizon, n_zones) it was issued with or None: the quantiles when scored)
         self.pending: deque[tuple[int, np.ndarray, np.ndarray | None, np.ndarray | None]] = \
@@ -221,12 +250,18 @@ class IntervalCalibrator:
                     b = int(self._class_bins(np.array([step_index * self.step_ns]),
                                              np.array([h]))[0]) + c * self.n_class_bins
                     self.hist[b, zones, np.searchsorted(_EDGES, s)] += 1.0
-                    if self.gamma > 0:
+                    step = self.eta if self.adapt == "scale" else self.gamma
+                    if step > 0:
                         served = q[b, zones] if issued is None else issued[h - 1, zones]
                         miss = (s > served).astype(float)
-                        self.levels[c, zones] = np.clip(
-                            self.levels[c, zones] + self.gamma * (miss - (1.0 - self.target)),
-                            0.5, 0.995)
+                        if self.adapt == "scale":
+                            self.log_scale[c, zones] = np.clip(
+                                self.log_scale[c, zones] + step * (miss - (1.0 - self.target)),
+                                -_LOG_SCALE_GUARD, _LOG_SCALE_GUARD)
+                        else:
+                            self.levels[c, zones] = np.clip(
+                                self.levels[c, zones] + step * (miss - (1.0 - self.target)),
+                                0.5, 0.995)
                     added += len(zones)
         # the target's day class forgets (all of them without classes)
         self.hist[c * self.n_class_bins:(c + 1) * self.n_class_bins] *= self.lam
@@ -250,6 +285,8 @@ class IntervalCalibrator:
             q = np.where(total >= self.min_weight, q, qp)
             total = np.where(total >= self.min_weight, total, tp)
         self._q = np.where(total >= self.min_weight, q, self.z_default)
+        if self.adapt == "scale":
+            self._q = self._q * np.exp(np.repeat(self.log_scale, self.n_class_bins, axis=0))
         return self._q
 
     def halfwidth(self, step_index: int, std: np.ndarray) -> np.ndarray:
@@ -269,7 +306,7 @@ class IntervalCalibrator:
             -1, self.horizon, self.nz)
         return {f"{prefix}hist": self.hist, f"{prefix}level": self.levels,
                 f"{prefix}steps": steps, f"{prefix}means": means, f"{prefix}stds": stds,
-                f"{prefix}issued_q": issued}
+                f"{prefix}issued_q": issued, f"{prefix}log_scale": self.log_scale}
 
     def load_state_arrays(self, arrays: Mapping[str, np.ndarray], prefix: str = "cal_") -> bool:
         if f"{prefix}hist" not in arrays:
@@ -316,6 +353,14 @@ class IntervalCalibrator:
             self.levels = level.reshape(k, -1).mean(axis=0, keepdims=True)
         else:
             return False
+        # the half-width's factor: kept when the day classes are the same, else (and in
+        # checkpoints before it) it starts again from 1
+        ls = arrays.get(f"{prefix}log_scale")
+        self.log_scale = (np.array(ls, float) if ls is not None
+                          and np.shape(ls) == self.log_scale.shape
+                          else np.zeros_like(self.log_scale))
+        if self.adapt == "scale":  # the level is fixed (a level-adapting checkpoint's is not)
+            self.levels = np.full_like(self.levels, self.target)
         self.pending.clear()
         stds = arrays.get(f"{prefix}stds")  # absent in checkpoints before it
         # absent before 2026-12-05 (or kept with feedback "current"): judged by the

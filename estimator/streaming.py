@@ -175,6 +175,11 @@ AFTER_OFF_INTERVALS = False
 #: "current", the quantiles when the measurement arrives (until 2026-12-05), or "served",
 #: those the forecast was issued with (docs/forecasts.md "The adaptive level's feedback")
 ACI_FEEDBACK = "current"
+#: what the misses of the served intervals move (:class:`IntervalCalibrator` ``adapt``):
+#: "level", the quantile's level (adaptive conformal inference; until 2026-12-05), or
+#: "scale", a factor on the half-width with the level fixed at 0.90 (quantile tracking,
+#: always judged by the served interval; docs/forecasts.md "The adaptive level's feedback")
+INTERVAL_ADAPT = "level"
 #: widen the served intervals by the forecast's sensitivity to the weather forecast's
 #: error: the forecast run again with the weather perturbed by its learned RMS error by
 #: lead (:class:`~zonecast.estimator.calibration.WeatherSpread`), the change added to the
@@ -948,7 +953,8 @@ class OnlineEstimator:
         self._profile = self._fill.copy()
         cal = self.calendar
         self.calibrator = IntervalCalibrator(
-            self._nz, HORIZON, cal.per_day, step_ns=STEP.value, feedback=ACI_FEEDBACK,
+            self._nz, HORIZON, cal.per_day, step_ns=STEP.value, adapt=INTERVAL_ADAPT,
+            feedback="served" if INTERVAL_ADAPT == "scale" else ACI_FEEDBACK,
             **self._interval_classes())
         # the weather channels of the inputs: Ta, then the facades' and the horizontal sun
         self._w_cols = np.array([nb] + list(range(nb + 2, nb + NV)))

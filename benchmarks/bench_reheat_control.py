@@ -174,9 +174,11 @@ def served(campaign: Path, model: Path, control: bool,
         streaming.PROFILE_LEARN_EMPTY = control  # learned online
     elif side == "after-off":  # the library's defaults but a day class of the intervals
         streaming.AFTER_OFF_INTERVALS = control  # for the working day after a day off
-    elif side == "aci-feedback":  # the library's defaults but the adaptive level's feedback
+    elif side == "aci-feedback":  # the adapted level (before 2026-12-05), judged by the
+        streaming.INTERVAL_ADAPT = "level"  # current interval, or by the served one
         streaming.ACI_FEEDBACK = "served" if control else "current"
-    elif side == "interval-scale":  # the library's defaults but the misses move a factor
+    elif side == "interval-scale":  # the adapted level judged by the current interval
+        streaming.ACI_FEEDBACK = "current"  # (before 2026-12-05), or the tracked factor
         streaming.INTERVAL_ADAPT = "scale" if control else "level"
     # "defaults": the library's defaults (one run, ``control`` ignored)
     # the second setting's calibrator beside the first's, in the same replay

@@ -24,8 +24,8 @@ rescales it by lead time from the errors the building's own served forecasts mad
   day classes only the target's class decays at a step (a window of ``window_days`` days
   of that class);
   scores inside the site's experiments are not kept (the streaming estimator skips them);
-- the served half-width is q(bin, zone) x std(h): split-conformal scaling of the model
-  std with the empirical quantile of recent scores;
+- the served half-width is q(bin, zone) x std(h) (times the tracked factor, below):
+  split-conformal scaling of the model std with the empirical quantile of recent scores;
 - the quantile's level per zone follows adaptive conformal inference (Gibbs and Candès
   2021): after each scored error, level += gamma (miss - (1 - target)), with miss = 1 when
   the error lay outside the interval then served (per day class and zone). A window of
@@ -65,10 +65,13 @@ import numpy as np
 __all__ = ["CALIBRATION_DEFAULTS", "IntervalCalibrator", "WeatherSpread"]
 
 #: window chosen on office6's training weeks; gamma re-chosen on the validation weeks of the
-#: family's training buildings (docs/forecasts.md "Served forecast")
+#: family's training buildings (docs/forecasts.md "Served forecast"); since 2026-12-05 the
+#: misses move a factor (adapt "scale", eta 3.5 x gamma), judged by the served interval,
+#: adopted on the 12 training members' streams (docs/forecasts.md "The adaptive level's
+#: feedback"); gamma is the level's step of adapt "level"
 CALIBRATION_DEFAULTS = {"window_days": 7.0, "cadence": 8, "tod_bins": 12, "level": 0.9,
-                        "min_weight": 30.0, "gamma": 0.001, "feedback": "current",
-                        "adapt": "level", "eta": 0.0035}
+                        "min_weight": 30.0, "gamma": 0.001, "feedback": "served",
+                        "adapt": "scale", "eta": 0.0035}
 #: guard on the log factor of ``adapt="scale"`` (a factor of 1 / 148 .. 148; never reached
 #: on the family: docs/forecasts.md)
 _LOG_SCALE_GUARD = 5.0

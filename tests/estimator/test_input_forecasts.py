@@ -198,7 +198,7 @@ def test_calibrated_intervals_cover_on_stationary_errors():
     90 % quantile (about 1.645 sigma for a normal error) and cover about 90 %."""
     rng = np.random.default_rng(3)
     H, nz, sigma = 96, 2, np.array([0.5, 1.5])
-    cal = IntervalCalibrator(nz, H, 96, window_days=30, cadence=8, gamma=0.0)
+    cal = IntervalCalibrator(nz, H, 96, window_days=30, cadence=8, gamma=0.0, adapt="level")
     std = np.full((H, nz), 0.2)
     truth = 20.0 + np.zeros(nz)
     hits, n = 0, 0
@@ -218,7 +218,7 @@ def test_calibrated_intervals_cover_on_stationary_errors():
     hw = cal.halfwidth(0, std)
     np.testing.assert_allclose(hw.mean(axis=0), 1.645 * sigma, rtol=0.1)
     # checkpoint round trip
-    other = IntervalCalibrator(nz, H, 96, window_days=30, cadence=8, gamma=0.0)
+    other = IntervalCalibrator(nz, H, 96, window_days=30, cadence=8, gamma=0.0, adapt="level")
     assert other.load_state_arrays(cal.state_arrays())
     assert np.array_equal(other.halfwidth(5, std), cal.halfwidth(5, std))
 
@@ -258,7 +258,7 @@ def _served_coverage(feedback: str, seed: int = 0, days: int = 90, **kw) -> floa
     rng = np.random.default_rng(seed)
     H = 96
     cal = IntervalCalibrator(1, H, 96, window_days=7, feedback=feedback,
-                             **({"gamma": 0.0002} | kw))
+                             **({"gamma": 0.0002, "adapt": "level"} | kw))
     std = np.full((H, 1), 0.2)
     day_scale = np.exp(0.6 * rng.standard_normal(days + 2))
     served, hits, n = {}, 0, 0
@@ -318,7 +318,7 @@ def test_tracked_factor_survives_a_checkpoint_and_fixes_the_level():
     np.testing.assert_array_equal(other.log_scale, cal.log_scale)
     np.testing.assert_array_equal(other.halfwidth(7, std), cal.halfwidth(7, std))
     # a checkpoint of the adapted level: its scores kept, the level back at the target
-    lvl = IntervalCalibrator(nz, H, 96)
+    lvl = IntervalCalibrator(nz, H, 96, adapt="level", feedback="current")
     feed(lvl, 400)
     assert np.any(lvl.levels != 0.9)
     assert other.load_state_arrays(lvl.state_arrays())
@@ -332,7 +332,7 @@ def test_tracked_factor_survives_a_checkpoint_and_fixes_the_level():
 def test_issued_quantiles_survive_a_checkpoint_and_old_checkpoints_still_load():
     rng = np.random.default_rng(1)
     H, nz = 96, 2
-    cal = IntervalCalibrator(nz, H, 96, feedback="served")
+    cal = IntervalCalibrator(nz, H, 96, feedback="served", adapt="level")
     std = np.full((H, nz), 0.3)
     for k in range(297):  # the last step issues a forecast: its quantiles are today's
         cal.resolve(k, 20.0 + 0.3 * rng.standard_normal(nz), std)
@@ -343,7 +343,7 @@ def test_issued_quantiles_survive_a_checkpoint_and_old_checkpoints_still_load():
     assert k0 == 296
     np.testing.assert_array_equal(issued, cal.halfwidth(k0, np.ones((H, nz))))
     assert not np.all(issued == cal.z_default)  # learned, not the default
-    other = IntervalCalibrator(nz, H, 96, feedback="served")
+    other = IntervalCalibrator(nz, H, 96, feedback="served", adapt="level")
     assert other.load_state_arrays(arrays)
     for (_, _, _, a), (_, _, _, b) in zip(cal.pending, other.pending, strict=True):
         np.testing.assert_array_equal(a, b)
@@ -361,8 +361,8 @@ def test_issued_quantiles_survive_a_checkpoint_and_old_checkpoints_still_load():
 def test_day_classes_calibrate_working_days_and_weekends_apart():
     """Errors three times larger on weekends: pooled, the intervals over-cover the working
     days and under-cover the weekends; per day class both come close to 90 %."""
-    pooled = IntervalCalibrator(1, 96, 96, window_days=14, gamma=0.0)
-    split = IntervalCalibrator(1, 96, 96, window_days=14, gamma=0.0,
+    pooled = IntervalCalibrator(1, 96, 96, window_days=14, gamma=0.0, adapt="level")
+    split = IntervalCalibrator(1, 96, 96, window_days=14, gamma=0.0, adapt="level",
                                day_class=_weekend_class, n_classes=2)
     cov_pooled = _run_two_laws(pooled, 0.3, 0.9, 70, np.random.default_rng(5))
     cov_split = _run_two_laws(split, 0.3, 0.9, 70, np.random.default_rng(5))
@@ -375,7 +375,8 @@ def test_a_day_class_short_of_scores_takes_the_pooled_ones():
     not the model's z_0.9."""
     from zonecast.estimator.calibration import _EDGES
 
-    cal = IntervalCalibrator(1, 96, 96, gamma=0.0, day_class=_weekend_class, n_classes=2)
+    cal = IntervalCalibrator(1, 96, 96, gamma=0.0, adapt="level",
+                             day_class=_weekend_class, n_classes=2)
     b_work = cal.bins(0, np.arange(1, 97))  # day 0 is a working day of _weekend_class
     cal.hist[b_work, 0, np.searchsorted(_EDGES, 3.0)] = 100.0
     q = cal.quantiles()
@@ -387,14 +388,15 @@ def test_a_day_class_short_of_scores_takes_the_pooled_ones():
 
 def test_day_class_calibration_starts_from_a_pooled_checkpoint():
     """A checkpoint of the calibration without day classes seeds both classes."""
-    old = IntervalCalibrator(1, 96, 96, gamma=0.01)
+    old = IntervalCalibrator(1, 96, 96, gamma=0.01, adapt="level")
     rng = np.random.default_rng(1)
     std = np.ones((96, 1))
     for k in range(96 * 3):
         old.resolve(k, np.array([rng.standard_normal()]), std)
         if old.due(k):
             old.add_forecast(k, np.zeros((96, 1)))
-    new = IntervalCalibrator(1, 96, 96, gamma=0.01, day_class=_weekend_class, n_classes=2)
+    new = IntervalCalibrator(1, 96, 96, gamma=0.01, adapt="level",
+                             day_class=_weekend_class, n_classes=2)
     assert new.load_state_arrays(old.state_arrays())
     assert new.levels.shape == (2, 1) and np.all(new.levels == old.level[0])
     for c in range(2):
@@ -407,7 +409,8 @@ def test_day_class_calibration_resumes_a_checkpoint_with_another_class_count():
     """Two classes into three: the kept classes bitwise, the new one from the first class's
     scores and level; three into two: the third's scores added to the first class's."""
     three = DayCalendar(TZ, "15min").interval_classes
-    two = IntervalCalibrator(2, 96, 96, gamma=0.01, day_class=_weekend_class, n_classes=2)
+    two = IntervalCalibrator(2, 96, 96, gamma=0.01, adapt="level",
+                             day_class=_weekend_class, n_classes=2)
     rng = np.random.default_rng(3)
     std = np.ones((96, 2))
     for k in range(96 * 8):
@@ -415,14 +418,15 @@ def test_day_class_calibration_resumes_a_checkpoint_with_another_class_count():
         if two.due(k):
             two.add_forecast(k, np.zeros((96, 2)))
     n = two.n_class_bins
-    new = IntervalCalibrator(2, 96, 96, gamma=0.01, day_class=three, n_classes=3)
+    new = IntervalCalibrator(2, 96, 96, gamma=0.01, adapt="level", day_class=three, n_classes=3)
     assert new.load_state_arrays(two.state_arrays())
     assert np.array_equal(new.hist[:2 * n], two.hist)
     assert np.array_equal(new.hist[2 * n:], two.hist[:n])
     assert np.array_equal(new.levels, np.vstack([two.levels, two.levels[:1]]))
     assert len(new.pending) == len(two.pending)
     new.hist[2 * n:] *= 0.5  # the third class's own scores
-    back = IntervalCalibrator(2, 96, 96, gamma=0.01, day_class=_weekend_class, n_classes=2)
+    back = IntervalCalibrator(2, 96, 96, gamma=0.01, adapt="level",
+                              day_class=_weekend_class, n_classes=2)
     assert back.load_state_arrays(new.state_arrays())
     np.testing.assert_allclose(back.hist[:n], new.hist[:n] + new.hist[2 * n:])
     assert np.array_equal(back.hist[n:], new.hist[n:2 * n])
@@ -473,7 +477,7 @@ def test_weather_spread_learns_absolute_and_relative_errors_by_lead():
 
 
 def test_adaptive_level_widens_after_misses():
-    cal = IntervalCalibrator(1, 96, 96, gamma=0.01)
+    cal = IntervalCalibrator(1, 96, 96, gamma=0.01, adapt="level")
     std = np.ones((96, 1))
     before = cal.level.copy()
     cal.add_forecast(0, np.zeros((96, 1)))
@@ -487,9 +491,9 @@ def test_a_forecast_is_scored_with_the_std_it_was_issued_with():
     from zonecast.estimator.calibration import _EDGES
 
     def scored(own):
-        cal = IntervalCalibrator(1, 96, 96, gamma=0.0)
+        cal = IntervalCalibrator(1, 96, 96, gamma=0.0, adapt="level")
         cal.add_forecast(0, np.zeros((96, 1)), own)
-        other = IntervalCalibrator(1, 96, 96, gamma=0.0)
+        other = IntervalCalibrator(1, 96, 96, gamma=0.0, adapt="level")
         assert other.load_state_arrays(cal.state_arrays())
         for c in (cal, other):
             c.resolve(1, np.array([1.0]), np.ones((96, 1)))

@@ -72,8 +72,9 @@ __all__ = ["CALIBRATION_DEFAULTS", "IntervalCalibrator", "WeatherSpread"]
 CALIBRATION_DEFAULTS = {"window_days": 7.0, "cadence": 8, "tod_bins": 12, "level": 0.9,
                         "min_weight": 30.0, "gamma": 0.001, "feedback": "served",
                         "adapt": "scale", "eta": 0.0035}
-#: guard on the log factor of ``adapt="scale"`` (a factor of 1 / 148 .. 148; never reached
-#: on the family: docs/forecasts.md)
+#: guard on the log factor of ``adapt="scale"`` (a factor of 1 / 148 .. 148), against a
+#: runaway on broken data; far from reached on a training member's 42-week stream (|log
+#: factor| at most 0.6 at its end, docs/forecasts.md "The adaptive level's feedback")
 _LOG_SCALE_GUARD = 5.0
 
 _EDGES = np.geomspace(1e-2, 1e2, 51)  # score bins; below/above go to the first/last

@@ -180,7 +180,7 @@ ACI_FEEDBACK = "served"
 #: "level", the quantile's level (adaptive conformal inference; until 2026-12-05), or
 #: "scale", a factor on the half-width with the level fixed at 0.90 (quantile tracking,
 #: always judged by the served interval; the default since 2026-12-05: on the 12 training
-#: members' gapless streams coverage 0.856-0.882 -> 0.889-0.901; docs/forecasts.md "The
+#: members' gapless streams coverage 0.856-0.882 -> 0.889-0.903; docs/forecasts.md "The
 #: adaptive level's feedback")
 INTERVAL_ADAPT = "scale"
 #: widen the served intervals by the forecast's sensitivity to the weather forecast's

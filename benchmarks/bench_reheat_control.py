@@ -52,6 +52,10 @@ docs/forecasts.md "The adaptive level's feedback"); one replay gives both (a sha
 calibrator beside the estimator's: the calibration changes no forecast, only its interval).
 ``--side interval-scale``: the same, the second with the level fixed and a factor on the
 half-width moved by the served intervals' misses (``streaming.INTERVAL_ADAPT``).
+``--side settled-calibration``: the library's defaults, the second without calibration
+forecasts from the filter's first ``YOUNG_STEPS`` steps after each start
+(``streaming.CALIBRATE_YOUNG``; docs/forecasts.md "The calibration after a restart"; a
+shadow calibrator as well).
 ``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
 each run's forecasts, intervals, measurements and target times (``.npz``) for analyses
 after the run (``benchmarks/coverage_analysis.py``). ``--stream FAMILY`` replays the
@@ -144,7 +148,7 @@ def served(campaign: Path, model: Path, control: bool,
               streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
               streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY,
               streaming.AFTER_OFF_INTERVALS, streaming.ACI_FEEDBACK,
-              streaming.INTERVAL_ADAPT)
+              streaming.INTERVAL_ADAPT, streaming.CALIBRATE_YOUNG)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -180,6 +184,8 @@ def served(campaign: Path, model: Path, control: bool,
     elif side == "interval-scale":  # the adapted level judged by the current interval
         streaming.ACI_FEEDBACK = "current"  # (before 2026-12-05), or the tracked factor
         streaming.INTERVAL_ADAPT = "scale" if control else "level"
+    elif side == "settled-calibration":  # the library's defaults but the calibration
+        streaming.CALIBRATE_YOUNG = not control  # without the young filter's forecasts
     # "defaults": the library's defaults (one run, ``control`` ignored)
     # the second setting's calibrator beside the first's, in the same replay
     shadow = side in SHADOW_SIDES and not control
@@ -210,10 +216,10 @@ def served(campaign: Path, model: Path, control: bool,
          streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
          streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY,
          streaming.AFTER_OFF_INTERVALS, streaming.ACI_FEEDBACK,
-         streaming.INTERVAL_ADAPT) = before
+         streaming.INTERVAL_ADAPT, streaming.CALIBRATE_YOUNG) = before
         if patched is not None:
-            for name, fn in patched.items():
-                setattr(IntervalCalibrator, name, fn)
+            for (owner, name), fn in patched.items():
+                setattr(owner, name, fn)
     pred, lo, hi, meas = (np.full((len(issues), HORIZON, nz), np.nan) for _ in range(4))
     lo2, hi2 = np.full_like(lo, np.nan), np.full_like(hi, np.nan)
     for k, (r, stop) in enumerate(issues):
@@ -244,7 +250,9 @@ def served(campaign: Path, model: Path, control: bool,
 #: setting's calibrator (these keyword arguments) runs as a shadow in the first's replay
 #: (the calibration changes no forecast mean, only the intervals, so one replay gives both)
 SHADOW_SIDES = {"aci-feedback": {"feedback": "served"},
-                "interval-scale": {"feedback": "served", "adapt": "scale"}}
+                "interval-scale": {"feedback": "served", "adapt": "scale"},
+                # the same calibrator, kept from forecasts of a settled filter only
+                "settled-calibration": {"_settled": True}}
 #: a shadow side's second results per member, made in the first setting's run
 _SHADOW_RUNS: dict[str, tuple] = {}
 
@@ -252,9 +260,19 @@ _SHADOW_RUNS: dict[str, tuple] = {}
 def _shadow_calibrator(store: dict[int, np.ndarray], shadow_kw: dict) -> dict:
     """Patch :class:`IntervalCalibrator` so that each instance runs a shadow with
     ``shadow_kw`` on the same forecasts and scores, and each served half-width's shadow
-    is kept in ``store`` by grid step. Returns the original methods to restore."""
+    is kept in ``store`` by grid step. ``shadow_kw`` ``_settled``: the shadow keeps only
+    the forecasts issued ``YOUNG_STEPS`` or more steps after the filter's start
+    (``streaming.CALIBRATE_YOUNG`` False). Returns the original methods to restore, by
+    (class, name)."""
+    shadow_kw = dict(shadow_kw)
+    settled = shadow_kw.pop("_settled", False)
     orig = {n: getattr(IntervalCalibrator, n)
             for n in ("__init__", "add_forecast", "resolve", "halfwidth", "load_state_arrays")}
+    learn = streaming.OnlineEstimator._learn_inputs
+
+    def learn_inputs(self, t, inputs, y):
+        self.calibrator._age_now = self._age  # what the shadow's add_forecast asks
+        return learn(self, t, inputs, y)
 
     def init(self, *a, **kw):
         orig["__init__"](self, *a, **kw)
@@ -263,7 +281,8 @@ def _shadow_calibrator(store: dict[int, np.ndarray], shadow_kw: dict) -> dict:
         self._shadow = sh
 
     def add_forecast(self, step_index, mean, std=None):
-        orig["add_forecast"](self._shadow, step_index, mean, std)
+        if not settled or self._age_now >= streaming.YOUNG_STEPS:
+            orig["add_forecast"](self._shadow, step_index, mean, std)
         return orig["add_forecast"](self, step_index, mean, std)
 
     def resolve(self, step_index, y, std):
@@ -280,7 +299,9 @@ def _shadow_calibrator(store: dict[int, np.ndarray], shadow_kw: dict) -> dict:
     for name, fn in (("__init__", init), ("add_forecast", add_forecast), ("resolve", resolve),
                      ("halfwidth", halfwidth), ("load_state_arrays", load_state_arrays)):
         setattr(IntervalCalibrator, name, fn)
-    return orig
+    streaming.OnlineEstimator._learn_inputs = learn_inputs
+    return ({(IntervalCalibrator, n): fn for n, fn in orig.items()}
+            | {(streaming.OnlineEstimator, "_learn_inputs"): learn})
 
 
 def _scored(campaign, site, sdata, issues, zones, side, control, pred, lo, hi, meas, rms,
@@ -389,7 +410,7 @@ def main() -> None:
                                        "weather-spread", "gains-level", "spread-sides",
                                        "closed-loop", "monday-fill", "deadband", "learn-empty",
                                        "after-off", "aci-feedback", "interval-scale",
-                                       "defaults"),
+                                       "settled-calibration", "defaults"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
@@ -480,6 +501,7 @@ def main() -> None:
             "after-off": ("working and other days", "and the day after a day off"),
             "aci-feedback": ("level moved by the current interval", "by the served interval"),
             "interval-scale": ("level moved", "a factor moved, level fixed"),
+            "settled-calibration": ("calibrated from every start", "from a settled filter"),
             "defaults": ("defaults", "defaults (not run again)")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| working / other days / after a day off | seconds off / on |")

@@ -589,3 +589,58 @@ def test_forecast_variants_of_one_replay_equal_separate_replays(bundle, telemetr
     assert np.array_equal(together["given"][times[0]].mean, together["served"][times[0]].mean)
     with pytest.raises(ValueError, match="None, 'persistence' or a mapping"):
         offline_forecast_variants(bundle, frame, times, {"x": "yesterday"})
+
+
+def test_settled_calibration_skips_the_young_filters_forecasts_after_each_start(
+        bundle, telemetry, monkeypatch):
+    """With ``calibrate_young`` off the interval calibration keeps no forecast issued in the
+    first YOUNG_STEPS steps after a start, the first one and the one after a gap longer
+    than ``max_gap``; the filter's age survives a checkpoint, and a checkpoint written
+    before the age was kept resumes as a settled filter."""
+    import zonecast.estimator.streaming as S
+
+    monkeypatch.setattr(S, "YOUNG_STEPS", 16)
+    tt, u, v, y = S.rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:80]))
+    gap = 40  # rows 40..43 missing: a gap of 75 min restarts the filter at row 44
+    keep = [k for k in range(len(tt)) if not gap <= k < gap + 4]
+
+    def kept_steps(calibrate_young: bool) -> list[int]:
+        est = S.OnlineEstimator(bundle, max_gap=pd.Timedelta("30min"))
+        est.calibrate_young = calibrate_young
+        seen: list[int] = []
+        add = est.calibrator.add_forecast
+
+        def record(step_index, mean, std=None):
+            seen.append(int(step_index))
+            return add(step_index, mean, std)
+
+        est.calibrator.add_forecast = record
+        for k in keep:
+            est.advance(tt[k], u[k], v[k], y[k])
+        assert est.resets == 1
+        step = tt[0].value // S.STEP.value
+        return [s - step for s in seen]  # rows of the kept forecasts
+
+    young = kept_steps(True)
+    settled = kept_steps(False)
+    due = [k for k in keep if (tt[k].value // S.STEP.value) % 8 == 0]
+    assert young == due
+    # the first start at row 0, the restart at row 44: 16 steps each before any is kept
+    assert settled == [k for k in due if 16 <= k < gap or k >= gap + 4 + 16]
+    assert settled and len(settled) < len(young)
+    # the age in a checkpoint; an older checkpoint without it is a settled filter
+    a = S.OnlineEstimator(bundle)
+    for k in range(5):
+        a.advance(tt[k], u[k], v[k], y[k])
+    assert a._age == 4
+    b = S.OnlineEstimator(bundle)
+    b.load_bytes(a.to_bytes())
+    assert b._age == 4
+    raw = a.to_bytes()
+    n = int.from_bytes(raw[4:8], "big")
+    meta = json.loads(raw[8:8 + n])
+    assert meta.pop("age") == 4
+    head = json.dumps(meta).encode()  # the same state as written before the age was kept
+    c = S.OnlineEstimator(bundle)
+    c.load_bytes(raw[:4] + len(head).to_bytes(4, "big") + head + raw[8 + n:])
+    assert c._age == S.YOUNG_STEPS

@@ -44,7 +44,9 @@ second with the profile's empty bins (Monday) learned from the building's own pe
 gains as it operates (``streaming.PROFILE_LEARN_EMPTY``; docs/forecasts.md "Monday's gains
 from Mondays"). ``--side after-off``: both runs with the library's defaults, the second
 with the intervals calibrated on a day class of their own for the working days after a
-day off (``streaming.AFTER_OFF_INTERVALS``; docs/forecasts.md "The day after a day off").
+day off (``streaming.AFTER_OFF_INTERVALS``; docs/forecasts.md "The day after a day off";
+since the thirty-third session a shadow calibrator in the first run's replay, as below:
+checked against a run with the option on office6's campaign, the same coverage).
 ``--side aci-feedback``: both with the library's defaults, the first with the adaptive
 level's misses judged against the quantiles when the measurement arrives, the second
 against the interval each forecast was served with (``streaming.ACI_FEEDBACK``;
@@ -252,7 +254,9 @@ def served(campaign: Path, model: Path, control: bool,
 SHADOW_SIDES = {"aci-feedback": {"feedback": "served"},
                 "interval-scale": {"feedback": "served", "adapt": "scale"},
                 # the same calibrator, kept from forecasts of a settled filter only
-                "settled-calibration": {"_settled": True}}
+                "settled-calibration": {"_settled": True},
+                # a third day class: the working day after a day off (AFTER_OFF_INTERVALS)
+                "after-off": {"_after_off": True}}
 #: a shadow side's second results per member, made in the first setting's run
 _SHADOW_RUNS: dict[str, tuple] = {}
 
@@ -266,18 +270,29 @@ def _shadow_calibrator(store: dict[int, np.ndarray], shadow_kw: dict) -> dict:
     (class, name)."""
     shadow_kw = dict(shadow_kw)
     settled = shadow_kw.pop("_settled", False)
+    after_off = shadow_kw.pop("_after_off", False)
     orig = {n: getattr(IntervalCalibrator, n)
             for n in ("__init__", "add_forecast", "resolve", "halfwidth", "load_state_arrays")}
     learn = streaming.OnlineEstimator._learn_inputs
+    init_inputs = streaming.OnlineEstimator._init_input_forecasts
+    classes: dict = {}  # the estimator being made (its calendar: the shadow's classes)
 
     def learn_inputs(self, t, inputs, y):
         self.calibrator._age_now = self._age  # what the shadow's add_forecast asks
         return learn(self, t, inputs, y)
 
+    def init_input_forecasts(self):
+        classes["estimator"] = self  # its calendar is made before its calibrator
+        return init_inputs(self)
+
     def init(self, *a, **kw):
         orig["__init__"](self, *a, **kw)
         sh = IntervalCalibrator.__new__(IntervalCalibrator)
-        orig["__init__"](sh, *a, **dict(kw, **shadow_kw))
+        extra = {}
+        if after_off:
+            cal = classes["estimator"].calendar
+            extra = {"day_class": cal.interval_classes, "n_classes": cal.n_interval_classes}
+        orig["__init__"](sh, *a, **dict(kw, **shadow_kw, **extra))
         self._shadow = sh
 
     def add_forecast(self, step_index, mean, std=None):
@@ -300,8 +315,10 @@ def _shadow_calibrator(store: dict[int, np.ndarray], shadow_kw: dict) -> dict:
                      ("halfwidth", halfwidth), ("load_state_arrays", load_state_arrays)):
         setattr(IntervalCalibrator, name, fn)
     streaming.OnlineEstimator._learn_inputs = learn_inputs
+    streaming.OnlineEstimator._init_input_forecasts = init_input_forecasts
     return ({(IntervalCalibrator, n): fn for n, fn in orig.items()}
-            | {(streaming.OnlineEstimator, "_learn_inputs"): learn})
+            | {(streaming.OnlineEstimator, "_learn_inputs"): learn,
+               (streaming.OnlineEstimator, "_init_input_forecasts"): init_inputs})
 
 
 def _scored(campaign, site, sdata, issues, zones, side, control, pred, lo, hi, meas, rms,

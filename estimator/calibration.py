@@ -357,12 +357,10 @@ class IntervalCalibrator:
             self.levels = level.reshape(k, -1).mean(axis=0, keepdims=True)
         else:
             return False
-        # the half-width's factor: kept when the day classes are the same, else (and in
-        # checkpoints before it) it starts again from 1
-        ls = arrays.get(f"{prefix}log_scale")
-        self.log_scale = (np.array(ls, float) if ls is not None
-                          and np.shape(ls) == self.log_scale.shape
-                          else np.zeros_like(self.log_scale))
+        # the half-width's factor, carried over the day classes as the level is (a new class
+        # starts from the working days' factor, pooled classes take their mean); absent in
+        # checkpoints before it, or for other zones: it starts again from 1
+        self.log_scale = _class_rows(arrays.get(f"{prefix}log_scale"), self.n_classes, self.nz)
         if self.adapt == "scale":  # the level is fixed (a level-adapting checkpoint's is not)
             self.levels = np.full_like(self.levels, self.target)
         self.pending.clear()
@@ -377,6 +375,20 @@ class IntervalCalibrator:
             self.pending.append((int(k), np.array(m, float), sd, q))
         self._q = None
         return True
+
+
+def _class_rows(rows, n_classes: int, nz: int) -> np.ndarray:
+    """(n_classes, nz) from a checkpoint's (k, nz) per-class array ``rows``: the same, the
+    first rows of more, the mean of several into one, or one or fewer rows extended by
+    copies of the first (the working days'); zeros when absent or of other zones."""
+    if rows is None or np.ndim(rows) != 2 or np.shape(rows)[1] != nz or len(rows) == 0:
+        return np.zeros((n_classes, nz))
+    rows = np.array(rows, float)
+    if n_classes == 1 and len(rows) > 1:
+        return rows.mean(axis=0, keepdims=True)
+    if len(rows) >= n_classes:
+        return rows[:n_classes].copy()
+    return np.concatenate([rows] + [rows[:1]] * (n_classes - len(rows)))
 
 
 class WeatherSpread:

@@ -555,3 +555,33 @@ def test_airflow_floor_state_round_trips_bitwise():
     assert np.isfinite(a.floor()).all()
     assert not AirflowFloor(3).load_state_arrays(a.state_arrays())  # another model's boxes
     assert not AirflowFloor(4).load_state_arrays({})
+
+
+def test_tracked_factor_carries_over_another_class_count():
+    """The half-width's factor follows the scores over a change of day classes: two into
+    three keeps both and starts the third from the working days', three into two keeps the
+    first two, classes into one take their mean; another zone count starts from 1."""
+    three = DayCalendar(TZ, "15min").interval_classes
+    two = IntervalCalibrator(2, 96, 96, day_class=_weekend_class, n_classes=2)
+    rng = np.random.default_rng(4)
+    std = np.ones((96, 2))
+    for k in range(96 * 8):
+        two.resolve(k, rng.standard_normal(2) * (1 + 2 * int(_weekend_class([k * STEP])[0])),
+                    std)
+        if two.due(k):
+            two.add_forecast(k, np.zeros((96, 2)))
+    assert two.adapt == "scale" and np.all(two.log_scale != 0)
+    assert not np.allclose(two.log_scale[0], two.log_scale[1])
+    new = IntervalCalibrator(2, 96, 96, day_class=three, n_classes=3)
+    assert new.load_state_arrays(two.state_arrays())
+    np.testing.assert_array_equal(new.log_scale, np.vstack([two.log_scale, two.log_scale[:1]]))
+    new.log_scale[2] += 0.3  # the third class's own factor
+    back = IntervalCalibrator(2, 96, 96, day_class=_weekend_class, n_classes=2)
+    assert back.load_state_arrays(new.state_arrays())
+    np.testing.assert_array_equal(back.log_scale, new.log_scale[:2])
+    pooled = IntervalCalibrator(2, 96, 96)
+    assert pooled.load_state_arrays(new.state_arrays())
+    np.testing.assert_allclose(pooled.log_scale, new.log_scale.mean(axis=0, keepdims=True))
+    arrays = dict(two.state_arrays(), cal_log_scale=np.ones((2, 3)))  # three zones' factors
+    assert new.load_state_arrays(arrays)
+    assert np.all(new.log_scale == 0)

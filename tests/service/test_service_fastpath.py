@@ -379,6 +379,7 @@ def test_estimator_calibrates_by_the_sites_day_class_and_resumes_a_pooled_checkp
 
     tt, u, v, y = rows_from_frame(bundle, si_frame(bundle, telemetry.iloc[:400]))
     monkeypatch.setattr(streaming, "DAY_CLASS_INTERVALS", True)
+    monkeypatch.setattr(streaming, "AFTER_OFF_INTERVALS", False)  # two classes
     est = OnlineEstimator(bundle)
     cal = est.calibrator
     assert cal.n_classes == 2

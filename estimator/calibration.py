@@ -340,13 +340,12 @@ class IntervalCalibrator:
                   else np.tile(level.reshape(1, -1)[-1:], (k, 1)))
             if k < self.n_classes:
                 hist = np.concatenate([hist] + [hist[:1]] * (self.n_classes - k))
-                lv = np.concatenate([lv] + [lv[:1]] * (self.n_classes - k))
             else:
                 extra = hist[self.n_classes:].sum(axis=0)
                 hist = hist[:self.n_classes].copy()
                 hist[0] += extra
             self.hist = hist.reshape(self.hist.shape)
-            self.levels = lv[:self.n_classes].copy()
+            self.levels = _class_rows(lv, self.n_classes, self.nz)
         elif (self.n_classes == 1 and hist.ndim == self.hist.ndim
               and hist.shape[1:] == self.hist.shape[1:]
               and hist.shape[0] % self.n_class_bins == 0):
@@ -354,7 +353,7 @@ class IntervalCalibrator:
             # pooled, the adaptive level their mean
             k = hist.shape[0] // self.n_class_bins
             self.hist = hist.reshape((k, self.n_class_bins) + hist.shape[1:]).sum(axis=0)
-            self.levels = level.reshape(k, -1).mean(axis=0, keepdims=True)
+            self.levels = _class_rows(level.reshape(k, -1), 1, self.nz)
         else:
             return False
         # the half-width's factor, carried over the day classes as the level is (a new class

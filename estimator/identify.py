@@ -492,10 +492,10 @@ class _Problem:
         L = self.bound(theta) if L is None else L
         r = L * self.model.step / 2.0
         if self._rho is None:
-            # with return air: how far the eigenvalues leave the real axis, taken once at the
-            # first parameters (the non-symmetric return terms do not depend on them; the
-            # margin of return_rho covers the conductances' change)
-            self._rho = 1.0 if not np.any(self.ret >= 0) else return_rho(
+            # with return air or one-way couplings: how far the eigenvalues leave the real
+            # axis, taken once at the first parameters (the non-symmetric terms do not
+            # depend on them; the margin of return_rho covers the conductances' change)
+            self._rho = return_rho(
                 sp.csr_matrix((data_vals, self.indices, self.indptr), shape=(n, n)),
                 self.rooms, self.bxu, self.ret, self.retc, self.u_max, L)
         coef = chebyshev_coefficients(r, rho=self._rho)

@@ -47,13 +47,13 @@ TOL = 1e-11
 def return_rho(A, rooms, bxu, ret, retc, u_max, L: float) -> float:
     """Bernstein-ellipse parameter rho >= 1 enclosing the eigenvalues of A(u) on the
     Chebyshev interval [-L, 0] (scaled to [-1, 1]) for airflows up to ``u_max``: 1 when they
-    are real (a symmetric generator), more when return air makes A(u) non-symmetric and some
-    leave the real axis. From the dense eigenvalues at ``u_max`` and at half of it, with a
+    are real (a symmetric generator), more when return air or one-way couplings
+    (:func:`_one_way`) make A(u) non-symmetric and some leave the real axis. From the dense eigenvalues at ``u_max`` and at half of it, with a
     margin of 50 % on rho - 1."""
     ret = np.asarray(ret)
-    if not np.any(ret >= 0) or L <= 0:
-        return 1.0
     A = sp.csr_matrix(A, dtype=float)
+    if L <= 0 or not (np.any(ret >= 0) or _one_way(A)):
+        return 1.0
     rho = 1.0
     for f in (1.0, 0.5):
         u = f * np.asarray(u_max, dtype=float)
@@ -67,6 +67,16 @@ def return_rho(A, rooms, bxu, ret, retc, u_max, L: float) -> float:
         w = z + np.sqrt(z * z - 1.0 + 0j)
         rho = max(rho, float(np.max(np.maximum(np.abs(w), 1.0 / np.maximum(np.abs(w), 1e-300)))))
     return 1.0 + 1.5 * (rho - 1.0)
+
+
+def _one_way(A: sp.csr_matrix) -> bool:
+    """Whether some state is driven by another that it does not drive back (a face that
+    follows another, ``ModelOptions.adiabatic="mirror"``): a coupling pattern that is not
+    symmetric, whose eigenvalues may leave the real axis."""
+    p = (A != 0).astype(np.int8)
+    p.setdiag(0)
+    p.eliminate_zeros()
+    return (p != p.T).nnz > 0
 
 
 def chebyshev_coefficients(r: float, tol: float = TOL, rho: float = 1.0) -> np.ndarray:

@@ -150,8 +150,11 @@ class BilinearModel:
         self._ret, self._retc = structure.returns
         self._has_ret = bool(np.any(self._ret >= 0))
         cap = structure.capacity
-        self._k0 = -cap[:, None] * self.A
-        self._k0 = 0.5 * (self._k0 + self._k0.T)  # symmetric by construction; remove round-off
+        k0 = -cap[:, None] * self.A
+        # K is symmetric unless a face follows another state one way (adiabatic="mirror")
+        self._general = self._has_ret or not np.allclose(
+            k0, k0.T, rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(k0).max())))
+        self._k0 = 0.5 * (k0 + k0.T)  # symmetric by construction; remove round-off
         self._sq = np.sqrt(cap)
         self._isq = 1.0 / self._sq
         self._fixed: DiscreteBilinear | None = None
@@ -236,10 +239,10 @@ class BilinearModel:
 
         M(u) = -Cap^-1 K(u) with K symmetric, so with S = Cap^-1/2 K Cap^-1/2 = Q L Q^T:
         e^{M h} = Cap^-1/2 Q e^{-L h} Q^T Cap^1/2 (exact, no series truncation). With return
-        air M(u) is not symmetric: the same with a general eigendecomposition
-        (:meth:`_propagators_general`).
+        air, or faces that follow another state (``adiabatic="mirror"``), M(u) is not
+        symmetric: :meth:`_propagators_general`.
         """
-        if self._has_ret:
+        if self._general:
             return self._propagators_general(np.atleast_2d(u))
         s = self._isq[None, :, None] * self._stiffness(u) * self._isq[None, None, :]
         lam, q = np.linalg.eigh(s)

@@ -285,6 +285,10 @@ SolarEnclosure = Annotated[str, typer.Option(
     help="'air_boundaries' (the default since 2026-12-04): the sun through a window lands on "
          "the faces of every room joined to its room by air boundaries, one enclosure as in "
          "EnergyPlus; 'room': on its own room's faces (docs/model.md \"Air boundaries\")")]
+Adiabatic = Annotated[str, typer.Option(
+    help="the outer face of an IDF's Adiabatic surfaces: 'zero_flux' (no heat through it) "
+         "or 'mirror' (held at its own inner face's temperature, as EnergyPlus does; "
+         "docs/model.md \"Adiabatic surfaces\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -373,6 +377,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  roof_exterior: RoofExterior = "absorptance",
                  envelope_radiation: EnvelopeRadiation = "none",
                  solar_enclosure: SolarEnclosure = "air_boundaries",
+                 adiabatic: Adiabatic = "zero_flux",
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'auto' (the default since 2026-12-04): 'metered' when the site's "
@@ -407,7 +412,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  internal_gains=internal_gains, window_angle=window_angle,
                                  roof_exterior=roof_exterior,
                                  envelope_radiation=envelope_radiation,
-                                 solar_enclosure=solar_enclosure,
+                                 solar_enclosure=solar_enclosure, adiabatic=adiabatic,
                                  x0_profile_days=x0_profile_days,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  progress=lambda m: prog.update(task, description=m))
@@ -514,6 +519,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   roof_exterior: RoofExterior = "absorptance",
                   envelope_radiation: EnvelopeRadiation = "none",
                   solar_enclosure: SolarEnclosure = "air_boundaries",
+                  adiabatic: Adiabatic = "zero_flux",
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'auto' (the default since 2026-12-04: 'metered' when the "
@@ -542,7 +548,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 internal_gains=internal_gains, service=service,
                                 window_angle=window_angle, roof_exterior=roof_exterior,
                                 envelope_radiation=envelope_radiation,
-                                solar_enclosure=solar_enclosure,
+                                solar_enclosure=solar_enclosure, adiabatic=adiabatic,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:

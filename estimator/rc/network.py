@@ -78,6 +78,11 @@ GLASS_CAPACITY = 12600.0
 #: vertical coefficient (3.08), for the faces that pass on the long-wave heat of
 #: ``envelope_radiation="room"`` (docs/model.md "Envelope faces' long-wave exchange")
 ROOM_FACE_CONVECTION = 3.08
+#: time constant [s] with which the outer face of an ``Adiabatic`` surface follows its inner
+#: face (``adiabatic="mirror"``): its node gets C_face / MIRROR_TIME [W/K] from the inner
+#: face's temperature, a quarter of the 15-min step (EnergyPlus puts the outer face at the
+#: inner face's temperature of its previous time step; docs/model.md "Adiabatic surfaces")
+MIRROR_TIME = 225.0
 #: U-factor [W/(m2 K)] of windows whose IDF gives none (layered glazing) when no window of
 #: the building has one: double glazing in an aluminium frame (the U_win prior's mean)
 WINDOW_U_DEFAULT = 2.8
@@ -250,6 +255,17 @@ class ModelOptions:
         receives by radiation, taken from the air through the faces that give it, with
         the room's other faces at the air temperature. No parameter; the fitted films
         stay the faces' convection (docs/model.md "Envelope faces' long-wave exchange").
+    adiabatic : {"zero_flux", "mirror"}
+        The outer face of a surface whose boundary is ``Adiabatic``: no heat flux
+        (``"zero_flux"``, what model files without the option were built with), or, as
+        EnergyPlus does, held at the temperature of its own inner face (``"mirror"``: the
+        surface is its own other side, ExtBoundCond = the surface). The outer face's node
+        then gets C_face / :data:`MIRROR_TIME` (x_inner - x_outer) from outside the room's
+        balance, the heat the storey above or below would give it, and the slab behind a
+        carpet or a suspended ceiling answers its room through that inner face alone
+        (EnergyPlus's outer-face flux on a middle floor's ceiling slab is 10 times its
+        inner face's). A is then not the symmetric form diag(1/C) K; the integrators take
+        the general path, as with return air (docs/model.md "Adiabatic surfaces").
     solar_enclosure : {"air_boundaries", "room"}
         Where a window's transmitted sun lands: on the faces of its room (``"room"``, what
         model files without the option were built with), or, the default since 2026-12-04,
@@ -293,8 +309,11 @@ class ModelOptions:
     roof_exterior: str = "absorptance"
     envelope_radiation: str = "none"
     solar_enclosure: str = "air_boundaries"
+    adiabatic: str = "zero_flux"
 
     def __post_init__(self):
+        if self.adiabatic not in ("zero_flux", "mirror"):
+            raise ModelDefinitionError("adiabatic must be 'zero_flux' or 'mirror'")
         if self.solar_enclosure not in ("room", "air_boundaries"):
             raise ModelDefinitionError("solar_enclosure must be 'room' or 'air_boundaries'")
         if self.envelope_radiation not in ("none", "room"):
@@ -581,6 +600,9 @@ class _Assembler:
         self.inputs: list[tuple[int, int, float, int]] = []
         # (i, g, p): conductance to an input temperature (adds -g to the diagonal)
         self.to_input_temp: list[tuple[int, int, float, int]] = []
+        # (i, j, g): heat g (x_j - x_i) into i only, from outside the network (a face held
+        # at another state's temperature); parameter free
+        self.follows: list[tuple[int, int, float]] = []
 
     def add_state(self, label: StateLabel, capacity: float) -> int:
         self.labels.append(label)
@@ -590,6 +612,11 @@ class _Assembler:
     def link(self, i: int, j: int, g: float, p: int = -1) -> None:
         if i != j and g != 0:
             self.links.append((i, j, float(g), p))
+
+    def follow(self, i: int, j: int, g: float) -> None:
+        """Heat flow g (x_j - x_i) into state i, not taken from j (one way)."""
+        if i != j and g > 0:
+            self.follows.append((i, j, float(g)))
 
     def to_temperature(self, i: int, col: int, g: float, p: int) -> None:
         """Heat flow g theta_p (v_col - x_i)."""
@@ -615,6 +642,9 @@ class _Assembler:
             for a, b in ((i, j), (j, i)):
                 put(a_rows, p, a, a, -g * inv[a])
                 put(a_rows, p, a, b, g * inv[a])
+        for i, j, g in self.follows:
+            put(a_rows, -1, i, i, -g * inv[i])
+            put(a_rows, -1, i, j, g * inv[i])
         for i, col, g, p in self.to_input_temp:
             put(a_rows, p, i, i, -g * inv[i])
             put(b_rows, p, i, col, g * inv[i])
@@ -885,6 +915,7 @@ def build_structure(
         kind = floor_faces if surface.surface_type == "Floor" else other_faces
         kind.setdefault(room, []).append((node, surface.area))
 
+    n_mirror = 0
     for name in sorted(surfaces):
         if name in done:
             continue
@@ -960,8 +991,16 @@ def build_structure(
                                   "supply": "ground",
                                   "monthly": [float(t)
                                               for t in building.ground_temperature_at(name)]}
+            elif s.boundary == "Adiabatic" and opts.adiabatic == "mirror":
+                # EnergyPlus's adiabatic surface is its own other side: the outer face
+                # follows the inner face's temperature (docs/model.md "Adiabatic surfaces")
+                asm.follow(nodes[0], nodes[-1], asm.cap[nodes[0]] / MIRROR_TIME)
+                n_mirror += 1
             elif s.boundary not in ("Adiabatic", "Ground"):
                 notes.append(f"surface {name}: boundary {s.boundary} treated as adiabatic")
+    if n_mirror:
+        notes.append(f"{n_mirror} adiabatic surfaces: outer face held at the inner face's "
+                     "temperature, as EnergyPlus does (ModelOptions.adiabatic)")
     if any(s.boundary == "Ground" for s in surfaces.values()):
         notes.append("ground-contact surfaces: outer face adiabatic (ModelOptions.ground)"
                      if opts.ground == "adiabatic" else

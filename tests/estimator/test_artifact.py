@@ -42,6 +42,10 @@ def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
                                              model_options={"internal_gains": "idf"}))
     assert split.model.structure.options.internal_gains == "idf"
     assert air.model.structure.options.internal_gains == "air"  # a file not naming it
+    mirror = load_model_file(write_model_file(tmp_path / "ad.json", vb / "site.yaml",
+                                              model_options={"adiabatic": "mirror"}))
+    assert mirror.model.structure.options.adiabatic == "mirror"
+    assert air.model.structure.options.adiabatic == "zero_flux"  # a file not naming it
     legacy = json.loads((tmp_path / "a.json").read_text())
     del legacy["model_options"]
     (tmp_path / "legacy.json").write_text(json.dumps(legacy))

@@ -788,3 +788,111 @@ def test_interior_radiation_star_links_a_rooms_faces(five_zone):
         pytest.approx(4.9)
     with pytest.raises(ModelDefinitionError, match="interior_radiation must be 'none' or 'star'"):
         ModelOptions(interior_radiation="yes")
+
+
+#: a middle floor's slab as the family's testbed builds it, outside -> inside: concrete,
+#: screed, carpet (no mass); three nodes, so its outer face is not its inner face's neighbour
+SLAB = [(0.1, 1.95, 2240, 900), (0.04, 1.4, 2000, 840), (0.12, None, 0, 0)]
+
+
+def _mirror_pair():
+    from zonecast.estimator.rc.network import MIRROR_TIME
+
+    b = _wall_building(SLAB, floor="Adiabatic")
+    zero = build_structure(b, {"Z": ["Room"]}, {"VAV": "Room"}, ModelOptions(ground="adiabatic"))
+    mirror = build_structure(b, {"Z": ["Room"]}, {"VAV": "Room"},
+                             ModelOptions(ground="adiabatic", adiabatic="mirror"))
+    return b, zero, mirror, MIRROR_TIME
+
+
+def test_adiabatic_mirror_drives_each_outer_face_from_its_inner_face():
+    """``adiabatic="mirror"``: each Adiabatic surface's outer face node gets
+    C_face / MIRROR_TIME (x_inner - x_outer) and nothing else changes (one row of A per
+    surface, parameter free); A stays Metzler and stable but is no longer the symmetric form,
+    which the integrators detect; zero_flux is the structure of before."""
+    from zonecast.estimator.integrate import _one_way
+
+    b, zero, mirror, tau = _mirror_pair()
+    theta = ParameterSet(["Z"]).physical
+    a0, a1 = zero.A(theta).toarray(), mirror.A(theta).toarray()
+    adiabatic = sorted(n for n, s in b.surfaces.items() if s.boundary == "Adiabatic")
+    assert len(adiabatic) == 5  # three walls, the floor and the ceiling
+    assert any("5 adiabatic surfaces" in n for n in mirror.notes)
+    assert not any("adiabatic surfaces: outer" in n for n in zero.notes)
+    rows = sorted(set(np.nonzero(a1 - a0)[0]))
+    assert len(rows) == 5
+    for r in rows:
+        lab = mirror.labels[r]
+        assert lab.element in adiabatic and lab.layer == 0  # each surface's outer face
+        inner = max(i for i, x in enumerate(mirror.labels) if x.element == lab.element)
+        d = np.zeros(mirror.n)
+        d[r], d[inner] = -1.0 / tau, 1.0 / tau
+        np.testing.assert_allclose(a1[r] - a0[r], d, rtol=1e-12, atol=1e-15)
+    assert not _one_way(sp.csr_matrix(a0)) and _one_way(sp.csr_matrix(a1))
+    off = a1 - np.diag(np.diag(a1))
+    assert off.min() >= 0.0
+    assert np.max(np.linalg.eigvals(a1).real) < 0.0
+    with pytest.raises(ModelDefinitionError, match="adiabatic must be 'zero_flux' or 'mirror'"):
+        ModelOptions(adiabatic="mirrored")
+
+
+def test_adiabatic_mirror_steps_equal_the_continuous_model():
+    """Both steppers take the one-way coupling exactly: the Chebyshev kernel (with its
+    Bernstein ellipse) and the dense propagators equal the zero-order-hold solution of the
+    continuous model by dense exponentials; with constant weather everything settles at the
+    outdoor temperature (the mirror adds no heat at equilibrium)."""
+    import scipy.linalg as sla
+    from zonecast.estimator.integrate import ExactStepper, simulate_exact
+
+    _, _, struct, _ = _mirror_pair()
+    m = BilinearModel(struct, ParameterSet(["Z"], {"c_IG[Z]": 0.0}))
+    n_steps = 96
+    hours = np.arange(n_steps) / 4.0
+    u = np.clip(0.05 + 0.04 * np.sin(2 * np.pi * hours / 24)[:, None], 0.0, None)
+    sun = np.clip(500 * np.sin(2 * np.pi * (hours - 6) / 24), 0, None)
+    v = np.column_stack([5 + 8 * np.sin(2 * np.pi * (hours - 9) / 24), np.full(n_steps, 13.0),
+                         *[sun] * 5])
+    x0 = np.full(m.n, 20.0)
+    ref = [x0]
+    for k in range(n_steps):
+        M = np.zeros((m.n + 1, m.n + 1))
+        M[:m.n, :m.n] = m.system_matrix(u[k])
+        M[:m.n, m.n] = m.input_matrix(u[k]) @ v[k] + m.B_ig @ m.params.c_ig
+        ref.append((sla.expm(M * m.step) @ np.append(ref[-1], 1.0))[:m.n])
+    ref = np.array(ref)
+    for method in ("exact", "eig"):
+        np.testing.assert_allclose(m.simulate(x0, u, v, method=method).x, ref, rtol=0, atol=1e-7)
+    forcing = v @ m.Bv.T + m.params.c_ig @ m.B_ig.T
+    xs = simulate_exact(struct.A(m.params.physical), m._rooms, m._bxu, x0, u, forcing, v[:, 1],
+                        m.step, capacity=struct.capacity)
+    np.testing.assert_allclose(xs, ref, rtol=0, atol=1e-7)
+    stepper = ExactStepper(struct.A(m.params.physical), m._rooms, m._bxu, m.step, u.max(axis=0),
+                           capacity=struct.capacity)
+    x = x0
+    for k in range(n_steps):
+        x = stepper.step(x, u[k], forcing[k], v[k, 1])
+    np.testing.assert_allclose(x, ref[-1], rtol=0, atol=1e-7)
+    ss = m.steady_state(np.zeros(1), np.r_[12.0, 12.0, 0, 0, 0, 0, 0])
+    np.testing.assert_allclose(ss, 12.0, atol=1e-9)
+
+
+def test_adiabatic_mirror_keeps_the_slab_with_its_face():
+    """What the option is for: a slab behind a carpet on an adiabatic floor. With zero flux
+    at its outer face the slab's far side lags the room by hours; held at the inner face's
+    temperature (EnergyPlus's adiabatic) it follows that face, and the room, whose floor
+    then stores less of a day's swing, swings more."""
+    _, zero, mirror, _ = _mirror_pair()
+    n_steps = 96 * 6
+    hours = np.arange(n_steps) / 4.0
+    v = np.column_stack([10 + 10 * np.sin(2 * np.pi * hours / 24), np.full(n_steps, 13.0),
+                         np.zeros((n_steps, 5))])
+    u = np.zeros((n_steps, 1))
+    out = {}
+    for name, struct in (("zero", zero), ("mirror", mirror)):
+        m = BilinearModel(struct, ParameterSet(["Z"], {"c_IG[Z]": 0.0}))
+        x = m.simulate(np.full(m.n, 10.0), u, v).x[-96:]
+        floor = [i for i, lab in enumerate(struct.labels) if lab.element == "Floor"]
+        outer, inner = min(floor), max(floor)
+        out[name] = (np.abs(x[:, outer] - x[:, inner]).max(), np.ptp(x[:, 0]))
+    assert out["mirror"][0] < 0.2 * out["zero"][0]
+    assert out["mirror"][1] > out["zero"][1]

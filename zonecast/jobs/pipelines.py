@@ -80,7 +80,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   interior_radiation: str = "none", films: str | None = None,
                   internal_gains: str = "air", window_angle: str = "none",
                   roof_exterior: str = "absorptance", envelope_radiation: str = "none",
-                  solar_enclosure: str = "air_boundaries",
+                  solar_enclosure: str = "air_boundaries", adiabatic: str = "zero_flux",
                   progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
                   x0_offset_sd: float | None = None,
@@ -89,7 +89,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
-    ``envelope_radiation``, ``solar_enclosure``: as
+    ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``: as
     :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
@@ -103,7 +103,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                                                          window_angle=window_angle,
                                                          roof_exterior=roof_exterior,
                                                          envelope_radiation=envelope_radiation,
-                                                         solar_enclosure=solar_enclosure))
+                                                         solar_enclosure=solar_enclosure,
+                                                         adiabatic=adiabatic))
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,

@@ -241,9 +241,9 @@ Sky = Annotated[str, typer.Option(
          "paper), 'clear' (a clear sky, Swinbank) or 'iso' (the air less ISO 13790's 11 K; "
          "docs/model.md \"Sky\")")]
 InteriorRadiation = Annotated[str, typer.Option(
-    help="long-wave exchange between a room's inside faces: 'none' (the paper: combined "
-         "films to the air) or 'star' (a star network; the films are convection alone; "
-         "docs/model.md \"Interior long-wave exchange\")")]
+    help="long-wave exchange between a room's inside faces: 'star' (the default since "
+         "2026-12-05: a star network; the films are convection alone; docs/model.md "
+         "\"Interior long-wave exchange\") or 'none' (the paper: combined films to the air)")]
 InternalGains = Annotated[str, typer.Option(
     help="where the internal gains' heat goes: 'air' (the paper: all on the room air) or "
          "'idf' (split as the IDF's People, Lights and equipment: convective on the air, "
@@ -286,9 +286,9 @@ SolarEnclosure = Annotated[str, typer.Option(
          "the faces of every room joined to its room by air boundaries, one enclosure as in "
          "EnergyPlus; 'room': on its own room's faces (docs/model.md \"Air boundaries\")")]
 Adiabatic = Annotated[str, typer.Option(
-    help="the outer face of an IDF's Adiabatic surfaces: 'zero_flux' (no heat through it) "
-         "or 'mirror' (held at its own inner face's temperature, as EnergyPlus does; "
-         "docs/model.md \"Adiabatic surfaces\")")]
+    help="the outer face of an IDF's Adiabatic surfaces: 'mirror' (the default since "
+         "2026-12-05: held at its own inner face's temperature, as EnergyPlus does; "
+         "docs/model.md \"Adiabatic surfaces\") or 'zero_flux' (no heat through it)")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -371,13 +371,13 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "'none' (the paper)")] = "idf",
                  roof_solar: RoofSolar = "horizontal",
                  sky: Sky = "none",
-                 interior_radiation: InteriorRadiation = "none",
+                 interior_radiation: InteriorRadiation = "star",
                  internal_gains: InternalGains = "air",
                  window_angle: WindowAngle = "none",
                  roof_exterior: RoofExterior = "absorptance",
                  envelope_radiation: EnvelopeRadiation = "none",
                  solar_enclosure: SolarEnclosure = "air_boundaries",
-                 adiabatic: Adiabatic = "zero_flux",
+                 adiabatic: Adiabatic = "mirror",
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'auto' (the default since 2026-12-04): 'metered' when the site's "
@@ -513,13 +513,13 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                            "plenums, or 'none' (the paper)")] = "idf",
                   roof_solar: RoofSolar = "horizontal",
                   sky: Sky = "none",
-                  interior_radiation: InteriorRadiation = "none",
+                  interior_radiation: InteriorRadiation = "star",
                   internal_gains: InternalGains = "air",
                   window_angle: WindowAngle = "none",
                   roof_exterior: RoofExterior = "absorptance",
                   envelope_radiation: EnvelopeRadiation = "none",
                   solar_enclosure: SolarEnclosure = "air_boundaries",
-                  adiabatic: Adiabatic = "zero_flux",
+                  adiabatic: Adiabatic = "mirror",
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'auto' (the default since 2026-12-04: 'metered' when the "

@@ -228,8 +228,10 @@ class ModelOptions:
         :func:`~zonecast.estimator.solar.clear_sky_temperature`), or the air temperature
         less the average sky temperature difference of ISO 52016-1 / ISO 13790,
         :data:`~zonecast.estimator.solar.SKY_DEPRESSION_ISO` (``"iso"``).
-    interior_radiation : {"none", "star"}
-        Long-wave exchange between the inside faces of a room. ``"none"`` (the paper): each
+    interior_radiation : {"star", "none"}
+        Long-wave exchange between the inside faces of a room (``"star"``, the default since
+        2026-12-05 with ``adiabatic="mirror"``, chosen on the family's training members;
+        model files without the key read as ``"none"``). ``"none"`` (the paper): each
         face exchanges heat with the room air only, through a film coefficient that must
         carry convection and radiation at once (the handbook's combined 8.3 W/m2K for a
         wall). ``"star"``: the faces of a room also exchange long-wave radiation with each
@@ -255,10 +257,11 @@ class ModelOptions:
         receives by radiation, taken from the air through the faces that give it, with
         the room's other faces at the air temperature. No parameter; the fitted films
         stay the faces' convection (docs/model.md "Envelope faces' long-wave exchange").
-    adiabatic : {"zero_flux", "mirror"}
+    adiabatic : {"mirror", "zero_flux"}
         The outer face of a surface whose boundary is ``Adiabatic``: no heat flux
         (``"zero_flux"``, what model files without the option were built with), or, as
-        EnergyPlus does, held at the temperature of its own inner face (``"mirror"``: the
+        EnergyPlus does, held at the temperature of its own inner face (``"mirror"``, the
+        default since 2026-12-05 with ``interior_radiation="star"``: the
         surface is its own other side, ExtBoundCond = the surface). The outer face's node
         then gets C_face / :data:`MIRROR_TIME` (x_inner - x_outer) from outside the room's
         balance, the heat the storey above or below would give it, and the slab behind a
@@ -303,13 +306,13 @@ class ModelOptions:
     shading: str = "idf"
     return_air: str = "idf"
     sky: str = "none"
-    interior_radiation: str = "none"
+    interior_radiation: str = "star"
     internal_gains: str = "air"
     window_angle: str = "none"
     roof_exterior: str = "absorptance"
     envelope_radiation: str = "none"
     solar_enclosure: str = "air_boundaries"
-    adiabatic: str = "zero_flux"
+    adiabatic: str = "mirror"
 
     def __post_init__(self):
         if self.adiabatic not in ("zero_flux", "mirror"):

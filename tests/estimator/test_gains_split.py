@@ -13,7 +13,10 @@ from zonecast.estimator.rc.parameters import ParameterSet
 ZONES = {"South": ["SPACE1-1"], "East": ["SPACE2-1"], "North": ["SPACE3-1"],
          "West": ["SPACE4-1"], "Core": ["SPACE5-1"]}
 BOXES = {f"VAV{i}": f"SPACE{i}-1" for i in range(1, 6)}
-BASE = {"infiltration": "none", "ground": "adiabatic", "shading": "none"}
+#: the combined-film structure (with the star, the default since 2026-12-05, the windows'
+#: radiant share goes to their glass nodes instead of the air)
+BASE = {"infiltration": "none", "ground": "adiabatic", "shading": "none",
+        "interior_radiation": "none"}
 
 
 @pytest.fixture(scope="module")

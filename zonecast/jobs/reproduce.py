@@ -456,12 +456,12 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         infiltration: str = "idf", weekend_gains: bool | str = "auto",
         ground: str = "idf", shading: str = "idf", return_air: str = "idf",
         roof_solar: str = "horizontal", sky: str = "none",
-        interior_radiation: str = "none", films: str | None = None,
+        interior_radiation: str = "star", films: str | None = None,
         internal_gains: str = "air", service: bool = True,
         x0_profile_days: int | None = None, x0_offset_sd: float | None = None,
         window_angle: str = "none", day_scale_sd: float | None = None,
         roof_exterior: str = "absorptance", envelope_radiation: str = "none",
-        solar_enclosure: str = "air_boundaries", adiabatic: str = "zero_flux") -> Results:
+        solar_enclosure: str = "air_boundaries", adiabatic: str = "mirror") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);

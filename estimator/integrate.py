@@ -48,8 +48,11 @@ def return_rho(A, rooms, bxu, ret, retc, u_max, L: float) -> float:
     """Bernstein-ellipse parameter rho >= 1 enclosing the eigenvalues of A(u) on the
     Chebyshev interval [-L, 0] (scaled to [-1, 1]) for airflows up to ``u_max``: 1 when they
     are real (a symmetric generator), more when return air or one-way couplings
-    (:func:`_one_way`) make A(u) non-symmetric and some leave the real axis. From the dense eigenvalues at ``u_max`` and at half of it, with a
-    margin of 50 % on rho - 1."""
+    (:func:`_one_way`) make A(u) non-symmetric and some leave the real axis. From the dense
+    eigenvalues at ``u_max`` and at half of it, with a margin of 50 % on rho - 1. A face that
+    follows a neighbour it is already linked to (a two-node adiabatic element) keeps the
+    pattern symmetric and the spectrum real (a diagonal scaling of that face alone makes the
+    pair symmetric), so the pattern is enough to tell."""
     ret = np.asarray(ret)
     A = sp.csr_matrix(A, dtype=float)
     if L <= 0 or not (np.any(ret >= 0) or _one_way(A)):

@@ -18,7 +18,9 @@ Variants are ``structure:films[:gains]``: ``none`` or ``star``
 = "room"``) and ``combined`` (the handbook's convection + radiation
 films) or ``convective`` (:data:`~zonecast.estimator.priors.CONVECTIVE_FILMS`) or three
 numbers ``iw/floor/ceil`` [W/(m2 K)], e.g. ``none:1.4/1.4/0.9``; then optionally ``air``
-(the default) or ``idf`` (``ModelOptions.internal_gains``: the IDF's radiant split).
+(the default) or ``idf`` (``ModelOptions.internal_gains``: the IDF's radiant split), and
+optionally ``lumped`` (the default) or ``fine`` (``ModelOptions.layers``: constructions in
+sections of at most an hour's diffusion time), e.g. ``star:convective:air:fine``.
 
     python benchmarks/bench_structure.py --family DIR [--only NAME ...] [--extra CAMPAIGN ...]
         [--variants none:combined none:convective star:convective] [--out FILE.json]
@@ -54,20 +56,24 @@ GAIN_PARTS = ("people", "lights", "equipment")
 FILMS = ("gamma_IW", "gamma_floor", "gamma_ceil")
 
 
-def parse_variant(text: str) -> tuple[str, dict[str, float] | str, str]:
-    """``"none:combined"`` -> ("none", "combined", "air"); ``"star:1.4/1.4/0.9:idf"`` ->
-    ("star", {...}, "idf")."""
+def parse_variant(text: str) -> tuple[str, dict[str, float] | str, str, str]:
+    """``"none:combined"`` -> ("none", "combined", "air", "lumped");
+    ``"star:1.4/1.4/0.9:idf:fine"`` -> ("star", {...}, "idf", "fine")."""
     parts = text.split(":")
-    if len(parts) not in (2, 3):
-        raise SystemExit(f"variant {text!r}: write structure:films[:gains], e.g. none:combined")
+    if len(parts) not in (2, 3, 4):
+        raise SystemExit(f"variant {text!r}: write structure:films[:gains[:layers]], "
+                         "e.g. none:combined")
     structure, films = parts[:2]
-    gains = parts[2] if len(parts) == 3 else "air"
+    gains = parts[2] if len(parts) >= 3 else "air"
+    layers = parts[3] if len(parts) == 4 else "lumped"
+    if layers not in ("lumped", "fine"):
+        raise SystemExit(f"variant {text!r}: layers must be 'lumped' or 'fine'")
     if structure not in ("none", "star", "envelope"):
         raise SystemExit(f"variant {text!r}: structure must be 'none', 'star' or 'envelope'")
     if gains not in ("air", "idf"):
         raise SystemExit(f"variant {text!r}: gains must be 'air' or 'idf'")
     if films in ("combined", "convective"):
-        return structure, films, gains
+        return structure, films, gains, layers
     try:
         values = [float(v) for v in films.split("/")]
     except ValueError:
@@ -75,7 +81,7 @@ def parse_variant(text: str) -> tuple[str, dict[str, float] | str, str]:
     if len(values) != 3 or min(values) <= 0:
         raise SystemExit(f"variant {text!r}: films must be 'combined', 'convective' or three "
                          "positive numbers iw/floor/ceil")
-    return structure, dict(zip(FILMS, values)), gains
+    return structure, dict(zip(FILMS, values)), gains, layers
 
 
 def true_gains(campaign: Path, data, model) -> np.ndarray:
@@ -93,14 +99,15 @@ def true_gains(campaign: Path, data, model) -> np.ndarray:
     return out
 
 
-def open_loop(campaign: Path, structure: str, films, gains: str = "air") -> dict:
+def open_loop(campaign: Path, structure: str, films, gains: str = "air",
+              layers: str = "lumped") -> dict:
     """Open-loop RMS per zone and mean of one building with one variant."""
     envelope = structure == "envelope"
     pipe = Pipeline.from_site(campaign / "site.yaml",
                               options=ModelOptions(
                                   interior_radiation="none" if envelope else structure,
                                   envelope_radiation="room" if envelope else "none",
-                                  internal_gains=gains))
+                                  internal_gains=gains, layers=layers))
     data = pipe.data(campaign / "telemetry.csv")
     start = ParameterSet(list(pipe.site.zones))
     priors = building_priors(start, pipe._building_or_none(),
@@ -160,9 +167,9 @@ def main() -> None:
     rows = []
     for m in members:
         row = {"name": m["name"], "role": m.get("role", "train")}
-        for label, structure, films, gains in variants:
+        for label, structure, films, gains, layers in variants:
             t = time.perf_counter()
-            res = open_loop(m["campaign"], structure, films, gains)
+            res = open_loop(m["campaign"], structure, films, gains, layers)
             row[label] = res
             print(f"{m['name']:22s} {label:22s} open-loop RMS {res['mean']:.3f} K "
                   f"({time.perf_counter() - t:.1f} s)", flush=True)

@@ -289,6 +289,10 @@ Adiabatic = Annotated[str, typer.Option(
     help="the outer face of an IDF's Adiabatic surfaces: 'mirror' (the default since "
          "2026-12-05: held at its own inner face's temperature, as EnergyPlus does; "
          "docs/model.md \"Adiabatic surfaces\") or 'zero_flux' (no heat through it)")]
+Layers = Annotated[str, typer.Option(
+    help="how constructions become nodes: 'lumped' (2 or 3 per element, BRCM-like; the "
+         "default) or 'fine' (sections of at most an hour's diffusion time, so heavy walls "
+         "and slabs get 4-8 nodes; docs/model.md \"States\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -378,6 +382,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  envelope_radiation: EnvelopeRadiation = "none",
                  solar_enclosure: SolarEnclosure = "air_boundaries",
                  adiabatic: Adiabatic = "mirror",
+                 layers: Layers = "lumped",
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'auto' (the default since 2026-12-04): 'metered' when the site's "
@@ -413,6 +418,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  roof_exterior=roof_exterior,
                                  envelope_radiation=envelope_radiation,
                                  solar_enclosure=solar_enclosure, adiabatic=adiabatic,
+                                 layers=layers,
                                  x0_profile_days=x0_profile_days,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  progress=lambda m: prog.update(task, description=m))
@@ -520,6 +526,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   envelope_radiation: EnvelopeRadiation = "none",
                   solar_enclosure: SolarEnclosure = "air_boundaries",
                   adiabatic: Adiabatic = "mirror",
+                  layers: Layers = "lumped",
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'auto' (the default since 2026-12-04: 'metered' when the "
@@ -549,6 +556,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 window_angle=window_angle, roof_exterior=roof_exterior,
                                 envelope_radiation=envelope_radiation,
                                 solar_enclosure=solar_enclosure, adiabatic=adiabatic,
+                                 layers=layers,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:

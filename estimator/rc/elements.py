@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from zonecast.estimator.idf import Layer
 
-__all__ = ["MASSLESS_FACE_CAPACITY", "MIN_RESISTANCE", "NodeLayout", "discretise_layers"]
+__all__ = ["FINE_SECTION_TIME", "MASSLESS_FACE_CAPACITY", "MIN_RESISTANCE", "NodeLayout",
+           "discretise_layers"]
 
 #: Areal capacity given to each face node of a construction without mass [J/(m2 K)]
 #: (about 2 mm of gypsum): keeps the state equation regular; documented in docs/model.md.
@@ -33,6 +34,9 @@ MIN_RESISTANCE = 1.0e-3
 THICK_LAYER_CAPACITY = 1.0e5
 #: Smallest total resistance for a three-node element [m2 K/W].
 MIN_THREE_NODE_RESISTANCE = 0.04
+#: Longest diffusion time R_k C_k of one section between neighbouring nodes [s] when a
+#: construction is resolved finely (``discretise_layers(..., section_time=...)``).
+FINE_SECTION_TIME = 3600.0
 
 
 @dataclass(frozen=True)
@@ -72,13 +76,46 @@ def _hat_share(a: float, b: float, p0: float, p1: float) -> tuple[float, float]:
     return left, right
 
 
-def discretise_layers(layers: Sequence[Layer]) -> NodeLayout:
-    """Lump a construction (outside layer first) into 2 or 3 nodes.
+def _fine_positions(res: np.ndarray, cap: np.ndarray, edges: np.ndarray,
+                    section_time: float) -> np.ndarray | None:
+    """Node positions [m2 K/W] that cut a construction into sections of equal diffusion time.
+
+    A layer of resistance R and capacity C takes about R C to pass a step through; on the
+    coordinate q = sum sqrt(R_i C_i) [s^0.5] (massless layers have no length) sections of
+    equal length have equal R_k C_k, and n = ceil(Q / sqrt(section_time)) of them keep each
+    at most ``section_time``. Returns None when two sections or fewer would do.
+    """
+    length = np.sqrt(np.maximum(res * cap, 0.0))
+    total = float(length.sum())
+    n = int(np.ceil(total / np.sqrt(section_time)))
+    if n <= 2:
+        return None
+    q_edges = np.concatenate([[0.0], np.cumsum(length)])
+    r_total = float(edges[-1])
+    pos = [0.0]
+    for k in range(1, n):
+        target = k * total / n
+        i = int(np.searchsorted(q_edges, target, side="left")) - 1
+        i = min(max(i, 0), len(length) - 1)  # q_edges[i] < target <= q_edges[i+1]: massive
+        frac = (target - q_edges[i]) / length[i]
+        r = float(edges[i] + min(max(frac, 0.0), 1.0) * res[i])
+        if r - pos[-1] > 1e-6 * r_total and r_total - r > 1e-6 * r_total:
+            pos.append(r)
+    pos.append(r_total)
+    return np.array(pos)
+
+
+def discretise_layers(layers: Sequence[Layer], section_time: float | None = None) -> NodeLayout:
+    """Lump a construction (outside layer first) into 2 or 3 nodes, or resolve it finely.
 
     Parameters
     ----------
     layers : sequence of Layer
         Outside to inside.
+    section_time : float, optional
+        If given [s], constructions whose layers add up to more than two sections of this
+        diffusion time get one node per section (:func:`_fine_positions`); others keep the
+        2- or 3-node lumping.
 
     Returns
     -------
@@ -100,7 +137,10 @@ def discretise_layers(layers: Sequence[Layer]) -> NodeLayout:
     three = r_total >= MIN_THREE_NODE_RESISTANCE and (
         massive >= 2 or c_total >= THICK_LAYER_CAPACITY
     )
-    if three:
+    fine = None if section_time is None else _fine_positions(res, cap, edges, section_time)
+    if fine is not None:
+        pos = fine
+    elif three:
         centres = 0.5 * (edges[:-1] + edges[1:])
         mid = float(np.dot(cap, centres) / c_total)
         mid = min(max(mid, 0.25 * r_total), 0.75 * r_total)

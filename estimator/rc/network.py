@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 from zonecast.estimator.idf import DEFAULT_SOLAR_ABSORPTANCE, Building, Construction, Surface
-from zonecast.estimator.rc.elements import NodeLayout, discretise_layers
+from zonecast.estimator.rc.elements import FINE_SECTION_TIME, NodeLayout, discretise_layers
 from zonecast.estimator.shading import FacadeShading, WindowShading
 
 __all__ = [
@@ -313,8 +313,11 @@ class ModelOptions:
     envelope_radiation: str = "none"
     solar_enclosure: str = "air_boundaries"
     adiabatic: str = "mirror"
+    layers: str = "lumped"
 
     def __post_init__(self):
+        if self.layers not in ("lumped", "fine"):
+            raise ModelDefinitionError("layers must be 'lumped' or 'fine'")
         if self.adiabatic not in ("zero_flux", "mirror"):
             raise ModelDefinitionError("adiabatic must be 'zero_flux' or 'mirror'")
         if self.solar_enclosure not in ("room", "air_boundaries"):
@@ -895,7 +898,8 @@ def build_structure(
 
     def layout_of(cons: Construction) -> NodeLayout:
         if cons.name not in layouts:
-            layouts[cons.name] = discretise_layers(cons.layers)
+            layouts[cons.name] = discretise_layers(
+                cons.layers, FINE_SECTION_TIME if opts.layers == "fine" else None)
         return layouts[cons.name]
 
     surfaces = building.surfaces

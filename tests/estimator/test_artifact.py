@@ -46,6 +46,11 @@ def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
                                               model_options={"adiabatic": "mirror"}))
     assert mirror.model.structure.options.adiabatic == "mirror"
     assert air.model.structure.options.adiabatic == "zero_flux"  # a file not naming it
+    fine = load_model_file(write_model_file(tmp_path / "fl.json", vb / "site.yaml",
+                                            model_options={"layers": "fine"}))
+    assert fine.model.structure.options.layers == "fine"
+    assert fine.model.structure.n > mirror.model.structure.n  # the virtual building's slabs
+    assert air.model.structure.options.layers == "lumped"  # a file not naming it
     legacy = json.loads((tmp_path / "a.json").read_text())
     del legacy["model_options"]
     (tmp_path / "legacy.json").write_text(json.dumps(legacy))

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 from zonecast.estimator.idf import Layer, building_from_epjson
 from zonecast.estimator.model import BilinearModel, build_model, write_model_summary
-from zonecast.estimator.rc.elements import discretise_layers
+from zonecast.estimator.rc.elements import FINE_SECTION_TIME, discretise_layers
 from zonecast.estimator.rc.network import (
     DISTURBANCES,
     ModelDefinitionError,
@@ -135,6 +135,91 @@ def test_discretise_layers_conserves():
     assert nl.resistance == pytest.approx(0.35)
     massless = discretise_layers([Layer("n", "nomass", 0, np.nan, 0, 0, 0.5)])
     assert massless.n == 2 and massless.resistance == pytest.approx(0.5)
+
+
+def test_layers_fine_adds_nodes_and_keeps_the_physics():
+    """``ModelOptions(layers="fine")``: the heavy wall gets more nodes, the steady state
+    (no capacity involved) is unchanged, A stays Metzler and stable; a wrong value says what
+    to write."""
+    b = _wall_building([(0.1, 0.89, 1920, 790), (0.2, 1.1, 1800, 840),
+                        (0.013, 0.16, 800, 1090)])
+    opts = {"ground": "adiabatic", "infiltration": "none", "shading": "none",
+            "return_air": "none"}
+    lumped = build_structure(b, {"Z": ["Room"]}, {}, ModelOptions(**opts))
+    fine = build_structure(b, {"Z": ["Room"]}, {}, ModelOptions(layers="fine", **opts))
+    assert fine.n > lumped.n
+    gam = {"gamma_EW": 20.0, "c_IG[Z]": 0.0}
+    v = np.array([0.0, 0, 0, 0, 0, 0, 0])
+    ig = np.array([50.0])
+    x = [BilinearModel(s, ParameterSet(["Z"], gam)).steady_state(np.zeros(0), v, ig)[0]
+         for s in (lumped, fine)]
+    assert x[1] == pytest.approx(x[0], rel=1e-9)
+    a = fine.A(ParameterSet(["Z"], gam).physical).toarray()
+    assert (a - np.diag(np.diag(a))).min() >= 0.0
+    assert np.max(np.linalg.eigvals(a).real) < 0.0
+    with pytest.raises(ModelDefinitionError, match="layers must be 'lumped' or 'fine'"):
+        ModelOptions(layers="thin")
+
+
+def _wall_transfer_exact(layers, w):
+    """Inner-face flux per outer-face temperature amplitude, both faces held [W/(m2 K)]:
+    the product of the layers' transmission matrices (exact for homogeneous layers)."""
+    m = np.eye(2, dtype=complex)
+    for layer in layers:
+        if layer.density > 0:
+            g = np.sqrt(1j * w * layer.density * layer.specific_heat / layer.conductivity)
+            kg, gd = layer.conductivity * g, g * layer.thickness
+            m = m @ np.array([[np.cosh(gd), np.sinh(gd) / kg], [kg * np.sinh(gd), np.cosh(gd)]])
+        else:
+            m = m @ np.array([[1.0, layer.resistance], [0.0, 1.0]])
+    return 1.0 / m[0, 1]
+
+
+def _wall_transfer_nodes(nl, w):
+    """The same transfer of a node layout (faces held, inner nodes solved at frequency w)."""
+    n = nl.n
+    a = np.diag(1j * w * nl.capacities).astype(complex)
+    for k, r in enumerate(nl.resistances):
+        a[k, k] += 1 / r
+        a[k + 1, k + 1] += 1 / r
+        a[k, k + 1] -= 1 / r
+        a[k + 1, k] -= 1 / r
+    t = np.zeros(n, complex)
+    t[0] = 1.0
+    inner = np.arange(1, n - 1)
+    t[inner] = np.linalg.solve(a[np.ix_(inner, inner)], -a[inner, 0])
+    return t[n - 2] / nl.resistances[-1]
+
+
+def test_discretise_layers_fine_matches_the_exact_wall():
+    # brick, air gap, concrete block, gypsum: a heavy uninsulated wall of the family
+    lay = [Layer("brick", "mass", 0.1, 0.89, 1920, 790, 0.1 / 0.89),
+           Layer("gap", "airgap", 0, np.nan, 0, 0, 0.15),
+           Layer("block", "mass", 0.2, 1.1, 1800, 840, 0.2 / 1.1),
+           Layer("gyp", "mass", 0.013, 0.16, 800, 1090, 0.013 / 0.16)]
+    lumped = discretise_layers(lay)
+    fine = discretise_layers(lay, FINE_SECTION_TIME)
+    assert lumped.n == 3 and fine.n > 3
+    c_total = sum(la.heat_capacity for la in lay)
+    assert fine.capacities.sum() == pytest.approx(c_total)
+    assert fine.resistance == pytest.approx(lumped.resistance)
+    assert np.all(fine.resistances > 0)
+    # every section within the diffusion time it was cut for (the gap adds no capacity)
+    for k, r in enumerate(fine.resistances):
+        massive = r - (0.15 if fine.positions[k] <= 0.1 / 0.89 < fine.positions[k + 1] else 0)
+        share = 0.5 * (fine.capacities[k] + fine.capacities[k + 1])
+        assert massive * share <= 1.5 * FINE_SECTION_TIME
+    # the diurnal swing through the wall: the fine layout within 10 % of the exact transfer,
+    # the lumped one off by most of it (its phase about 3.5 h early)
+    w = 2 * np.pi / 86400
+    exact = _wall_transfer_exact(lay, w)
+    err_fine = abs(_wall_transfer_nodes(fine, w) - exact) / abs(exact)
+    err_lumped = abs(_wall_transfer_nodes(lumped, w) - exact) / abs(exact)
+    assert err_fine < 0.1
+    assert err_lumped > 0.5
+    # light constructions keep their 2 or 3 nodes
+    light = [Layer("gyp", "mass", 0.013, 0.16, 800, 1090, 0.013 / 0.16)]
+    assert discretise_layers(light, FINE_SECTION_TIME).n == discretise_layers(light).n
 
 
 @settings(max_examples=25, deadline=None)

@@ -81,6 +81,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   internal_gains: str = "air", window_angle: str = "none",
                   roof_exterior: str = "absorptance", envelope_radiation: str = "none",
                   solar_enclosure: str = "air_boundaries", adiabatic: str = "mirror",
+                  layers: str = "lumped",
                   progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
                   x0_offset_sd: float | None = None,
@@ -89,7 +90,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
-    ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``: as
+    ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``: as
     :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
@@ -104,7 +105,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                                                          roof_exterior=roof_exterior,
                                                          envelope_radiation=envelope_radiation,
                                                          solar_enclosure=solar_enclosure,
-                                                         adiabatic=adiabatic))
+                                                         adiabatic=adiabatic,
+                                                         layers=layers))
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,

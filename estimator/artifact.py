@@ -242,14 +242,15 @@ def _noise(doc: dict, path: Path) -> NoiseSettings:
 _OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration", "facades", "ground",
                 "shading", "return_air", "sky", "interior_radiation", "internal_gains",
                 "window_angle", "roof_exterior", "envelope_radiation", "solar_enclosure",
-                "adiabatic", "layers")
+                "adiabatic", "layers", "internal_mass")
 #: what a model file without an option was built with (options added later)
 _LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal", "ground": "adiabatic",
                     "shading": "none", "return_air": "none", "roof_solar": "mean",
                     "sky": "none", "interior_radiation": "none", "internal_gains": "air",
                     "window_angle": "none", "roof_exterior": "fitted",
                     "envelope_radiation": "none", "solar_enclosure": "room",
-                    "adiabatic": "zero_flux", "layers": "lumped"}
+                    "adiabatic": "zero_flux", "layers": "lumped",
+                    "internal_mass": "both_faces"}
 #: what a model file without ``model_options`` was built with (files written before the
 #: key existed put window solar on the room air, the paper's placement)
 LEGACY_OPTIONS = {"window_solar": "air"}

@@ -293,6 +293,10 @@ Layers = Annotated[str, typer.Option(
     help="how constructions become nodes: 'lumped' (2 or 3 per element, BRCM-like; the "
          "default) or 'fine' (sections of at most an hour's diffusion time, so heavy walls "
          "and slabs get 4-8 nodes; docs/model.md \"States\")")]
+InternalMass = Annotated[str, typer.Option(
+    help="the IDF's InternalMass objects: 'both_faces' (both faces of the given area meet "
+         "the zone; the default) or 'one_face' (one face meets the zone and the back face "
+         "is held as an Adiabatic surface's, as EnergyPlus does; docs/model.md \"States\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -383,6 +387,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  solar_enclosure: SolarEnclosure = "air_boundaries",
                  adiabatic: Adiabatic = "mirror",
                  layers: Layers = "lumped",
+                 internal_mass: InternalMass = "both_faces",
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'auto' (the default since 2026-12-04): 'metered' when the site's "
@@ -418,7 +423,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  roof_exterior=roof_exterior,
                                  envelope_radiation=envelope_radiation,
                                  solar_enclosure=solar_enclosure, adiabatic=adiabatic,
-                                 layers=layers,
+                                 layers=layers, internal_mass=internal_mass,
                                  x0_profile_days=x0_profile_days,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  progress=lambda m: prog.update(task, description=m))
@@ -527,6 +532,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   solar_enclosure: SolarEnclosure = "air_boundaries",
                   adiabatic: Adiabatic = "mirror",
                   layers: Layers = "lumped",
+                  internal_mass: InternalMass = "both_faces",
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'auto' (the default since 2026-12-04: 'metered' when the "
@@ -556,7 +562,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 window_angle=window_angle, roof_exterior=roof_exterior,
                                 envelope_radiation=envelope_radiation,
                                 solar_enclosure=solar_enclosure, adiabatic=adiabatic,
-                                 layers=layers,
+                                 layers=layers, internal_mass=internal_mass,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:

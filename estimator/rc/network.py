@@ -314,8 +314,11 @@ class ModelOptions:
     solar_enclosure: str = "air_boundaries"
     adiabatic: str = "mirror"
     layers: str = "lumped"
+    internal_mass: str = "both_faces"
 
     def __post_init__(self):
+        if self.internal_mass not in ("both_faces", "one_face"):
+            raise ModelDefinitionError("internal_mass must be 'both_faces' or 'one_face'")
         if self.layers not in ("lumped", "fine"):
             raise ModelDefinitionError("layers must be 'lumped' or 'fine'")
         if self.adiabatic not in ("zero_flux", "mirror"):
@@ -1017,10 +1020,18 @@ def build_structure(
     for name in sorted(building.internal_masses):
         m = building.internal_masses[name]
         layout = layout_of(building.constructions[m.construction])
-        # EnergyPlus exposes both faces of internal mass to its zone
         nodes = _add_element(asm, "internal_mass", name, room_state, layout, m.area, m.zone, IW)
-        asm.link(nodes[0], room_state[m.zone], m.area, IW)
-        other_faces.setdefault(m.zone, []).extend([(nodes[0], m.area), (nodes[-1], m.area)])
+        if opts.internal_mass == "one_face":
+            # EnergyPlus's internal mass is its own other side (ExtBoundCond = itself, as an
+            # adiabatic surface): one face of the given area meets the zone, the back face is
+            # held as an Adiabatic surface's (docs/model.md "Internal mass")
+            if opts.adiabatic == "mirror":
+                asm.follow(nodes[0], nodes[-1], asm.cap[nodes[0]] / MIRROR_TIME)
+            other_faces.setdefault(m.zone, []).append((nodes[-1], m.area))
+        else:
+            # both faces exposed to the zone (the structure before 2026-12-06)
+            asm.link(nodes[0], room_state[m.zone], m.area, IW)
+            other_faces.setdefault(m.zone, []).extend([(nodes[0], m.area), (nodes[-1], m.area)])
 
     if opts.envelope_radiation == "room":
         n_env = _envelope_radiation(asm, envelope, room_state, floor_faces, other_faces)

@@ -51,6 +51,10 @@ def test_model_file_defaults_and_errors(vb, bundle, tmp_path):
     assert fine.model.structure.options.layers == "fine"
     assert fine.model.structure.n > mirror.model.structure.n  # the virtual building's slabs
     assert air.model.structure.options.layers == "lumped"  # a file not naming it
+    one = load_model_file(write_model_file(tmp_path / "im.json", vb / "site.yaml",
+                                           model_options={"internal_mass": "one_face"}))
+    assert one.model.structure.options.internal_mass == "one_face"
+    assert air.model.structure.options.internal_mass == "both_faces"  # a file not naming it
     legacy = json.loads((tmp_path / "a.json").read_text())
     del legacy["model_options"]
     (tmp_path / "legacy.json").write_text(json.dumps(legacy))

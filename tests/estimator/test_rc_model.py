@@ -411,6 +411,51 @@ def test_small_office_builds(small_office):
     assert np.linalg.eigvals(model.system_matrix(np.ones(5))).real.max() < 0
 
 
+def test_internal_mass_one_face_as_energyplus(small_office):
+    """``internal_mass="one_face"``: EnergyPlus's InternalMass is its own other side (an
+    adiabatic back face), so only its inner face meets the zone's air and long-wave star; the
+    back face follows the inner face (the mirror) or holds no flux (zero_flux). A stays
+    Metzler and stable; ``both_faces`` links both faces to the air."""
+    zones = {z: [z] for z in small_office.zones if z != "Attic"}
+    boxes = {f"PSZ {z}": z for z in zones}
+    theta = ParameterSet(list(zones)).physical
+    built = {}
+    for im in ("both_faces", "one_face"):
+        for adiabatic in ("mirror", "zero_flux"):
+            opts = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
+                                return_air="none", internal_mass=im, adiabatic=adiabatic)
+            built[im, adiabatic] = build_structure(small_office, zones, boxes, opts)
+    for (im, adiabatic), struct in built.items():
+        a = struct.A(theta).toarray()
+        assert (a - np.diag(np.diag(a))).min() >= 0.0
+        assert np.max(np.linalg.eigvals(a).real) < 0.0
+        masses = sorted({lab.element for lab in struct.labels if lab.kind == "internal_mass"})
+        assert len(masses) == 5
+        for name in masses:
+            rows = [i for i, lab in enumerate(struct.labels)
+                    if lab.kind == "internal_mass" and lab.element == name]
+            back, face = rows[0], rows[-1]
+            room = next(i for i, lab in enumerate(struct.labels)
+                        if lab.kind == "room_air" and lab.room == struct.labels[back].room)
+            assert a[face, room] > 0  # the inner face convects to the air in every variant
+            if im == "both_faces":
+                assert a[back, room] > 0
+            else:
+                assert a[back, room] == 0.0 and a[room, back] == 0.0
+                # nothing links the back face but its own element (and the mirror's follow)
+                others = [j for j in np.nonzero(a[back])[0] if j != back and j not in rows]
+                assert others == []
+    # the mirror adds a follow of each back face of internal mass to its inner face
+    one = built["one_face", "mirror"]
+    diff = one.A(theta).toarray() - built["one_face", "zero_flux"].A(theta).toarray()
+    backs = {min(i for i, lab in enumerate(one.labels)
+                 if lab.kind == "internal_mass" and lab.element == name)
+             for name in {lab.element for lab in one.labels if lab.kind == "internal_mass"}}
+    assert backs <= set(np.nonzero(diff)[0])
+    with pytest.raises(ModelDefinitionError, match="internal_mass must be"):
+        ModelOptions(internal_mass="two")
+
+
 def test_write_summary(five_model, tmp_path):
     write_model_summary(five_model, tmp_path / "m.json", tmp_path / "m.npz")
     s = json.loads((tmp_path / "m.json").read_text())

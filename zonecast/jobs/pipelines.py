@@ -81,7 +81,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   internal_gains: str = "air", window_angle: str = "none",
                   roof_exterior: str = "absorptance", envelope_radiation: str = "none",
                   solar_enclosure: str = "air_boundaries", adiabatic: str = "mirror",
-                  layers: str = "lumped",
+                  layers: str = "lumped", internal_mass: str = "both_faces",
                   progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
                   x0_offset_sd: float | None = None,
@@ -90,7 +90,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
-    ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``: as
+    ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``,
+    ``internal_mass``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``: as
     :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
@@ -106,7 +107,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                                                          envelope_radiation=envelope_radiation,
                                                          solar_enclosure=solar_enclosure,
                                                          adiabatic=adiabatic,
-                                                         layers=layers))
+                                                         layers=layers,
+                                                         internal_mass=internal_mass))
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,

@@ -462,7 +462,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         window_angle: str = "none", day_scale_sd: float | None = None,
         roof_exterior: str = "absorptance", envelope_radiation: str = "none",
         solar_enclosure: str = "air_boundaries", adiabatic: str = "mirror",
-        layers: str = "lumped") -> Results:
+        layers: str = "lumped", internal_mass: str = "both_faces") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
@@ -472,7 +472,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     ``x0_offset_sd``, ``day_scale_sd``: as :meth:`Pipeline.identify`;
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
-    ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``:
+    ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``, ``internal_mass``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``films``: as :meth:`Pipeline.identify`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
@@ -496,7 +496,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                                    roof_exterior=roof_exterior,
                                                    envelope_radiation=envelope_radiation,
                                                    solar_enclosure=solar_enclosure,
-                                                   adiabatic=adiabatic, layers=layers))
+                                                   adiabatic=adiabatic, layers=layers,
+                                                   internal_mass=internal_mass))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()

@@ -269,6 +269,15 @@ class ModelOptions:
         (EnergyPlus's outer-face flux on a middle floor's ceiling slab is 10 times its
         inner face's). A is then not the symmetric form diag(1/C) K; the integrators take
         the general path, as with return air (docs/model.md "Adiabatic surfaces").
+    layers : {"lumped", "fine"}
+        How a construction becomes nodes: 2 or 3 per element, BRCM-like (``"lumped"``, the
+        default), or sections of at most :data:`~zonecast.estimator.rc.elements.FINE_SECTION_TIME`
+        of diffusion time each (``"fine"``; measured and not adopted, docs/model.md "States").
+    internal_mass : {"both_faces", "one_face"}
+        An InternalMass object: both faces of its area meet the zone (``"both_faces"``, the
+        default), or one face does and the back face is held as an ``Adiabatic`` surface's
+        outer face (``"one_face"``: EnergyPlus's form, the surface its own other side;
+        measured and not adopted, docs/model.md "States").
     solar_enclosure : {"air_boundaries", "room"}
         Where a window's transmitted sun lands: on the faces of its room (``"room"``, what
         model files without the option were built with), or, the default since 2026-12-04,
@@ -700,6 +709,13 @@ def _add_element(
     return nodes
 
 
+def _mirror(asm: _Assembler, nodes: Sequence[int]) -> None:
+    """An element that is its own other side (an ``Adiabatic`` surface, EnergyPlus's internal
+    mass): its outer face follows its inner face's temperature (docs/model.md "Adiabatic
+    surfaces")."""
+    asm.follow(nodes[0], nodes[-1], asm.cap[nodes[0]] / MIRROR_TIME)
+
+
 def glass_factor(u_value: float) -> float:
     """Ratio [-] of a window's glass-to-outdoor conductance to its U-factor.
 
@@ -1002,9 +1018,7 @@ def build_structure(
                                   "monthly": [float(t)
                                               for t in building.ground_temperature_at(name)]}
             elif s.boundary == "Adiabatic" and opts.adiabatic == "mirror":
-                # EnergyPlus's adiabatic surface is its own other side: the outer face
-                # follows the inner face's temperature (docs/model.md "Adiabatic surfaces")
-                asm.follow(nodes[0], nodes[-1], asm.cap[nodes[0]] / MIRROR_TIME)
+                _mirror(asm, nodes)
                 n_mirror += 1
             elif s.boundary not in ("Adiabatic", "Ground"):
                 notes.append(f"surface {name}: boundary {s.boundary} treated as adiabatic")
@@ -1024,12 +1038,12 @@ def build_structure(
         if opts.internal_mass == "one_face":
             # EnergyPlus's internal mass is its own other side (ExtBoundCond = itself, as an
             # adiabatic surface): one face of the given area meets the zone, the back face is
-            # held as an Adiabatic surface's (docs/model.md "Internal mass")
+            # held as an Adiabatic surface's (docs/model.md "States")
             if opts.adiabatic == "mirror":
-                asm.follow(nodes[0], nodes[-1], asm.cap[nodes[0]] / MIRROR_TIME)
+                _mirror(asm, nodes)
             other_faces.setdefault(m.zone, []).append((nodes[-1], m.area))
         else:
-            # both faces exposed to the zone (the structure before 2026-12-06)
+            # both faces of the given area exposed to the zone
             asm.link(nodes[0], room_state[m.zone], m.area, IW)
             other_faces.setdefault(m.zone, []).extend([(nodes[0], m.area), (nodes[-1], m.area)])
 

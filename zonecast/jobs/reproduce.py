@@ -453,16 +453,16 @@ def service_check(model_file: Path, telemetry: Path, data: ModelData, seed: int,
 def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         progress=lambda s: None, *, priors: bool = True, sigma_e: float = 0.3,
         window: str = "weekend", sensitivity: bool = True,
-        infiltration: str = "idf", weekend_gains: bool | str = "auto",
-        ground: str = "idf", shading: str = "idf", return_air: str = "idf",
-        roof_solar: str = "horizontal", sky: str = "none",
-        interior_radiation: str = "star", films: str | None = None,
-        internal_gains: str = "air", service: bool = True,
+        infiltration: str = ModelOptions.infiltration, weekend_gains: bool | str = "auto",
+        ground: str = ModelOptions.ground, shading: str = ModelOptions.shading, return_air: str = ModelOptions.return_air,
+        roof_solar: str = ModelOptions.roof_solar, sky: str = ModelOptions.sky,
+        interior_radiation: str = ModelOptions.interior_radiation, films: str | None = None,
+        internal_gains: str = ModelOptions.internal_gains, service: bool = True,
         x0_profile_days: int | None = None, x0_offset_sd: float | None = None,
-        window_angle: str = "none", day_scale_sd: float | None = None,
-        roof_exterior: str = "absorptance", envelope_radiation: str = "none",
-        solar_enclosure: str = "air_boundaries", adiabatic: str = "mirror",
-        layers: str = "lumped", internal_mass: str = "both_faces") -> Results:
+        window_angle: str = ModelOptions.window_angle, day_scale_sd: float | None = None,
+        roof_exterior: str = ModelOptions.roof_exterior, envelope_radiation: str = ModelOptions.envelope_radiation,
+        solar_enclosure: str = ModelOptions.solar_enclosure, adiabatic: str = ModelOptions.adiabatic,
+        layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);

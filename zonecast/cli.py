@@ -365,19 +365,19 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  infiltration: Annotated[str, typer.Option(
                      help="'idf' (the default, chosen on the building family): the IDF's "
                           "infiltration objects as a fixed outdoor-air conductance "
-                          "(docs/model.md), or 'none' (the paper)")] = "idf",
+                          "(docs/model.md), or 'none' (the paper)")] = ModelOptions.infiltration,
                  ground: Annotated[str, typer.Option(
                      help="'idf' (the default): ground-contact floors held near the IDF's "
                           "monthly ground temperature (docs/model.md \"Ground contact\"), or "
-                          "'adiabatic' (the paper's model)")] = "idf",
+                          "'adiabatic' (the paper's model)")] = ModelOptions.ground,
                  shading: Annotated[str, typer.Option(
                      help="'idf' (the default): the IDF's overhangs, fins and shading "
                           "surfaces shade the windows' solar (docs/model.md \"Exterior "
-                          "shading\"), or 'none'")] = "idf",
+                          "shading\"), or 'none'")] = ModelOptions.shading,
                  return_air: Annotated[str, typer.Option(
                      help="'idf' (the default): the boxes' return air flows through the "
                           "IDF's return plenums (docs/model.md \"Return plenum\"), or "
-                          "'none' (the paper)")] = "idf",
+                          "'none' (the paper)")] = ModelOptions.return_air,
                  roof_solar: RoofSolar = ModelOptions.roof_solar,
                  sky: Sky = ModelOptions.sky,
                  interior_radiation: InteriorRadiation = ModelOptions.interior_radiation,
@@ -513,16 +513,16 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   day_scale_sd: DayScaleSd = None,
                   infiltration: Annotated[str, typer.Option(
                       help="'idf' (the default): the IDF's infiltration as a fixed "
-                           "outdoor-air conductance, or 'none' (the paper)")] = "idf",
+                           "outdoor-air conductance, or 'none' (the paper)")] = ModelOptions.infiltration,
                   ground: Annotated[str, typer.Option(
                       help="'idf' (the default): ground-contact floors at the IDF's monthly "
-                           "ground temperature, or 'adiabatic' (the paper)")] = "idf",
+                           "ground temperature, or 'adiabatic' (the paper)")] = ModelOptions.ground,
                   shading: Annotated[str, typer.Option(
                       help="'idf' (the default): the IDF's overhangs, fins and shading "
-                           "surfaces shade the windows, or 'none'")] = "idf",
+                           "surfaces shade the windows, or 'none'")] = ModelOptions.shading,
                   return_air: Annotated[str, typer.Option(
                       help="'idf' (the default): return air through the IDF's return "
-                           "plenums, or 'none' (the paper)")] = "idf",
+                           "plenums, or 'none' (the paper)")] = ModelOptions.return_air,
                   roof_solar: RoofSolar = ModelOptions.roof_solar,
                   sky: Sky = ModelOptions.sky,
                   interior_radiation: InteriorRadiation = ModelOptions.interior_radiation,

@@ -58,7 +58,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from zonecast.estimator.forecast import track_week, week_split, zone_floor_area
-from zonecast.estimator.internal_gains import truth_correlation, zone_gain_heat
+from zonecast.estimator.internal_gains import truth_column, truth_correlation, zone_gain_heat
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.rc.network import CP_AIR  # the model's c_p of air [J/(kg K)]
 
@@ -147,7 +147,8 @@ def member(model_file: Path, campaign: Path, with_explain: bool = False) -> dict
                                 model.structure.room_of_box)], -1)
         q_box = CP_AIR * data.u[rows] * data.reheat[rows]
         for j, z in enumerate(data.zones):
-            true = np.sum([np.nan_to_num(tr.get(f"{p}:zone:{z}", pd.Series(np.nan, index=tr.index))
+            true = np.sum([np.nan_to_num(tr.get(truth_column(tr.columns, p, f"zone:{z}"),
+                                                pd.Series(np.nan, index=tr.index))
                                          .to_numpy(float)) for p in PARTS], axis=0)
             q = q_box[:, box_zone == j].sum(axis=1)
             b, k = regress(est[:, j], true, q)

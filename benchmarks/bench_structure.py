@@ -46,6 +46,7 @@ import numpy as np
 import pandas as pd
 from zonecast.estimator.forecast import whole_weeks, zone_floor_area
 from zonecast.estimator.identify import kalman_state
+from zonecast.estimator.internal_gains import truth_column
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.priors import building_priors
 from zonecast.estimator.rc.network import ModelOptions
@@ -85,14 +86,16 @@ def parse_variant(text: str) -> tuple[str, dict[str, float] | str, str, str]:
 
 
 def true_gains(campaign: Path, data, model) -> np.ndarray:
-    """f_IG [W/m2] per row and zone: the truth's people + lights + equipment heat / floor."""
+    """f_IG [W/m2] per row and zone: the truth's people (sensible) + lights + equipment heat
+    / floor."""
     truth = pd.read_csv(campaign / "truth.csv", index_col=0)
     truth.index = pd.to_datetime(truth.index, utc=True)
     truth = truth.reindex(data.times)
     area = zone_floor_area(model)
     out = np.zeros((len(data.times), len(data.zones)))
     for j, z in enumerate(data.zones):
-        cols = [f"{p}:zone:{z}" for p in GAIN_PARTS if f"{p}:zone:{z}" in truth]
+        cols = [c for c in (truth_column(truth.columns, p, f"zone:{z}") for p in GAIN_PARTS)
+                if c in truth]
         if not cols:
             raise SystemExit(f"{campaign}: truth.csv has no gains of zone {z!r}")
         out[:, j] = np.nan_to_num(truth[cols].to_numpy(float)).sum(axis=1) / area[j]

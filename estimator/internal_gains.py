@@ -80,6 +80,17 @@ def zone_gain_heat(f_ig: np.ndarray, c_ig: np.ndarray, zone_area: np.ndarray) ->
     return (np.asarray(f_ig) + np.asarray(c_ig)) * np.asarray(zone_area)
 
 
+def truth_column(columns, part: str, key: str) -> str:
+    """The column of a campaign's ``truth.csv`` (docs/data.md) with ``part``'s heat [W] at
+    ``key`` (a room, or ``zone:<zone>``): for people their sensible heat where the campaign
+    has it (``people_sensible:``; the latent part only moistens the air and is no heat of
+    the air balance the model keeps), else the column of the part's own name (``people:``
+    is sensible + latent heat)."""
+    if part == "people" and f"people_sensible:{key}" in columns:
+        return f"people_sensible:{key}"
+    return f"{part}:{key}"
+
+
 def truth_correlation(est: np.ndarray, true: np.ndarray) -> dict:
     """Pearson r and least-squares scale (true ≈ scale · est) over rows where both exist."""
     ok = np.isfinite(est) & np.isfinite(true)

@@ -32,7 +32,7 @@ from zonecast.estimator.forecast import (
     zone_floor_area,
 )
 from zonecast.estimator.gains import DayAheadGains, fit_weekly_profile
-from zonecast.estimator.internal_gains import truth_correlation, zone_gain_heat
+from zonecast.estimator.internal_gains import truth_column, truth_correlation, zone_gain_heat
 from zonecast.estimator.model import BilinearModel
 
 __all__ = ["TRUTH_PARTS", "forecast_study", "gains_truth"]
@@ -44,7 +44,8 @@ TRUTH_PARTS = ("people", "lights", "equipment", "reheat")
 def gains_truth(model: BilinearModel, data: ModelData, tracks: list[WeekTrack],
                 truth: pd.DataFrame) -> dict:
     """Per zone r and scale of the estimated gains heat a_floor (c_IG + f_IG) [W] against the
-    true people + lights + equipment + reheat heat, and each part alone (issue item 5).
+    true people (sensible, :func:`truth_column`) + lights + equipment + reheat heat, and each
+    part alone (issue item 5).
 
     When the boxes' discharge air is measured (``data.reheat`` not all zero) reheat is a
     known input of the model, not part of f_IG, and the total leaves it out."""
@@ -57,7 +58,8 @@ def gains_truth(model: BilinearModel, data: ModelData, tracks: list[WeekTrack],
     reheat_known = bool(np.any(data.reheat))
     out = {}
     for j, z in enumerate(data.zones):
-        parts = {p: tr.get(f"{p}:zone:{z}", pd.Series(np.nan, index=tr.index)).to_numpy(float)
+        parts = {p: tr.get(truth_column(tr.columns, p, f"zone:{z}"),
+                           pd.Series(np.nan, index=tr.index)).to_numpy(float)
                  for p in TRUTH_PARTS}
         in_total = [p for p in TRUTH_PARTS if not (p == "reheat" and reheat_known)]
         total = np.sum([np.nan_to_num(parts[p]) for p in in_total], axis=0)

@@ -109,6 +109,7 @@ SURFACE_TYPES = ("BuildingSurface:Detailed", "Wall:Detailed", "RoofCeiling:Detai
 WINDOW_TYPES = ("FenestrationSurface:Detailed", "Window", "GlazedDoor")
 SCHEDULE_TYPES = ("Schedule:Compact", "Schedule:Year", "Schedule:Constant", "Schedule:File")
 ZONE_VARIABLES = ("Zone Mean Air Temperature", "Zone People Total Heating Rate",
+                  "Zone People Sensible Heating Rate",
                   "Zone Lights Total Heating Rate", "Zone Electric Equipment Total Heating Rate",
                   "Zone Infiltration Sensible Heat Gain Energy",
                   "Zone Infiltration Sensible Heat Loss Energy",
@@ -609,6 +610,7 @@ def to_records(layout: Layout, wide: pd.DataFrame, per_hour: int, keep: list, st
     for z in layout.zones:
         tru[f"air_temperature:{z}"] = _col(st, z, "Zone Mean Air Temperature")
         tru[f"people:{z}"] = _opt(iv, z, "Zone People Total Heating Rate")
+        tru[f"people_sensible:{z}"] = _opt(iv, z, "Zone People Sensible Heating Rate")
         tru[f"lights:{z}"] = _opt(iv, z, "Zone Lights Total Heating Rate")
         tru[f"equipment:{z}"] = _opt(iv, z, "Zone Electric Equipment Total Heating Rate")
         tru[f"infiltration:{z}"] = (_opt(iv, z, "Zone Infiltration Sensible Heat Gain Energy")
@@ -621,8 +623,8 @@ def to_records(layout: Layout, wide: pd.DataFrame, per_hour: int, keep: list, st
                                  np.zeros(len(index)))
         tru[f"heating_setpoint:{z}"] = _opt(iv, z, "Zone Thermostat Heating Setpoint Temperature")
         tru[f"cooling_setpoint:{z}"] = _opt(iv, z, "Zone Thermostat Cooling Setpoint Temperature")
-        for q in ("air_temperature", "people", "lights", "equipment", "infiltration",
-                  "window_solar", "reheat"):
+        for q in ("air_temperature", "people", "people_sensible", "lights", "equipment",
+                  "infiltration", "window_solar", "reheat"):
             tru[f"{q}:zone:{z}"] = tru[f"{q}:{z}"]
     return pd.DataFrame(tel, index=index), pd.DataFrame(tru, index=index)
 

@@ -23,6 +23,7 @@ SCHEDULE_FILE = "schedules.csv"
 OUTPUT_VARIABLES = [
     ("*", "Zone Mean Air Temperature"),
     ("*", "Zone People Total Heating Rate"),
+    ("*", "Zone People Sensible Heating Rate"),
     ("*", "Zone Lights Total Heating Rate"),
     ("*", "Zone Electric Equipment Total Heating Rate"),
     ("*", "Zone Infiltration Sensible Heat Gain Energy"),

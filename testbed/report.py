@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
+from zonecast.estimator.internal_gains import truth_column
 from zonecast.estimator.site import load_site
 from zonecast.estimator.telemetry import load_telemetry
 from zonecast.testbed.config import load_config
@@ -71,14 +72,16 @@ def plot_gains(truth: pd.DataFrame, zones, tz, path: Path) -> None:
     fig = Figure(figsize=(10, 1.6 * len(zones)))
     axes = fig.subplots(len(zones), 1, sharex=True)
     for ax, z in zip(np.atleast_1d(axes), zones):
-        q = sum(truth[f"{k}:zone:{z}"] for k in ("people", "lights", "equipment")).to_numpy() / 1e3
+        q = sum(truth[truth_column(truth.columns, k, f"zone:{z}")]
+                for k in ("people", "lights", "equipment")).to_numpy() / 1e3
         frame = pd.DataFrame({"tow": tow, "week": week, "q": q})
         table = frame.pivot_table(index="tow", columns="week", values="q")
         ax.plot(table.index / 96, table.values, color="0.7", lw=0.6)
         ax.plot(table.index / 96, table.mean(axis=1), color="red", lw=1.2)
         ax.set_ylabel(f"{z} [kW]")
     np.atleast_1d(axes)[-1].set_xlabel("day of week (0 = Monday), local time")
-    fig.suptitle("True internal gains (people + lights + equipment): each week grey, mean red")
+    fig.suptitle("True internal gains (people's sensible heat + lights + equipment): "
+                 "each week grey, mean red")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
@@ -123,7 +126,8 @@ def write_report(run_dir: Path, out: Path) -> Path:
     for j, z in enumerate(site.zones):
         rooms = site.zones[z]
         area = sum(cfg.rooms[r].floor_area for r in rooms)
-        gains = sum(truth[f"{k}:zone:{z}"] for k in ("people", "lights", "equipment")).mean()
+        gains = sum(truth[truth_column(truth.columns, k, f"zone:{z}")]
+                    for k in ("people", "lights", "equipment")).mean()
         rows.append(f"| {z} | {len(rooms)} | {area:.0f} | {np.nanmean(y[:, j]):.2f} | "
                     f"{np.nanstd(y[:, j]):.2f} | {gains / area:.1f} | "
                     f"{truth[f'reheat:zone:{z}'].mean() / area:.1f} |")

@@ -392,6 +392,7 @@ def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Time
                 tel[names["discharge"][b]] = _col(iv, supply_node(r, i), "System Node Temperature")
         tru[f"air_temperature:{r}"] = true_t
         tru[f"people:{r}"] = _opt(iv, r, "Zone People Total Heating Rate")
+        tru[f"people_sensible:{r}"] = _opt(iv, r, "Zone People Sensible Heating Rate")
         tru[f"lights:{r}"] = _col(iv, r, "Zone Lights Total Heating Rate")
         tru[f"equipment:{r}"] = _col(iv, r, "Zone Electric Equipment Total Heating Rate")
         tru[f"infiltration:{r}"] = (_opt(iv, r, "Zone Infiltration Sensible Heat Gain Energy")
@@ -413,7 +414,8 @@ def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Time
         w = np.array([vol[r] for r in rooms])
         tru[f"air_temperature:zone:{z}"] = sum(w[i] * tru[f"air_temperature:{r}"]
                                                for i, r in enumerate(rooms)) / w.sum()
-        for q in ("people", "lights", "equipment", "infiltration", "window_solar"):
+        for q in ("people", "people_sensible", "lights", "equipment", "infiltration",
+                  "window_solar"):
             tru[f"{q}:zone:{z}"] = sum(tru[f"{q}:{r}"] for r in rooms)
         tru[f"reheat:zone:{z}"] = sum(tru[f"reheat:{b}"] for r in rooms
                                       for _, b, _ in room_boxes(cfg, r))

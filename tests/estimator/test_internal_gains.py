@@ -8,6 +8,7 @@ from zonecast.estimator.integrate import ExactStepper
 from zonecast.estimator.internal_gains import (
     stepper_for,
     track_gains,
+    truth_column,
     truth_correlation,
     zone_gain_heat,
 )
@@ -71,3 +72,11 @@ def test_truth_correlation_and_heat():
     assert truth_correlation(est, 2 * est) == {"r": pytest.approx(1.0), "scale": pytest.approx(2.0),
                                                "n": 4}
     np.testing.assert_allclose(zone_gain_heat([[1.0, 2.0]], [3.0, 4.0], [10.0, 20.0]), [[40.0, 120.0]])
+
+
+def test_truth_column_takes_the_peoples_sensible_heat_where_the_campaign_has_it():
+    new = ["people:zone:N", "people_sensible:zone:N", "lights:zone:N"]
+    assert truth_column(new, "people", "zone:N") == "people_sensible:zone:N"
+    assert truth_column(new, "lights", "zone:N") == "lights:zone:N"
+    # a campaign written before the column: the total, as it was
+    assert truth_column(["people:zone:N"], "people", "zone:N") == "people:zone:N"

@@ -126,6 +126,17 @@ def test_effect_switches_change_the_truth_as_documented(base, withheld):
     assert 0.2 < ratio < 0.7                     # SHGC 0.4 -> 0.2
 
 
+def test_truth_holds_the_peoples_sensible_heat_beside_their_total(base):
+    b = base.truth
+    total, sensible = b["people:zone:NW"].to_numpy(), b["people_sensible:zone:NW"].to_numpy()
+    busy = total > 0
+    assert busy.any() and np.all(sensible <= total + 1e-9)
+    # EnergyPlus's autocalculated sensible share of an office worker's heat: about 0.5-0.8
+    assert 0.5 < sensible[busy].sum() / total[busy].sum() < 0.8
+    rooms = [r for r, room in CFG.rooms.items() if room.zone == "NW"]
+    np.testing.assert_allclose(sum(b[f"people_sensible:{r}"] for r in rooms), sensible)
+
+
 def test_sensor_switches(base):
     clean = Effects(sensor_noise=0.0, sensor_resolution=0.0, sensor_bias={"NW": 0.5})
     tel, tru = to_records(CFG, base.raw, base.keep, clean, seed=7)

@@ -10,8 +10,9 @@ background gain (c_IG = 0) and the true internal gains as f_IG (people + lights 
 equipment heat of each zone [W] / its floor area); per whole week x(0) comes from the
 Kalman filter over the first day (with those gains), then the model runs open loop for six
 days with the recorded airflows, weather and discharge air. Per building: the RMS [K] of
-the open-loop zone temperatures against the measured ones, per zone and mean; per variant:
-the median and worst over the buildings.
+the open-loop zone temperatures against the measured ones, per zone and mean, and the mean
+error by period (working-day nights, the 8 h warm-up, afternoons, weekends, winter, summer)
+of the perimeter zones and the others; per variant: the median and worst over the buildings.
 
 Variants are ``structure:films[:gains]``: ``none`` or ``star``
 (``ModelOptions.interior_radiation``) or ``envelope`` (``ModelOptions.envelope_radiation
@@ -122,20 +123,63 @@ def open_loop(campaign: Path, structure: str, films, gains: str = "air",
     model = pipe.model(start.copy(values))
     f_ig = true_gains(campaign, data, model)
     day = 96
-    sq, n = np.zeros(len(data.zones)), np.zeros(len(data.zones))
+    errs, times = [], []
     for week in whole_weeks(data):
         a, b = week["rows"]
         x0 = kalman_state(model, data, a, a + day, f_ig=f_ig)
         s = slice(a + day, b)
         y = model.simulate(x0, data.u[s], data.v[s], f_ig[s], reheat=data.reheat[s]).y
         meas = data.y[a + day + 1:b]  # the week's own rows (row b may open the next segment)
-        err = y[1:1 + len(meas)] - meas
-        ok = np.isfinite(err)
-        sq += (np.where(ok, err, 0.0) ** 2).sum(axis=0)
-        n += ok.sum(axis=0)
-    rms = np.sqrt(sq / np.maximum(n, 1))
+        errs.append(y[1:1 + len(meas)] - meas)
+        times.append(data.times[a + day + 1:b])
+    err = np.concatenate(errs)
+    ok = np.isfinite(err)
+    rms = np.sqrt((np.where(ok, err, 0.0) ** 2).sum(axis=0) / np.maximum(ok.sum(axis=0), 1))
+    building = pipe._building_or_none()
+    windowed = set() if building is None else {w.zone for w in building.windows.values()}
+    perimeter = [j for j, z in enumerate(data.zones)
+                 if windowed & set(pipe.site.zones[z])]
     return {"zones": dict(zip(data.zones, rms.round(4).tolist())),
-            "mean": float(rms.mean()), "films": {k: values[k] for k in FILMS}}
+            "mean": float(rms.mean()), "films": {k: values[k] for k in FILMS},
+            "bias": bias_by_period(err, pd.DatetimeIndex(np.concatenate(times)), data.timezone,
+                                   data.zones, perimeter)}
+
+
+#: periods of the bias breakdown: name -> (working days only, local hours [from, to), months)
+PERIODS = {
+    "night": (True, (0, 6), None),          # working-day nights, the building at rest
+    "08h": (True, (8, 9), None),            # the morning warm-up
+    "afternoon": (True, (12, 18), None),
+    "weekend": (False, None, None),
+    "winter": (None, None, (12, 1, 2)),
+    "summer": (None, None, (5, 6, 7, 8, 9)),
+}
+
+
+def bias_by_period(err: np.ndarray, times: pd.DatetimeIndex, tz: str, zones: list[str],
+                   perimeter: list[int]) -> dict:
+    """Mean model - measured [K] per period (:data:`PERIODS`, local time, Monday-Friday as
+    working days) of each zone, and of the perimeter zones (those with windows) and the
+    others taken together: where in the day and the year a structure's error lies."""
+    local = times.tz_convert(tz)
+    working = np.asarray(local.day_of_week < 5)
+    hour, month = np.asarray(local.hour), np.asarray(local.month)
+    groups = {"perimeter": perimeter, "core": [j for j in range(len(zones)) if j not in perimeter]}
+    out: dict = {}
+    for name, (workday, hours, months) in PERIODS.items():
+        sel = np.ones(len(times), bool)
+        if workday is not None:
+            sel &= working if workday else ~working
+        if hours is not None:
+            sel &= (hour >= hours[0]) & (hour < hours[1])
+        if months is not None:
+            sel &= np.isin(month, months)
+        part = err[sel]
+        per_zone = np.nanmean(part, axis=0) if len(part) else np.full(len(zones), np.nan)
+        out[name] = {**{z: round(float(v), 3) for z, v in zip(zones, per_zone)},
+                     **{g: (round(float(np.nanmean(part[:, js])), 3) if js and len(part)
+                            else None) for g, js in groups.items()}}
+    return out
 
 
 def main() -> None:
@@ -188,6 +232,16 @@ def main() -> None:
         print(f"| **median {role}** ({len(sel)}) | | "
               + " | ".join(f"{statistics.median(r[v]['mean'] for r in sel):.3f} / worst "
                            f"{max(r[v]['mean'] for r in sel):.3f}" for v, *_ in variants) + " |")
+    print("\nMean model - measured [K] by period (working-day nights 0-6 h, 8 h, afternoons "
+          "12-18 h; weekends; Dec-Feb; May-Sep), perimeter zones (with windows) / the others:")
+    print("| building | variant | " + " | ".join(PERIODS) + " |")
+    print("|---|---|" + "---|" * len(PERIODS))
+    for r in rows:
+        for v, *_ in variants:
+            b = r[v]["bias"]
+            cells = [" / ".join("–" if b[p][g] is None else f"{b[p][g]:+.2f}"
+                                for g in ("perimeter", "core")) for p in PERIODS]
+            print(f"| {r['name']} | {v} | " + " | ".join(cells) + " |")
     if args.out:
         args.out.write_text(json.dumps({"variants": args.variants, "rows": rows}, indent=1))
 

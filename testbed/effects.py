@@ -6,6 +6,8 @@ diagnosis finds it. Each switch and what it changes is listed in docs/testbed.md
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field
 
 EFFECTS = ("reheat", "infiltration", "gains", "window_solar", "sensor_noise", "sensor_bias",
@@ -35,6 +37,10 @@ class Effects(BaseModel):
         is an effect the model does not see.
     power_meters : each model zone's lights and plug loads are sub-metered (a telemetry
         point ``P_<zone>`` [W] per zone under ``points.power`` of the site description).
+    sky : the sky temperature of every exterior face's long-wave exchange: ``"weather"``,
+        EnergyPlus's own (from the weather file's horizontal infrared), or ``"dry_bulb"``,
+        the outdoor air temperature (``WeatherProperty:SkyTemperature``), a building without
+        the sky's long-wave deficit: what a model with that physics exactly right would see.
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -51,6 +57,7 @@ class Effects(BaseModel):
     mixing: dict[str, float] = Field(default_factory=dict)
     discharge_sensors: bool = True
     power_meters: bool = True
+    sky: Literal["weather", "dry_bulb"] = "weather"
 
     def gain_scale(self, zone: str) -> float:
         return self.gains.get(zone, 1.0)
@@ -71,7 +78,7 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
 
     ``EFFECT`` is one of reheat, infiltration, gains[.ZONE], window_solar,
     sensor_noise, sensor_bias, supply_offset; ``--set`` also takes shgc, sensor_resolution,
-    airflow_noise, bias.ZONE, mass.ZONE and mixing.ZONE.
+    airflow_noise, sky (``weather`` or ``dry_bulb``), bias.ZONE, mass.ZONE and mixing.ZONE.
     """
     data: dict = {"gains": {}, "sensor_bias": {}, "mass": {}, "mixing": {}}
 
@@ -115,6 +122,11 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
             data[key] = _num(key, value)
         elif key == "reheat":
             data["reheat"] = value.lower() in ("1", "true", "on", "yes")
+        elif key == "sky":
+            if value not in ("weather", "dry_bulb"):
+                raise ValueError(f"--set sky={value}: choose 'weather' (EnergyPlus's sky from "
+                                 "the weather file) or 'dry_bulb' (the sky at the outdoor air)")
+            data["sky"] = value
         elif key.startswith("gains."):
             data["gains"][zone_of(key)] = _num(key, value)
         elif key.startswith("bias."):
@@ -132,5 +144,5 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
         else:
             raise ValueError(f"--set {key}: unknown setting; choose from infiltration, shgc, "
                              "sensor_noise, sensor_resolution, airflow_noise, supply_offset, "
-                             "reheat, gains.ZONE, bias.ZONE, mass.ZONE, mixing.ZONE")
+                             "reheat, sky, gains.ZONE, bias.ZONE, mass.ZONE, mixing.ZONE")
     return Effects.model_validate(data)

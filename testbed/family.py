@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 from zonecast.testbed.config import BuildingConfig, Campaign, Layer, load_config
+from zonecast.testbed.effects import Effects
 from zonecast.testbed.geometry import plan_walls
 
 #: Share of the members after office6 held out from choosing defaults [-].
@@ -512,13 +513,14 @@ def continuous_campaign(campaign: Campaign) -> Campaign:
                     excitation_weekends=list(campaign.excitation_weekends))
 
 
-def _run_one(cfg: BuildingConfig, out: Path, run_seed: int) -> dict:
+def _run_one(cfg: BuildingConfig, out: Path, run_seed: int,
+             effects: Effects | None = None) -> dict:
     """Run one member's campaign (in a worker process); never raises."""
     from zonecast.testbed.run import run_campaign
 
     t0 = time.perf_counter()
     try:
-        res = run_campaign(out, seed=run_seed, config=cfg)
+        res = run_campaign(out, seed=run_seed, config=cfg, effects=effects)
     except (ValueError, RuntimeError, OSError) as exc:  # a failed building does not stop the rest
         return {"status": "failed", "error": f"{type(exc).__name__}: {exc}",
                 "seconds": round(time.perf_counter() - t0, 1)}
@@ -528,7 +530,8 @@ def _run_one(cfg: BuildingConfig, out: Path, run_seed: int) -> dict:
 
 def run_family(out: Path, n: int, seed: int, jobs: int = 1, weeks: int | None = None,
                progress: Callable[[str], None] = lambda s: None, *,
-               continuous: bool = False, only: list[str] | None = None) -> dict:
+               continuous: bool = False, only: list[str] | None = None,
+               effects: Effects | None = None) -> dict:
     """Run the campaign of every member and write ``out/index.json``.
 
     Parameters
@@ -541,6 +544,8 @@ def run_family(out: Path, n: int, seed: int, jobs: int = 1, weeks: int | None = 
     continuous : every week from the campaign's first to its last
         (:func:`continuous_campaign`; not with ``weeks``).
     only : run these members only (names); None = all.
+    effects : the effect switches of every member's campaign (building-wide ones: a zone's
+        differ by member); None = the defaults. Recorded in ``index.json`` when given.
     progress : called with one line per finished building.
 
     Returns
@@ -577,6 +582,8 @@ def run_family(out: Path, n: int, seed: int, jobs: int = 1, weeks: int | None = 
              "weeks": [w.isoformat() for w in first.weeks],
              "excitation_weekends": [d.isoformat() for d in first.excitation_weekends],
              "members": [{**m.record(), "status": "pending"} for m in members]}
+    if effects is not None:
+        index["effects"] = effects.model_dump(mode="json")
     entry = {e["name"]: e for e in index["members"]}
 
     def write_index() -> None:
@@ -593,10 +600,11 @@ def run_family(out: Path, n: int, seed: int, jobs: int = 1, weeks: int | None = 
     t0 = time.perf_counter()
     if jobs == 1:
         for k, m in enumerate(members, 1):
-            done(m, _run_one(configs[m.name], out / m.name, m.run_seed), k)
+            done(m, _run_one(configs[m.name], out / m.name, m.run_seed, effects), k)
     else:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_run_one, configs[m.name], out / m.name, m.run_seed): m
+            futures = {pool.submit(_run_one, configs[m.name], out / m.name, m.run_seed,
+                                   effects): m
                        for m in members}
             for k, fut in enumerate(as_completed(futures), 1):
                 done(futures[fut], fut.result(), k)

@@ -136,6 +136,11 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
     add(obj("Schedule:Constant", "AlwaysOn", "Fraction", 1.0))
     add(obj("Schedule:Constant", "AlwaysOff", "Fraction", 0.0))
     add(obj("Schedule:Constant", "Activity", "Any Number", 120.0))
+    if effects.sky == "dry_bulb":
+        # the sky at the outdoor air: no long-wave deficit at any exterior face
+        add(obj("Schedule:Constant", "Sky Below Dry Bulb", "Any Number", 0.0))
+        add(obj("WeatherProperty:SkyTemperature", "", "DifferenceScheduleDryBulbValue",
+                "Sky Below Dry Bulb", "No"))
     for name in columns:
         limits = "Temperature" if name in ("htg", "clg") else "Fraction"
         add(obj("Schedule:File", f"sch:{name}", limits, SCHEDULE_FILE, col[name], 1, 8760,

@@ -51,8 +51,8 @@ Disable = Annotated[list[str] | None, typer.Option(
                       "window_solar, sensor_noise, sensor_bias (repeatable).")]
 Set = Annotated[list[str] | None, typer.Option(
     "--set", help="Set an effect: infiltration=SCALE, shgc=VALUE, sensor_noise=SIGMA, "
-                  "sensor_resolution=DEGC, airflow_noise=REL, gains.ZONE=SCALE, bias.ZONE=DEGC "
-                  "(repeatable).")]
+                  "sensor_resolution=DEGC, airflow_noise=REL, sky=weather|dry_bulb, "
+                  "gains.ZONE=SCALE, bias.ZONE=DEGC (repeatable).")]
 Seed = Annotated[int, typer.Option(help="Seed of every random draw (occupancy, excitation, noise).")]
 Building = Annotated[str, typer.Option(help="Building config name in configs/buildings, or a path.")]
 
@@ -163,13 +163,21 @@ def testbed_family(out: Annotated[Path, typer.Option(help="Output folder: one ca
                        help="Every week from the campaign's first to its last (the "
                             "building operated without the campaign's gaps).")] = False,
                    only: Annotated[list[str] | None, typer.Option(
-                       help="Run this member only (repeatable).")] = None) -> None:
+                       help="Run this member only (repeatable).")] = None,
+                   set_: Set = None) -> None:
     """A family of virtual office floors (docs/testbed.md): office6 and n - 1 seeded
     variants, each with its campaign, and index.json with their parameters and roles."""
+    from zonecast.testbed.effects import parse_switches
     from zonecast.testbed.family import run_family
     try:
+        zonal = [item for item in set_ or [] if "." in item.split("=", 1)[0]]
+        if zonal:
+            raise ValueError(f"--set {zonal[0]}: a family's settings apply to every member, "
+                             "whose zones differ; set a zone's effect on one building with "
+                             "zonecast testbed campaign")
+        effects = parse_switches(None, set_, []) if set_ else None
         index = run_family(out, n, seed, jobs=jobs, weeks=weeks, progress=typer.echo,
-                           continuous=continuous, only=only)
+                           continuous=continuous, only=only, effects=effects)
     except ValueError as exc:
         _fail(exc)
     failed = [m["name"] for m in index["members"] if m["status"] != "ok"]

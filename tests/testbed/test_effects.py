@@ -27,6 +27,7 @@ def test_switches_parse():
     (None, ["supply_offset=9"], r"less than or equal to 5"),
     (None, ["mass.S=0"], r"furniture area scale must be > 0"),
     (None, ["mixing.S=-1"], r"mixing flow must be >= 0"),
+    (None, ["sky=clear"], r"--set sky=clear: choose 'weather'"),
 ])
 def test_bad_switches_say_what_to_fix(disable, set_, message):
     with pytest.raises(ValueError, match=message):
@@ -78,3 +79,21 @@ def test_mixing_switch_joins_its_zone_to_neighbours_of_other_zones_once():
                 if room.zone == "S" for w in walls[r].walls
                 if w.neighbour is not None and cfg.rooms[w.neighbour].zone != "S"}
     assert pairs == expected
+
+
+def test_sky_switch_puts_the_sky_at_the_dry_bulb_in_the_idf():
+    import datetime as dt
+
+    from zonecast.testbed.config import load_config
+    from zonecast.testbed.effects import Effects
+    from zonecast.testbed.idfgen import build_idf
+
+    cfg = load_config("office6")
+    week = [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))]
+    e = parse_switches(None, ["sky=dry_bulb"], ZONES)
+    assert e.sky == "dry_bulb" and parse_switches(None, None, ZONES).sky == "weather"
+    idf = build_idf(cfg, week, e, [])
+    assert ("WeatherProperty:SkyTemperature,\n    ,\n    DifferenceScheduleDryBulbValue,\n"
+            "    Sky Below Dry Bulb,\n    No;") in idf
+    assert "Schedule:Constant,\n    Sky Below Dry Bulb,\n    Any Number,\n    0;" in idf
+    assert "WeatherProperty:SkyTemperature" not in build_idf(cfg, week, Effects(), [])

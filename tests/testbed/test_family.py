@@ -308,6 +308,14 @@ def test_cli_family_rejects_bad_options_before_writing(tmp_path):
     assert not (tmp_path / "f").exists()
     res = runner.invoke(app, ["testbed", "family", "--out", str(tmp_path / "f"), "--n", "0"])
     assert res.exit_code == 2
+    # a zone's effect cannot apply to members whose zones differ
+    res = runner.invoke(app, ["testbed", "family", "--out", str(tmp_path / "f"), "--n", "2",
+                              "--set", "gains.N=2"])
+    assert res.exit_code == 2 and "apply to every member" in res.output
+    res = runner.invoke(app, ["testbed", "family", "--out", str(tmp_path / "f"), "--n", "2",
+                              "--set", "sky=cloudy"])
+    assert res.exit_code == 2 and "choose 'weather'" in res.output
+    assert not (tmp_path / "f").exists()
 
 
 # --------------------------------------------------------------------------- real EnergyPlus

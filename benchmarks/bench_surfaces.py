@@ -16,7 +16,11 @@ and per month, over the nights (21-06 h local, no sun):
 * the share of that loss that reaches the inside face by convection from the room air
   (the rest arrives as long-wave from the room's other faces);
 * the inside convection coefficient and the total outside coefficient (convection +
-  long-wave to air, ground and sky) EnergyPlus used.
+  long-wave to air, ground and sky) EnergyPlus used;
+
+and, for every face of the rooms (interior walls, floors, ceilings, windows and furniture
+too), the inside convection coefficient over all the run's rows (mean, 10th and 90th
+percentiles) and its mean by class of face.
 
     python benchmarks/bench_surfaces.py --campaign runs/family-m/f0-04-chicago --rooms N_1
         [--out runs/surfaces-f0-04.json] [--keep DIR]
@@ -116,6 +120,23 @@ def summarise(wide: pd.DataFrame, faces: pd.DataFrame, rated: dict[str, float]) 
     return out
 
 
+def inside_convection(wide: pd.DataFrame, faces: pd.DataFrame) -> list[dict]:
+    """Every face's inside convection coefficient [W/(m2 K)] over all the run's rows (mean,
+    10th and 90th percentiles): what the model's convective films stand for."""
+    out = []
+    for face in faces.itertuples():
+        h = wide.get(f"{face.SurfaceName.upper()}|"
+                     "Surface Inside Face Convection Heat Transfer Coefficient")
+        if h is None:
+            continue
+        v = h.to_numpy(float)
+        out.append({"face": face.SurfaceName, "class": face.ClassName, "zone": face.ZoneName,
+                    "area_m2": float(face.Area), "h_mean": float(np.nanmean(v)),
+                    "h_p10": float(np.nanpercentile(v, 10)),
+                    "h_p90": float(np.nanpercentile(v, 90))})
+    return out
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--campaign", type=Path, required=True,
@@ -161,9 +182,11 @@ def main(argv=None) -> None:
             inside = HANDBOOK_INSIDE.get(f.ClassName, HANDBOOK_INSIDE["Wall"])
             u = 1.0 / (1.0 / u + 1.0 / inside + 1.0 / HANDBOOK_OUTSIDE)
         rated[f.SurfaceName.upper()] = u
-    keys = ["ENVIRONMENT", *faces.SurfaceName.tolist(), *faces.ZoneName.unique().tolist()]
+    inner = surf[surf.ZoneName.str.upper().isin(rooms)]  # every face, furniture included
+    keys = ["ENVIRONMENT", *inner.SurfaceName.tolist(), *faces.ZoneName.unique().tolist()]
     wide = read_series(work / "eplusout.sql", keys)
     rows = summarise(wide, faces, rated)
+    convection = inside_convection(wide, inner)
     print(f"machine: {platform.machine()}; EnergyPlus {t_ep:.0f} s; {len(faces)} faces")
     print(f"{'face':30s} {'month':>5s} {'dT':>5s} {'loss':>6s} {'U_eff':>6s} {'U_rat':>6s} "
           f"{'conv':>5s} {'h_in':>5s} {'h_out':>6s}")
@@ -173,11 +196,22 @@ def main(argv=None) -> None:
               f"{r['loss_W_m2']:6.1f} {r['U_effective']:6.2f} {u_r:6.2f} "
               f"{r['convective_share']:5.2f} {r['h_inside_convection']:5.2f} "
               f"{r['h_outside_total']:6.1f}")
+    print(f"\ninside convection coefficient [W/(m2 K)] of every face, all rows\n"
+          f"{'face':30s} {'class':14s} {'area':>7s} {'mean':>5s} {'p10':>5s} {'p90':>5s}")
+    for r in convection:
+        print(f"{r['face']:30s} {r['class']:14s} {r['area_m2']:7.1f} {r['h_mean']:5.2f} "
+              f"{r['h_p10']:5.2f} {r['h_p90']:5.2f}")
+    by_class: dict[str, list[float]] = {}
+    for r in convection:
+        by_class.setdefault(r["class"], []).append(r["h_mean"])
+    print("by class (mean of the faces' means): " + ", ".join(
+        f"{c} {np.mean(v):.2f}" for c, v in sorted(by_class.items())))
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"campaign": str(camp.name), "rooms": sorted(rooms),
                                         "machine": platform.machine(),
-                                        "seconds": time.perf_counter() - t0, "rows": rows},
+                                        "seconds": time.perf_counter() - t0, "rows": rows,
+                                        "inside_convection": convection},
                                        indent=1))
     if args.keep is None:
         shutil.rmtree(work, ignore_errors=True)

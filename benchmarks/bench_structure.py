@@ -68,8 +68,8 @@ def parse_variant(text: str) -> tuple[str, dict[str, float] | str, str, str]:
     structure, films = parts[:2]
     gains = parts[2] if len(parts) >= 3 else "air"
     layers = parts[3] if len(parts) == 4 else "lumped"
-    if layers not in ("lumped", "fine"):
-        raise SystemExit(f"variant {text!r}: layers must be 'lumped' or 'fine'")
+    if layers not in ("lumped", "fine", "fine_roofs"):
+        raise SystemExit(f"variant {text!r}: layers must be 'lumped', 'fine' or 'fine_roofs'")
     if structure not in ("none", "star", "envelope"):
         raise SystemExit(f"variant {text!r}: structure must be 'none', 'star' or 'envelope'")
     if gains not in ("air", "idf"):

@@ -300,8 +300,9 @@ Adiabatic = Annotated[str, typer.Option(
          "docs/model.md \"Adiabatic surfaces\") or 'zero_flux' (no heat through it)")]
 Layers = Annotated[str, typer.Option(
     help="how constructions become nodes: 'lumped' (2 or 3 per element, BRCM-like; the "
-         "default) or 'fine' (sections of at most an hour's diffusion time, so heavy walls "
-         "and slabs get 4-8 nodes; docs/model.md \"States\")")]
+         "default), 'fine' (sections of at most an hour's diffusion time, so heavy walls "
+         "and slabs get 4-8 nodes) or 'fine_roofs' (so for roofs open to the outdoors only; "
+         "docs/model.md \"States\")")]
 InternalMass = Annotated[str, typer.Option(
     help="the IDF's InternalMass objects: 'both_faces' (both faces of the given area meet "
          "the zone; the default) or 'one_face' (one face meets the zone and the back face "

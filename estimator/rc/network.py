@@ -269,10 +269,12 @@ class ModelOptions:
         (EnergyPlus's outer-face flux on a middle floor's ceiling slab is 10 times its
         inner face's). A is then not the symmetric form diag(1/C) K; the integrators take
         the general path, as with return air (docs/model.md "Adiabatic surfaces").
-    layers : {"lumped", "fine"}
+    layers : {"lumped", "fine", "fine_roofs"}
         How a construction becomes nodes: 2 or 3 per element, BRCM-like (``"lumped"``, the
         default), or sections of at most :data:`~zonecast.estimator.rc.elements.FINE_SECTION_TIME`
-        of diffusion time each (``"fine"``; measured and not adopted, docs/model.md "States").
+        of diffusion time each (``"fine"``), or so for the roofs open to the outdoors alone
+        and lumped elsewhere (``"fine_roofs"``); both measured and not adopted
+        (docs/model.md "States").
     internal_mass : {"both_faces", "one_face"}
         An InternalMass object: both faces of its area meet the zone (``"both_faces"``, the
         default), or one face does and the back face is held as an ``Adiabatic`` surface's
@@ -328,8 +330,8 @@ class ModelOptions:
     def __post_init__(self):
         if self.internal_mass not in ("both_faces", "one_face"):
             raise ModelDefinitionError("internal_mass must be 'both_faces' or 'one_face'")
-        if self.layers not in ("lumped", "fine"):
-            raise ModelDefinitionError("layers must be 'lumped' or 'fine'")
+        if self.layers not in ("lumped", "fine", "fine_roofs"):
+            raise ModelDefinitionError("layers must be 'lumped', 'fine' or 'fine_roofs'")
         if self.adiabatic not in ("zero_flux", "mirror"):
             raise ModelDefinitionError("adiabatic must be 'zero_flux' or 'mirror'")
         if self.solar_enclosure not in ("room", "air_boundaries"):
@@ -915,11 +917,12 @@ def build_structure(
 
     layouts: dict[str, NodeLayout] = {}
 
-    def layout_of(cons: Construction) -> NodeLayout:
-        if cons.name not in layouts:
-            layouts[cons.name] = discretise_layers(
-                cons.layers, FINE_SECTION_TIME if opts.layers == "fine" else None)
-        return layouts[cons.name]
+    def layout_of(cons: Construction, roof: bool = False) -> NodeLayout:
+        fine = opts.layers == "fine" or (opts.layers == "fine_roofs" and roof)
+        key = f"{cons.name}|fine" if fine else cons.name
+        if key not in layouts:
+            layouts[key] = discretise_layers(cons.layers, FINE_SECTION_TIME if fine else None)
+        return layouts[key]
 
     surfaces = building.surfaces
     skey = {k.lower(): k for k in surfaces}
@@ -950,7 +953,7 @@ def build_structure(
         if s.area <= 0:
             continue
         cons = building.constructions[s.construction]
-        layout = layout_of(cons)
+        layout = layout_of(cons, roof=s.surface_type == "Roof" and s.boundary == "Outdoors")
         inside_g = _INSIDE_GAMMA.get(s.surface_type, IW)
         kind = s.surface_type.lower()
         if s.parent is not None:  # doors

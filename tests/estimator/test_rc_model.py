@@ -35,9 +35,9 @@ NO_LEAK = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
                        return_air="none")
 
 
-def _wall_building(layers, area=(4.0, 3.0), extra=None, floor="Adiabatic"):
+def _wall_building(layers, area=(4.0, 3.0), extra=None, floor="Adiabatic", roof=False):
     """One room whose south wall is exterior; all other surfaces adiabatic (the floor's
-    boundary ``floor``)."""
+    boundary ``floor``; with ``roof`` the ceiling is a roof open to the outdoors)."""
     w, h = area
     depth = 5.0
     mats = {}
@@ -57,7 +57,8 @@ def _wall_building(layers, area=(4.0, 3.0), extra=None, floor="Adiabatic"):
         "North": ([(w, depth, h), (w, depth, 0), (0, depth, 0), (0, depth, h)], "Wall", "Adiabatic"),
         "West": ([(0, depth, h), (0, depth, 0), (0, 0, 0), (0, 0, h)], "Wall", "Adiabatic"),
         "Floor": ([(0, 0, 0), (0, depth, 0), (w, depth, 0), (w, 0, 0)], "Floor", floor),
-        "Ceil": ([(0, depth, h), (0, 0, h), (w, 0, h), (w, depth, h)], "Ceiling", "Adiabatic"),
+        "Ceil": ([(0, depth, h), (0, 0, h), (w, 0, h), (w, depth, h)],
+                 *(("Roof", "Outdoors") if roof else ("Ceiling", "Adiabatic"))),
     }
     surfs = {
         n: {"surface_type": t, "construction_name": "C", "zone_name": "Room",
@@ -157,8 +158,30 @@ def test_layers_fine_adds_nodes_and_keeps_the_physics():
     a = fine.A(ParameterSet(["Z"], gam).physical).toarray()
     assert (a - np.diag(np.diag(a))).min() >= 0.0
     assert np.max(np.linalg.eigvals(a).real) < 0.0
-    with pytest.raises(ModelDefinitionError, match="layers must be 'lumped' or 'fine'"):
+    with pytest.raises(ModelDefinitionError, match="layers must be 'lumped', 'fine' or"):
         ModelOptions(layers="thin")
+
+
+def test_layers_fine_roofs_refines_the_roofs_alone():
+    """``ModelOptions(layers="fine_roofs")``: a roof open to the outdoors gets the fine
+    sections, the wall of the same construction keeps its lumped nodes, and the steady
+    state is the lumped one's."""
+    b = _wall_building([(0.1, 0.89, 1920, 790), (0.2, 1.1, 1800, 840),
+                        (0.013, 0.16, 800, 1090)], roof=True)
+    opts = {"ground": "adiabatic", "infiltration": "none", "shading": "none",
+            "return_air": "none"}
+    nodes = {}
+    for layers in ("lumped", "fine", "fine_roofs"):
+        st = build_structure(b, {"Z": ["Room"]}, {}, ModelOptions(layers=layers, **opts))
+        nodes[layers] = {kind: sum(lab.kind == kind for lab in st.labels)
+                         for kind in ("wall", "roof")}
+        gam = {"gamma_EW": 20.0, "c_IG[Z]": 0.0}
+        x = BilinearModel(st, ParameterSet(["Z"], gam)).steady_state(
+            np.zeros(0), np.array([0.0, 0, 0, 0, 0, 0, 0]), np.array([50.0]))[0]
+        nodes[layers]["x"] = x
+    assert nodes["fine_roofs"]["roof"] == nodes["fine"]["roof"] > nodes["lumped"]["roof"]
+    assert nodes["fine_roofs"]["wall"] == nodes["lumped"]["wall"] < nodes["fine"]["wall"]
+    assert nodes["fine_roofs"]["x"] == pytest.approx(nodes["lumped"]["x"], rel=1e-9)
 
 
 def _wall_transfer_exact(layers, w):

@@ -6,7 +6,7 @@ diagnosis finds it. Each switch and what it changes is listed in docs/testbed.md
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -123,7 +123,7 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
         elif key == "reheat":
             data["reheat"] = value.lower() in ("1", "true", "on", "yes")
         elif key == "sky":
-            if value not in ("weather", "dry_bulb"):
+            if value not in get_args(Effects.model_fields["sky"].annotation):
                 raise ValueError(f"--set sky={value}: choose 'weather' (EnergyPlus's sky from "
                                  "the weather file) or 'dry_bulb' (the sky at the outdoor air)")
             data["sky"] = value

@@ -135,6 +135,11 @@ def test_truth_holds_the_peoples_sensible_heat_beside_their_total(base):
     assert 0.5 < sensible[busy].sum() / total[busy].sum() < 0.8
     rooms = [r for r, room in CFG.rooms.items() if room.zone == "NW"]
     np.testing.assert_allclose(sum(b[f"people_sensible:{r}"] for r in rooms), sensible)
+    # the campaign report sums the air's gains: the sensible part where the truth has it
+    from zonecast.testbed.report import _gain_parts
+    assert _gain_parts(b)[0] == "people_sensible"
+    assert _gain_parts(b.drop(columns=[c for c in b.columns
+                                       if c.startswith("people_sensible:")]))[0] == "people"
 
 
 def test_sensor_switches(base):

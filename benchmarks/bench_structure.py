@@ -50,7 +50,7 @@ from zonecast.estimator.identify import kalman_state
 from zonecast.estimator.internal_gains import truth_column
 from zonecast.estimator.pipeline import Pipeline
 from zonecast.estimator.priors import building_priors
-from zonecast.estimator.rc.network import ModelOptions
+from zonecast.estimator.rc.network import LAYERS, ModelOptions
 from zonecast.estimator.rc.parameters import ParameterSet
 
 #: the truth's parts that the model's f_IG stands for
@@ -68,8 +68,8 @@ def parse_variant(text: str) -> tuple[str, dict[str, float] | str, str, str]:
     structure, films = parts[:2]
     gains = parts[2] if len(parts) >= 3 else "air"
     layers = parts[3] if len(parts) == 4 else "lumped"
-    if layers not in ("lumped", "fine", "fine_roofs"):
-        raise SystemExit(f"variant {text!r}: layers must be 'lumped', 'fine' or 'fine_roofs'")
+    if layers not in LAYERS:
+        raise SystemExit(f"variant {text!r}: layers must be one of {', '.join(LAYERS)}")
     if structure not in ("none", "star", "envelope"):
         raise SystemExit(f"variant {text!r}: structure must be 'none', 'star' or 'envelope'")
     if gains not in ("air", "idf"):

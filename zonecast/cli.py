@@ -301,8 +301,9 @@ Adiabatic = Annotated[str, typer.Option(
 Layers = Annotated[str, typer.Option(
     help="how constructions become nodes: 'lumped' (2 or 3 per element, BRCM-like; the "
          "default), 'fine' (sections of at most an hour's diffusion time, so heavy walls "
-         "and slabs get 4-8 nodes) or 'fine_roofs' (so for roofs open to the outdoors only; "
-         "docs/model.md \"States\")")]
+         "and slabs get 4-8 nodes), 'fine_roofs' (so for roofs open to the outdoors only) or "
+         "'roofs_admittance' (so for the roofs whose lumped layout is more than 10 % off their "
+         "daily inside admittance); docs/model.md \"States\"")]
 InternalMass = Annotated[str, typer.Option(
     help="the IDF's InternalMass objects: 'both_faces' (both faces of the given area meet "
          "the zone; the default) or 'one_face' (one face meets the zone and the back face "

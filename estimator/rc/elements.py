@@ -22,8 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 from zonecast.estimator.idf import Layer
 
-__all__ = ["FINE_SECTION_TIME", "MASSLESS_FACE_CAPACITY", "MIN_RESISTANCE", "NodeLayout",
-           "discretise_layers"]
+__all__ = ["ADMITTANCE_TOLERANCE", "FINE_SECTION_TIME", "MASSLESS_FACE_CAPACITY",
+           "MIN_RESISTANCE", "NodeLayout", "admittance_error", "discretise_layers",
+           "inside_admittance", "layout_admittance"]
 
 #: Areal capacity given to each face node of a construction without mass [J/(m2 K)]
 #: (about 2 mm of gypsum): keeps the state equation regular; documented in docs/model.md.
@@ -37,6 +38,14 @@ MIN_THREE_NODE_RESISTANCE = 0.04
 #: Longest diffusion time R_k C_k of one section between neighbouring nodes [s] when a
 #: construction is resolved finely (``discretise_layers(..., section_time=...)``).
 FINE_SECTION_TIME = 3600.0
+#: Period of the periodic admittance that judges a lumped layout [s]: the day.
+ADMITTANCE_PERIOD = 86400.0
+#: Exterior film behind a face open to the outdoors when its admittance is judged
+#: [W/(m2 K)] (the handbook's combined exterior film, EN ISO 6946's 1/0.04).
+ADMITTANCE_OUTER_FILM = 25.0
+#: Largest relative error of a lumped layout's daily inside admittance |Y| that
+#: ``ModelOptions(layers="roofs_admittance")`` accepts before resolving a roof finely [-].
+ADMITTANCE_TOLERANCE = 0.10
 
 
 @dataclass(frozen=True)
@@ -165,3 +174,55 @@ def discretise_layers(layers: Sequence[Layer], section_time: float | None = None
     # capacity, as a construction without mass does: a state needs a capacity
     node_cap[node_cap <= 0] = MASSLESS_FACE_CAPACITY
     return NodeLayout(pos, node_cap, np.diff(pos))
+
+
+# --------------------------------------------------------------------------- admittance
+def _layer_matrix(resistance: float, capacity: float, omega: float) -> np.ndarray:
+    """Transfer matrix of one homogeneous layer (EN ISO 13786 eq. 4, in R and C per area):
+    (theta, q) on its inner side from those on its outer side, q flowing outwards."""
+    r = max(resistance, 0.0)
+    if capacity <= 0 or r <= 0:
+        return np.array([[1.0, r], [0.0, 1.0]], dtype=complex)
+    xi = np.sqrt(1j * omega * r * capacity)
+    return np.array([[np.cosh(xi), r * np.sinh(xi) / xi],
+                     [xi * np.sinh(xi) / r, np.cosh(xi)]])
+
+
+def _admittance(m: np.ndarray, outer_film: float | None) -> complex:
+    if outer_film is None:  # no flux through the outer face
+        return complex(m[1, 0] / m[0, 0])
+    return complex((m[1, 0] + m[1, 1] * outer_film) / (m[0, 0] + m[0, 1] * outer_film))
+
+
+def inside_admittance(layers: Sequence[Layer], outer_film: float | None = ADMITTANCE_OUTER_FILM,
+                      period: float = ADMITTANCE_PERIOD) -> complex:
+    """Periodic admittance of a construction's inside face, exact (EN ISO 13786).
+
+    The heat flux into the inside face per unit amplitude of its temperature [W/(m2 K)]
+    at ``period`` [s], with the outer face held through ``outer_film`` [W/(m2 K)] to a
+    steady temperature, or adiabatic (``None``); no inside film.
+    """
+    omega = 2.0 * np.pi / period
+    m = np.eye(2, dtype=complex)
+    for layer in reversed(list(layers)):  # inside layer first
+        m = m @ _layer_matrix(layer.resistance, layer.heat_capacity, omega)
+    return _admittance(m, outer_film)
+
+
+def layout_admittance(layout: NodeLayout, outer_film: float | None = ADMITTANCE_OUTER_FILM,
+                      period: float = ADMITTANCE_PERIOD) -> complex:
+    """The same admittance [W/(m2 K)] of a node layout (the RC ladder the model builds)."""
+    omega = 2.0 * np.pi / period
+    m = np.eye(2, dtype=complex)
+    for k in range(layout.n - 1, -1, -1):  # inside node first
+        m = m @ np.array([[1.0, 0.0], [1j * omega * layout.capacities[k], 1.0]])
+        if k > 0:
+            m = m @ np.array([[1.0, layout.resistances[k - 1]], [0.0, 1.0]], dtype=complex)
+    return _admittance(m, outer_film)
+
+
+def admittance_error(layers: Sequence[Layer], layout: NodeLayout,
+                     outer_film: float | None = ADMITTANCE_OUTER_FILM) -> float:
+    """Relative error of ``layout``'s daily inside |Y| against the exact construction [-]."""
+    exact = abs(inside_admittance(layers, outer_film))
+    return abs(layout_admittance(layout, outer_film)) / exact - 1.0

@@ -34,7 +34,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 from zonecast.estimator.idf import DEFAULT_SOLAR_ABSORPTANCE, Building, Construction, Surface
-from zonecast.estimator.rc.elements import FINE_SECTION_TIME, NodeLayout, discretise_layers
+from zonecast.estimator.rc.elements import (
+    ADMITTANCE_TOLERANCE,
+    FINE_SECTION_TIME,
+    NodeLayout,
+    admittance_error,
+    discretise_layers,
+)
 from zonecast.estimator.shading import FacadeShading, WindowShading
 
 __all__ = [
@@ -89,6 +95,8 @@ WINDOW_U_DEFAULT = 2.8
 #: [W/(m2 K)] a rated window U-factor at or above this is single glazing (clear single
 #: panes rate 5-6, double 1.5-3.3), for the panes of ``ModelOptions.window_angle``
 SINGLE_PANE_U = 4.0
+#: ``ModelOptions.layers``: how constructions become nodes
+LAYERS = ("lumped", "fine", "fine_roofs", "roofs_admittance")
 #: Specific heat capacity of air c_p [J/(kg K)].
 CP_AIR = 1005.0
 #: Air density for room air capacity [kg/m3].
@@ -269,12 +277,17 @@ class ModelOptions:
         (EnergyPlus's outer-face flux on a middle floor's ceiling slab is 10 times its
         inner face's). A is then not the symmetric form diag(1/C) K; the integrators take
         the general path, as with return air (docs/model.md "Adiabatic surfaces").
-    layers : {"lumped", "fine", "fine_roofs"}
+    layers : {"lumped", "fine", "fine_roofs", "roofs_admittance"}
         How a construction becomes nodes: 2 or 3 per element, BRCM-like (``"lumped"``, the
         default), or sections of at most :data:`~zonecast.estimator.rc.elements.FINE_SECTION_TIME`
         of diffusion time each (``"fine"``), or so for the roofs open to the outdoors alone
-        and lumped elsewhere (``"fine_roofs"``); both measured and not adopted
-        (docs/model.md "States").
+        and lumped elsewhere (``"fine_roofs"``); both measured and not adopted. Or so for
+        the roofs open to the outdoors whose lumped layout gets the daily admittance of
+        their inside face wrong by more than
+        :data:`~zonecast.estimator.rc.elements.ADMITTANCE_TOLERANCE` (EN ISO 13786;
+        :func:`~zonecast.estimator.rc.elements.admittance_error`), e.g. a concrete deck
+        behind a suspended ceiling, which the lumped layout puts on the tile's face
+        (``"roofs_admittance"``; docs/model.md "States").
     internal_mass : {"both_faces", "one_face"}
         An InternalMass object: both faces of its area meet the zone (``"both_faces"``, the
         default), or one face does and the back face is held as an ``Adiabatic`` surface's
@@ -330,8 +343,8 @@ class ModelOptions:
     def __post_init__(self):
         if self.internal_mass not in ("both_faces", "one_face"):
             raise ModelDefinitionError("internal_mass must be 'both_faces' or 'one_face'")
-        if self.layers not in ("lumped", "fine", "fine_roofs"):
-            raise ModelDefinitionError("layers must be 'lumped', 'fine' or 'fine_roofs'")
+        if self.layers not in LAYERS:
+            raise ModelDefinitionError(f"layers must be one of {', '.join(map(repr, LAYERS))}")
         if self.adiabatic not in ("zero_flux", "mirror"):
             raise ModelDefinitionError("adiabatic must be 'zero_flux' or 'mirror'")
         if self.solar_enclosure not in ("room", "air_boundaries"):
@@ -919,6 +932,9 @@ def build_structure(
 
     def layout_of(cons: Construction, roof: bool = False) -> NodeLayout:
         fine = opts.layers == "fine" or (opts.layers == "fine_roofs" and roof)
+        if opts.layers == "roofs_admittance" and roof:
+            lumped = layout_of(cons)
+            fine = abs(admittance_error(cons.layers, lumped)) > ADMITTANCE_TOLERANCE
         key = f"{cons.name}|fine" if fine else cons.name
         if key not in layouts:
             layouts[key] = discretise_layers(cons.layers, FINE_SECTION_TIME if fine else None)

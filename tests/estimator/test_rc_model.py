@@ -14,7 +14,14 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 from zonecast.estimator.idf import Layer, building_from_epjson
 from zonecast.estimator.model import BilinearModel, build_model, write_model_summary
-from zonecast.estimator.rc.elements import FINE_SECTION_TIME, discretise_layers
+from zonecast.estimator.rc.elements import (
+    ADMITTANCE_TOLERANCE,
+    FINE_SECTION_TIME,
+    admittance_error,
+    discretise_layers,
+    inside_admittance,
+    layout_admittance,
+)
 from zonecast.estimator.rc.network import (
     DISTURBANCES,
     ModelDefinitionError,
@@ -158,8 +165,27 @@ def test_layers_fine_adds_nodes_and_keeps_the_physics():
     a = fine.A(ParameterSet(["Z"], gam).physical).toarray()
     assert (a - np.diag(np.diag(a))).min() >= 0.0
     assert np.max(np.linalg.eigvals(a).real) < 0.0
-    with pytest.raises(ModelDefinitionError, match="layers must be 'lumped', 'fine' or"):
+    with pytest.raises(ModelDefinitionError, match="layers must be one of 'lumped', 'fine'"):
         ModelOptions(layers="thin")
+
+
+#: a one-room building's scheduled inputs and leaks off: its RC network alone
+_ONE_ROOM = {"ground": "adiabatic", "infiltration": "none", "shading": "none",
+             "return_air": "none"}
+
+
+def _nodes_by_layers(b, layouts) -> dict[str, dict]:
+    """Per ``ModelOptions.layers`` value: the wall and roof states of a one-room building
+    and its air's steady state under 50 W of gains."""
+    nodes = {}
+    for layers in layouts:
+        st = build_structure(b, {"Z": ["Room"]}, {}, ModelOptions(layers=layers, **_ONE_ROOM))
+        nodes[layers] = {kind: sum(lab.kind == kind for lab in st.labels)
+                         for kind in ("wall", "roof")}
+        gam = {"gamma_EW": 20.0, "c_IG[Z]": 0.0}
+        nodes[layers]["x"] = BilinearModel(st, ParameterSet(["Z"], gam)).steady_state(
+            np.zeros(0), np.array([0.0, 0, 0, 0, 0, 0, 0]), np.array([50.0]))[0]
+    return nodes
 
 
 def test_layers_fine_roofs_refines_the_roofs_alone():
@@ -168,17 +194,7 @@ def test_layers_fine_roofs_refines_the_roofs_alone():
     state is the lumped one's."""
     b = _wall_building([(0.1, 0.89, 1920, 790), (0.2, 1.1, 1800, 840),
                         (0.013, 0.16, 800, 1090)], roof=True)
-    opts = {"ground": "adiabatic", "infiltration": "none", "shading": "none",
-            "return_air": "none"}
-    nodes = {}
-    for layers in ("lumped", "fine", "fine_roofs"):
-        st = build_structure(b, {"Z": ["Room"]}, {}, ModelOptions(layers=layers, **opts))
-        nodes[layers] = {kind: sum(lab.kind == kind for lab in st.labels)
-                         for kind in ("wall", "roof")}
-        gam = {"gamma_EW": 20.0, "c_IG[Z]": 0.0}
-        x = BilinearModel(st, ParameterSet(["Z"], gam)).steady_state(
-            np.zeros(0), np.array([0.0, 0, 0, 0, 0, 0, 0]), np.array([50.0]))[0]
-        nodes[layers]["x"] = x
+    nodes = _nodes_by_layers(b, ("lumped", "fine", "fine_roofs"))
     assert nodes["fine_roofs"]["roof"] == nodes["fine"]["roof"] > nodes["lumped"]["roof"]
     assert nodes["fine_roofs"]["wall"] == nodes["lumped"]["wall"] < nodes["fine"]["wall"]
     assert nodes["fine_roofs"]["x"] == pytest.approx(nodes["lumped"]["x"], rel=1e-9)
@@ -243,6 +259,60 @@ def test_discretise_layers_fine_matches_the_exact_wall():
     # light constructions keep their 2 or 3 nodes
     light = [Layer("gyp", "mass", 0.013, 0.16, 800, 1090, 0.013 / 0.16)]
     assert discretise_layers(light, FINE_SECTION_TIME).n == discretise_layers(light).n
+
+
+#: the family's roof over an occupied storey (membrane, insulation, concrete deck, ceiling
+#: air space, acoustic tile) and the deck over a return plenum (no suspended ceiling)
+_ROOF = [(0.01, 0.16, 1120, 1460), (0.12, 0.035, 40, 1200), (0.1, 1.95, 2240, 900),
+         (0.18, None, None, None), (0.02, 0.06, 368, 590)]
+_DECK = _ROOF[:3]
+
+
+def _layers(spec):
+    return [Layer(f"L{i}", "nomass", 0, np.nan, 0, 0, d) if k is None
+            else Layer(f"L{i}", "mass", d, k, rho, c, d / k) for i, (d, k, rho, c) in enumerate(spec)]
+
+
+def test_inside_admittance_is_the_closed_form_and_the_limit_of_fine_ladders():
+    """EN ISO 13786's inside admittance: a single slab with an adiabatic back is
+    xi tanh(xi) / R, xi = sqrt(i w R C); RC ladders of ever shorter sections tend to the
+    exact layered value; a massless construction behind the outdoor film is its U."""
+    w = 2 * np.pi / 86400
+    slab = _layers([(0.2, 1.95, 2240, 900)])
+    r, c = 0.2 / 1.95, 0.2 * 2240 * 900
+    xi = np.sqrt(1j * w * r * c)
+    assert inside_admittance(slab, None) == pytest.approx(xi * np.tanh(xi) / r, rel=1e-12)
+    roof = _layers(_ROOF)
+    exact = inside_admittance(roof)
+    errors = [abs(layout_admittance(discretise_layers(roof, t)) / exact - 1)
+              for t in (3600.0, 600.0, 60.0)]
+    assert errors[0] < 0.05 and errors[2] < 0.1 * errors[0] and errors[2] < errors[1]
+    glass = [Layer("g", "nomass", 0, np.nan, 0, 0, 0.3)]
+    assert inside_admittance(glass, 25.0) == pytest.approx(1 / (0.3 + 1 / 25.0))
+
+
+def test_admittance_error_finds_the_deck_the_lumped_layout_puts_on_the_tile():
+    """The lumped layout of a roof with a suspended ceiling puts most of the deck's capacity
+    on the tile's face: its daily admittance is several times the exact one; the deck over
+    a plenum (its face the inside face) is within a few per cent."""
+    roof, deck = _layers(_ROOF), _layers(_DECK)
+    assert admittance_error(roof, discretise_layers(roof)) > 1.0
+    assert abs(admittance_error(roof, discretise_layers(roof, FINE_SECTION_TIME))) < 0.05
+    assert abs(admittance_error(deck, discretise_layers(deck))) < ADMITTANCE_TOLERANCE / 2
+
+
+@pytest.mark.parametrize(("spec", "refined"), [(_ROOF, True), (_DECK, False)])
+def test_layers_roofs_admittance_refines_the_roofs_the_lumped_layout_gets_wrong(spec, refined):
+    """``ModelOptions(layers="roofs_admittance")`` resolves a roof finely exactly when its
+    lumped layout fails the admittance test; the wall of the same construction stays
+    lumped either way."""
+    b = _wall_building(spec, roof=True)
+    nodes = _nodes_by_layers(b, ("lumped", "fine_roofs", "roofs_admittance"))
+    assert nodes["roofs_admittance"]["wall"] == nodes["lumped"]["wall"]
+    expected = nodes["fine_roofs"] if refined else nodes["lumped"]
+    assert nodes["roofs_admittance"]["roof"] == expected["roof"]
+    assert nodes["fine_roofs"]["roof"] > nodes["lumped"]["roof"]
+    assert nodes["roofs_admittance"]["x"] == pytest.approx(nodes["lumped"]["x"], rel=1e-9)
 
 
 @settings(max_examples=25, deadline=None)

@@ -299,11 +299,12 @@ Adiabatic = Annotated[str, typer.Option(
          "2026-12-05: held at its own inner face's temperature, as EnergyPlus does; "
          "docs/model.md \"Adiabatic surfaces\") or 'zero_flux' (no heat through it)")]
 Layers = Annotated[str, typer.Option(
-    help="how constructions become nodes: 'lumped' (2 or 3 per element, BRCM-like; the "
-         "default), 'fine' (sections of at most an hour's diffusion time, so heavy walls "
-         "and slabs get 4-8 nodes), 'fine_roofs' (so for roofs open to the outdoors only) or "
-         "'roofs_admittance' (so for the roofs whose lumped layout is more than 10 % off their "
-         "daily inside admittance); docs/model.md \"States\"")]
+    help="how constructions become nodes: 'roofs_admittance' (the default since 2026-12-06: "
+         "2 or 3 per element, BRCM-like, but sections of at most an hour's diffusion time for "
+         "the roofs whose lumped layout is more than 10 % off their daily inside admittance), "
+         "'lumped' (2 or 3 nodes everywhere), 'fine' (the sections everywhere, so heavy walls "
+         "and slabs get 4-8 nodes) or 'fine_roofs' (the sections for every roof open to the "
+         "outdoors); docs/model.md \"States\"")]
 InternalMass = Annotated[str, typer.Option(
     help="the IDF's InternalMass objects: 'both_faces' (both faces of the given area meet "
          "the zone; the default) or 'one_face' (one face meets the zone and the back face "

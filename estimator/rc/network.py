@@ -278,16 +278,17 @@ class ModelOptions:
         inner face's). A is then not the symmetric form diag(1/C) K; the integrators take
         the general path, as with return air (docs/model.md "Adiabatic surfaces").
     layers : {"lumped", "fine", "fine_roofs", "roofs_admittance"}
-        How a construction becomes nodes: 2 or 3 per element, BRCM-like (``"lumped"``, the
-        default), or sections of at most :data:`~zonecast.estimator.rc.elements.FINE_SECTION_TIME`
-        of diffusion time each (``"fine"``), or so for the roofs open to the outdoors alone
-        and lumped elsewhere (``"fine_roofs"``); both measured and not adopted. Or so for
-        the roofs open to the outdoors whose lumped layout gets the daily admittance of
-        their inside face wrong by more than
-        :data:`~zonecast.estimator.rc.elements.ADMITTANCE_TOLERANCE` (EN ISO 13786;
+        How a construction becomes nodes: 2 or 3 per element, BRCM-like (``"lumped"``, what
+        model files without the option were built with), or sections of at most
+        :data:`~zonecast.estimator.rc.elements.FINE_SECTION_TIME` of diffusion time each
+        (``"fine"``), or so for the roofs open to the outdoors alone and lumped elsewhere
+        (``"fine_roofs"``); both measured and not adopted. Or, the default since 2026-12-06
+        (chosen on the family's training members), so for the roofs open to the outdoors
+        whose lumped layout gets the daily admittance of their inside face wrong by more
+        than :data:`~zonecast.estimator.rc.elements.ADMITTANCE_TOLERANCE` (EN ISO 13786;
         :func:`~zonecast.estimator.rc.elements.admittance_error`), e.g. a concrete deck
-        behind a suspended ceiling, which the lumped layout puts on the tile's face
-        (``"roofs_admittance"``; docs/model.md "States").
+        behind a suspended ceiling, which the lumped layout puts on the tile's face, and
+        lumped elsewhere (``"roofs_admittance"``; docs/model.md "States").
     internal_mass : {"both_faces", "one_face"}
         An InternalMass object: both faces of its area meet the zone (``"both_faces"``, the
         default), or one face does and the back face is held as an ``Adiabatic`` surface's
@@ -337,7 +338,7 @@ class ModelOptions:
     envelope_radiation: str = "none"
     solar_enclosure: str = "air_boundaries"
     adiabatic: str = "mirror"
-    layers: str = "lumped"
+    layers: str = "roofs_admittance"
     internal_mass: str = "both_faces"
 
     def __post_init__(self):

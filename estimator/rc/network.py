@@ -933,12 +933,17 @@ def build_structure(
 
     def layout_of(cons: Construction, roof: bool = False) -> NodeLayout:
         fine = opts.layers == "fine" or (opts.layers == "fine_roofs" and roof)
+        error = None
         if opts.layers == "roofs_admittance" and roof:
-            lumped = layout_of(cons)
-            fine = abs(admittance_error(cons.layers, lumped)) > ADMITTANCE_TOLERANCE
+            error = admittance_error(cons.layers, layout_of(cons))
+            fine = abs(error) > ADMITTANCE_TOLERANCE
         key = f"{cons.name}|fine" if fine else cons.name
         if key not in layouts:
             layouts[key] = discretise_layers(cons.layers, FINE_SECTION_TIME if fine else None)
+            if error is not None and fine:
+                notes.append(f"roof construction {cons.name}: its 2- or 3-node layout is "
+                             f"{error:+.0%} off the daily inside admittance, so it is resolved "
+                             f"into {layouts[key].n} nodes (ModelOptions.layers)")
         return layouts[key]
 
     surfaces = building.surfaces

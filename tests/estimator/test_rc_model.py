@@ -313,6 +313,8 @@ def test_layers_roofs_admittance_refines_the_roofs_the_lumped_layout_gets_wrong(
     assert nodes["roofs_admittance"]["roof"] == expected["roof"]
     assert nodes["fine_roofs"]["roof"] > nodes["lumped"]["roof"]
     assert nodes["roofs_admittance"]["x"] == pytest.approx(nodes["lumped"]["x"], rel=1e-9)
+    notes = " ".join(build_structure(b, {"Z": ["Room"]}, {}, ModelOptions(**_ONE_ROOM)).notes)
+    assert ("roof construction C: its 2- or 3-node layout is" in notes) == refined
 
 
 @settings(max_examples=25, deadline=None)

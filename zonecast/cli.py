@@ -17,6 +17,7 @@ from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from threadpoolctl import threadpool_limits
 
 from zonecast.estimator.pipeline import weekend_occupancy_warning
+from zonecast.estimator.rc.elements import ADMITTANCE_TOLERANCE
 from zonecast.estimator.rc.network import ModelOptions
 from zonecast.estimator.site_draft import draft_site
 from zonecast.jobs import diagnosis, reproduce
@@ -301,7 +302,8 @@ Adiabatic = Annotated[str, typer.Option(
 Layers = Annotated[str, typer.Option(
     help="how constructions become nodes: 'roofs_admittance' (the default since 2026-12-06: "
          "2 or 3 per element, BRCM-like, but sections of at most an hour's diffusion time for "
-         "the roofs whose lumped layout is more than 10 % off their daily inside admittance), "
+         f"the roofs whose lumped layout is more than {ADMITTANCE_TOLERANCE:.0%} off their "
+         "daily inside admittance), "
          "'lumped' (2 or 3 nodes everywhere), 'fine' (the sections everywhere, so heavy walls "
          "and slabs get 4-8 nodes) or 'fine_roofs' (the sections for every roof open to the "
          "outdoors); docs/model.md \"States\"")]

@@ -291,6 +291,22 @@ def test_inside_admittance_is_the_closed_form_and_the_limit_of_fine_ladders():
     assert inside_admittance(glass, 25.0) == pytest.approx(1 / (0.3 + 1 / 25.0))
 
 
+_LAYER = st.tuples(st.floats(0.005, 0.3), st.floats(0.03, 2.5), st.floats(20.0, 2500.0),
+                   st.floats(800.0, 1700.0))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(_LAYER, min_size=1, max_size=4), st.sampled_from([25.0, None]))
+def test_fine_ladders_match_the_exact_admittance_of_any_construction(spec, outer_film):
+    """Property: whatever the layers, the RC ladder of 5-min sections is within 1 % of the
+    exact daily admittance (EN ISO 13786), behind the outdoor film or adiabatic, and no
+    layout's admittance error is below -100 %."""
+    layers = _layers(spec)
+    fine = discretise_layers(layers, 300.0)
+    assert abs(admittance_error(layers, fine, outer_film)) < 0.01
+    assert admittance_error(layers, discretise_layers(layers), outer_film) > -1.0
+
+
 def test_admittance_error_finds_the_deck_the_lumped_layout_puts_on_the_tile():
     """The lumped layout of a roof with a suspended ceiling puts most of the deck's capacity
     on the tile's face: its daily admittance is several times the exact one; the deck over

@@ -361,7 +361,8 @@ class IdentificationResult:
             flag = "  AT BOUND" if name in pinned else ""
             prior = self.priors.get(name) if self.priors else None
             if prior is not None:
-                flag += f"  prior {prior.mean:.3g} +- {prior.sd:.3g}"
+                flag += (f"  prior {prior.mean:.3g} +- {prior.sd:.3g}"
+                         + (" (log-normal)" if prior.log else ""))
             lines.append(f"{name:<16}{v:>12.4g}{s:>12.3g}  {u:<10}[{lo:.4g}, {hi:.4g}]{flag}")
         lines.append("")
         for label, row in (("training RMS [K]", self.train_rms),
@@ -392,7 +393,7 @@ class IdentificationResult:
                 "seed": self.seed, "at_bounds": self.at_bounds() if self.bounds else [],
                 "jacobian_rank": self.rank, "jacobian_condition": self.condition,
                 "prior": None if self.priors is None else
-                {n: {"mean": p.mean, "sd": p.sd, "source": p.source}
+                {n: {"mean": p.mean, "sd": p.sd, "source": p.source, "log": p.log}
                  for n, p in self.priors.items()},
                 "map_sigma_e": self.sigma_e, "window": self.window, "spans": self.spans,
                 "gain_scale": self.gain_scale, "gain_day_scale": self.gain_day_scale,
@@ -855,9 +856,6 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
             return list(pool.map(lambda sp: kalman_state(m, data, sp[0] - x0_window, sp[0],
                                                          f_ig=g), spans))
 
-    if priors is not None:
-        prior_jac = prior_jacobian(priors, names, sigma_e)
-
     def fit(problem, theta):
         if priors is None:
             fun, jac = problem.residuals, (lambda t, p=problem: p.jacobian(t, lo, hi))
@@ -867,7 +865,8 @@ def identify(model: BilinearModel, data: ModelData, train: Sequence, validation:
                                                                        sigma_e)])
 
             def jac(t, p=problem):
-                return np.vstack([p.jacobian(t, lo, hi), prior_jac])
+                return np.vstack([p.jacobian(t, lo, hi),
+                                  prior_jacobian(priors, names, sigma_e, t)])
         return least_squares(fun, theta, bounds=(lo, hi), x_scale=scale, method="trf",
                              max_nfev=max_nfev, jac=jac, ftol=1e-6, xtol=1e-6, gtol=1e-8)
 

@@ -40,7 +40,12 @@ from zonecast.estimator.identify import IdentificationResult, excitation_saturda
 from zonecast.estimator.idf import Building, read_building
 from zonecast.estimator.inputs_forecast import DayCalendar
 from zonecast.estimator.model import BilinearModel
-from zonecast.estimator.priors import CONVECTIVE_FILMS, Prior, building_priors
+from zonecast.estimator.priors import (
+    CONVECTIVE_FILMS,
+    POSITIVE_PRIORS,
+    Prior,
+    building_priors,
+)
 from zonecast.estimator.rc.network import ModelOptions, RCStructure, build_structure
 from zonecast.estimator.rc.parameters import ParameterSet
 from zonecast.estimator.site import Site, load_site
@@ -334,7 +339,8 @@ class Pipeline:
                  agree_rtol: float = 1e-3, films: str | None = None,
                  x0_profile_days: int | None = None,
                  x0_offset_sd: float | None = None,
-                 day_scale_sd: float | None = None) -> IdentificationResult:
+                 day_scale_sd: float | None = None,
+                 positive_priors: str = "log") -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -350,6 +356,12 @@ class Pipeline:
         handbook's convection + radiation films), ``"convective"``
         (:data:`~.priors.CONVECTIVE_FILMS`, convection alone); default ``"convective"``
         for a structure with interior long-wave exchange, else ``"combined"``.
+
+        ``positive_priors``: ``"log"`` (the default since 2026-12-06, chosen on the
+        family's training members, docs/identification.md "Log-normal priors of the films
+        and the glazing U"): the films' and U_win's priors are log-normal (same median and
+        relative spread), so a film cannot fall to its bound at the cost of two standard
+        deviations; ``"normal"``: Gaussian as before (:func:`~.priors.building_priors`).
 
         ``agree_rtol``: the starts stop once two reach the same cost within it
         (:func:`~.identify.identify`; 0 runs all ``n_starts``).
@@ -414,6 +426,9 @@ class Pipeline:
             films = "convective" if self.options.interior_radiation == "star" else "combined"
         if films not in ("combined", "convective"):
             raise PipelineError(f"films={films!r}: use 'combined' or 'convective'")
+        if positive_priors not in POSITIVE_PRIORS:
+            raise PipelineError(f"positive_priors={positive_priors!r}: use "
+                                f"{' or '.join(repr(v) for v in POSITIVE_PRIORS)}")
         sats = [str(s.date()) for s in excitation_saturdays(data)]
         train = list(train) if train else sats[1:3]
         validation = list(validation) if validation is not None else sats[:1]
@@ -425,7 +440,8 @@ class Pipeline:
         if convective:  # films as convection alone: start where their priors are
             start = start.copy({k: v[0] for k, v in CONVECTIVE_FILMS.items()})
         if priors is True:
-            priors = building_priors(start, self._building_or_none(), convective=convective)
+            priors = building_priors(start, self._building_or_none(), convective=convective,
+                                     positive=positive_priors)
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
                        seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,
                        window=window, agree_rtol=agree_rtol, x0_offset_sd=x0_offset_sd,

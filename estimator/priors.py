@@ -11,6 +11,11 @@ MAP cost (paper section 4-A's simulation-error least squares plus the prior)::
 
     sum_k ||y_sim(k) - y(k)||^2 / sigma_e^2 + sum_p ((theta_p - mu_p) / sigma_p)^2
 
+with, for the positive coefficients held by log-normal priors (the films and U_win with
+``building_priors(positive="log")``, the identification's default since 2026-12-06), the
+term ``(ln(theta_p / mu_p) / (sigma_p / mu_p))^2`` instead: same median, same relative
+spread, but a film near zero as improbable as one many times its nominal value.
+
 solved as least squares with the prior rows ``sigma_e (theta_p - mu_p) / sigma_p`` appended to
 the residuals (:func:`prior_residuals`). ``sigma_e`` [K] is the residual scale the data are
 trusted to; simulation residuals are autocorrelated, so it is a choice, made on the training
@@ -46,11 +51,21 @@ class Prior:
     mean: float
     sd: float
     source: str
+    log: bool = False
 
     def __post_init__(self):
         if not np.isfinite(self.mean) or not self.sd > 0:
             raise ValueError(f"a prior needs a finite mean and a positive sd, got "
                              f"{self.mean} +- {self.sd}")
+        if self.log and not self.mean > 0:
+            raise ValueError(f"a log-normal prior needs a positive median, got {self.mean}")
+
+    @property
+    def log_sd(self) -> float:
+        """Standard deviation [-] of ln(theta) for a log-normal prior: the relative spread
+        sd / mean, so that near its median the prior weighs deviations as the Gaussian of the
+        same mean and sd does."""
+        return self.sd / self.mean
 
 
 #: handbook priors of the shared parameters: (mean, sd, source); the means are the
@@ -79,8 +94,16 @@ CONVECTIVE_FILMS = {
 _C_IG = (5.0, 10.0, "idle equipment and lighting 2-10 W/m2, weak")
 
 
+#: parameters that are positive coefficients (films, glazing U) [W/(m2 K)]: their uncertainty
+#: is relative, so ``building_priors(positive="log")`` puts their priors on ln(theta)
+POSITIVE = ("gamma_EW", "gamma_IW", "gamma_floor", "gamma_ceil", "U_win")
+#: ways to hold the positive coefficients: Gaussian on theta, or on ln(theta)
+POSITIVE_PRIORS = ("normal", "log")
+
+
 def building_priors(params: ParameterSet, building: Building | None = None, *,
-                    window_sd: float = 0.25, convective: bool = False) -> dict[str, Prior]:
+                    window_sd: float = 0.25, convective: bool = False,
+                    positive: str = "normal") -> dict[str, Prior]:
     """Priors of every parameter of ``params``.
 
     Parameters
@@ -96,6 +119,12 @@ def building_priors(params: ParameterSet, building: Building | None = None, *,
         The inside films are convection alone (:data:`CONVECTIVE_FILMS`), as in a model
         whose faces exchange long-wave radiation with each other; otherwise the handbook's
         combined films.
+    positive : {"normal", "log"}
+        ``"log"``: the priors of the positive coefficients (:data:`POSITIVE`) are log-normal,
+        median the nominal value and ln-spread its relative sd (:attr:`Prior.log_sd`), so a
+        film or U-factor near zero is as improbable as one many times its nominal value; a
+        Gaussian of 25 +- 12 W/m2K lets an exterior film fall to its 0.001 bound at the cost
+        of two standard deviations.
 
     Returns
     -------
@@ -120,6 +149,11 @@ def building_priors(params: ParameterSet, building: Building | None = None, *,
             g = sum(w.shgc * w.area for w in with_g) / area
             out["gamma_winSolAbs"] = Prior(g, max(window_sd * g, 0.05),
                                            "area-weighted window SHGC of the IDF")
+    if positive not in POSITIVE_PRIORS:
+        raise ValueError(f"positive={positive!r}: use one of {', '.join(POSITIVE_PRIORS)}")
+    if positive == "log":
+        out.update({n: Prior(p.mean, p.sd, p.source, log=True)
+                    for n, p in out.items() if n in POSITIVE})
     for name in params.param_names:
         if name.startswith("c_IG"):
             out[name] = Prior(*_C_IG)
@@ -134,14 +168,33 @@ def _arrays(priors: Mapping[str, Prior], names: list[str]) -> tuple[np.ndarray, 
     return (np.array([priors[n].mean for n in names]), np.array([priors[n].sd for n in names]))
 
 
+def _log_mask(priors: Mapping[str, Prior], names: list[str]) -> np.ndarray:
+    return np.array([priors[n].log for n in names], dtype=bool)
+
+
 def prior_residuals(theta: np.ndarray, priors: Mapping[str, Prior], names: list[str],
                     sigma_e: float) -> np.ndarray:
-    """Prior rows of the MAP least squares: ``sigma_e (theta - mu) / sd`` [K]."""
+    """Prior rows of the MAP least squares: ``sigma_e (theta - mu) / sd`` [K], and
+    ``sigma_e ln(theta / mu) / (sd / mu)`` for a log-normal prior (theta floored at 1e-12)."""
     mu, sd = _arrays(priors, names)
-    return sigma_e * (np.asarray(theta, float) - mu) / sd
+    theta = np.asarray(theta, float)
+    out = (theta - mu) / sd
+    log = _log_mask(priors, names)
+    if log.any():
+        out[log] = np.log(np.maximum(theta[log], 1e-12) / mu[log]) * mu[log] / sd[log]
+    return sigma_e * out
 
 
-def prior_jacobian(priors: Mapping[str, Prior], names: list[str], sigma_e: float) -> np.ndarray:
-    """Jacobian of :func:`prior_residuals` (diagonal)."""
-    _, sd = _arrays(priors, names)
-    return np.diag(sigma_e / sd)
+def prior_jacobian(priors: Mapping[str, Prior], names: list[str], sigma_e: float,
+                   theta: np.ndarray | None = None) -> np.ndarray:
+    """Jacobian of :func:`prior_residuals` (diagonal); ``theta`` is needed when a prior is
+    log-normal (its row's slope is ``sigma_e mu / (sd theta)``)."""
+    mu, sd = _arrays(priors, names)
+    diag = 1.0 / sd
+    log = _log_mask(priors, names)
+    if log.any():
+        if theta is None:
+            raise ValueError("a log-normal prior's Jacobian depends on theta; pass it")
+        t = np.maximum(np.asarray(theta, float)[log], 1e-12)
+        diag[log] = mu[log] / (sd[log] * t)
+    return np.diag(sigma_e * diag)

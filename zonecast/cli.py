@@ -273,6 +273,11 @@ DayScaleSd = Annotated[float | None, typer.Option(
                    "weekend day also fits its own deviation of every zone's daytime scale, "
                    "prior 0 +- this value (people in on some weekend days, not others; "
                    "docs/identification.md)")]
+PositivePriors = Annotated[str, typer.Option(
+    help="priors of the films and the glazing U: 'log' (the default since 2026-12-06): "
+         "log-normal, same median and relative spread as the Gaussians, so a film near zero "
+         "is as improbable as one many times its nominal value; 'normal': Gaussian "
+         "(docs/identification.md)")]
 Films = Annotated[str | None, typer.Option(
     help="priors and starting values of the inside films: 'combined' (the handbook's "
          "convection + radiation films) or 'convective' (convection alone); default "
@@ -403,6 +408,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  layers: Layers = ModelOptions.layers,
                  internal_mass: InternalMass = ModelOptions.internal_mass,
                  films: Films = None,
+                 positive_priors: PositivePriors = "log",
                  weekend_gains: Annotated[str, typer.Option(
                      help="'auto' (the default since 2026-12-04): 'metered' when the site's "
                           "lights and plug-load meters show occupied weekends (their weekend "
@@ -440,6 +446,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  layers=layers, internal_mass=internal_mass,
                                  x0_profile_days=x0_profile_days,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
+                                 positive_priors=positive_priors,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -548,6 +555,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   layers: Layers = ModelOptions.layers,
                   internal_mass: InternalMass = ModelOptions.internal_mass,
                   films: Films = None,
+                  positive_priors: PositivePriors = "log",
                   weekend_gains: Annotated[str, typer.Option(
                       help="'auto' (the default since 2026-12-04: 'metered' when the "
                            "site's meters show occupied weekends, else 'daytime'), 'daytime' "
@@ -578,7 +586,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 solar_enclosure=solar_enclosure, adiabatic=adiabatic,
                                  layers=layers, internal_mass=internal_mass,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
-                                day_scale_sd=day_scale_sd)
+                                day_scale_sd=day_scale_sd, positive_priors=positive_priors)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

@@ -185,6 +185,8 @@ def test_pipeline_rejects_an_unknown_weekend_gains_mode(vb):
         pipe.identify(pipe.data(pipe.telemetry(vb)), weekend_gains="sometimes")
     with pytest.raises(PipelineError, match="films='radiant': use 'combined' or 'convective'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), films="radiant")
+    with pytest.raises(PipelineError, match="positive_priors='gamma': use 'normal' or 'log'"):
+        pipe.identify(pipe.data(pipe.telemetry(vb)), positive_priors="gamma")
 
 
 def test_weekend_daytime_shape_marks_weekend_days_between_8_and_18_local(vb):

@@ -3,6 +3,8 @@
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.identify import (
     IdentificationError,
@@ -189,6 +191,67 @@ def test_building_priors_take_window_u_and_shgc_from_the_idf(five_zone):
     conv = building_priors(model.params, five_zone, convective=True)
     assert conv["gamma_IW"].mean == pytest.approx(3.1) and conv["gamma_ceil"].mean < 4.1
     assert conv["U_win"] == pri["U_win"] and pri["gamma_IW"].mean == pytest.approx(8.3)
+
+
+def test_log_normal_priors_hold_positive_coefficients_away_from_zero(five_zone):
+    """positive="log": films and U_win get log-normal priors of the same median and relative
+    spread; near the median they weigh a deviation as the Gaussian does, near zero far more,
+    and the absorptances and c_IG keep their Gaussians."""
+    from zonecast.estimator.model import build_model
+    from zonecast.estimator.priors import (
+        POSITIVE,
+        Prior,
+        building_priors,
+        prior_jacobian,
+        prior_residuals,
+    )
+
+    model = build_model(five_zone, {"South": ["SPACE1-1"]}, {"VAV-1": "SPACE1-1"},
+                        options=NO_LEAK)
+    names = model.params.param_names
+    normal = building_priors(model.params, five_zone)
+    log = building_priors(model.params, five_zone, positive="log")
+    assert {n for n, p in log.items() if p.log} == set(POSITIVE)
+    assert all(log[n].mean == normal[n].mean and log[n].sd == normal[n].sd for n in names)
+    mu = np.array([normal[n].mean for n in names])
+    i = names.index("gamma_EW")
+    near = mu.copy()
+    near[i] *= 1.01
+    assert prior_residuals(near, log, names, 0.3)[i] == pytest.approx(
+        prior_residuals(near, normal, names, 0.3)[i], rel=0.01)
+    cut = mu.copy()
+    cut[i] = 0.001  # the exterior film at its lower bound
+    r_log, r_normal = (prior_residuals(cut, p, names, 0.3)[i] for p in (log, normal))
+    assert r_normal == pytest.approx(-0.3 * 25.0 / 12.0, rel=1e-3)
+    assert r_log == pytest.approx(0.3 * np.log(0.001 / 25.0) * 25.0 / 12.0)
+    assert r_log < 3 * r_normal
+    j = names.index("gamma_absorp")
+    assert not log["gamma_absorp"].log
+    assert prior_residuals(cut, log, names, 0.3)[j] == prior_residuals(cut, normal, names, 0.3)[j]
+    with pytest.raises(ValueError, match="depends on theta"):
+        prior_jacobian(log, names, 0.3)
+    with pytest.raises(ValueError, match="use one of normal, log"):
+        building_priors(model.params, five_zone, positive="lognormal")
+    with pytest.raises(ValueError, match="positive median"):
+        Prior(0.0, 1.0, "test", log=True)
+
+
+@given(theta=st.lists(st.floats(0.01, 200.0), min_size=5, max_size=5))
+@settings(max_examples=40, deadline=None)
+def test_log_normal_prior_jacobian_matches_finite_differences(theta):
+    """The MAP fit's Jacobian rows of log-normal priors are the residuals' derivatives."""
+    from zonecast.estimator.priors import Prior, prior_jacobian, prior_residuals
+
+    names = ["a", "b", "c", "d", "e"]
+    priors = {n: Prior(m, 0.5 * m, "test", log=n != "e")
+              for n, m in zip(names, (25.0, 3.1, 2.5, 2.5, 1.6))}
+    t = np.array(theta)
+    jac = prior_jacobian(priors, names, 0.3, t)
+    assert np.allclose(jac, np.diag(np.diag(jac)))
+    h = 1e-6 * t
+    fd = (prior_residuals(t + h, priors, names, 0.3)
+          - prior_residuals(t - h, priors, names, 0.3)) / (2 * h)
+    assert np.allclose(np.diag(jac), fd, rtol=1e-5)
 
 
 def test_identification_on_declared_experiments_with_a_lead_in(truth_and_data):

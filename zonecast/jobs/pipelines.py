@@ -85,7 +85,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
                   x0_offset_sd: float | None = None,
-                  day_scale_sd: float | None = None) -> IdentifyOutcome:
+                  day_scale_sd: float | None = None,
+                  positive_priors: str = "log") -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
@@ -93,8 +94,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``,
     ``internal_mass``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
-    ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``: as
-    :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
+    ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``,
+    ``positive_priors``: as :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
     pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar,
                                                          infiltration=infiltration,
                                                          ground=ground, shading=shading,
@@ -114,7 +115,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,
                         films=films, progress=lambda m: progress(f"identification: {m}"),
                         x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
-                        day_scale_sd=day_scale_sd)
+                        day_scale_sd=day_scale_sd, positive_priors=positive_priors)
     if profile_weeks:
         pipe.weekly_profile(d, progress=lambda m: progress(f"weekly internal-gains profile: {m}"))
     out.parent.mkdir(parents=True, exist_ok=True)

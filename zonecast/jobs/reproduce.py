@@ -462,7 +462,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         window_angle: str = ModelOptions.window_angle, day_scale_sd: float | None = None,
         roof_exterior: str = ModelOptions.roof_exterior, envelope_radiation: str = ModelOptions.envelope_radiation,
         solar_enclosure: str = ModelOptions.solar_enclosure, adiabatic: str = ModelOptions.adiabatic,
-        layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass) -> Results:
+        layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
+        positive_priors: str = "log") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
@@ -474,7 +475,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
     ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``, ``internal_mass``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
-    ``films``: as :meth:`Pipeline.identify`;
+    ``films``, ``positive_priors``: as :meth:`Pipeline.identify`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
     the forecast study's split (never its validation weeks)."""
     out.mkdir(parents=True, exist_ok=True)
@@ -509,13 +510,13 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                        if weekend_gains not in (False, None, "none")
                                        or x0_profile_days else None),
                           x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
-                          day_scale_sd=day_scale_sd)
+                          day_scale_sd=day_scale_sd, positive_priors=positive_priors)
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
     progress("identification with window solar on the room air (paper's placement)")
     ident_air = pipe.with_options(replace(pipe.options, window_solar="air")).identify(
         data, n_starts=1, seed=seed, priors=priors, sigma_e=sigma_e,
-        window=window) if sensitivity else None
+        window=window, positive_priors=positive_priors) if sensitivity else None
     fitted = ident.model
     truth = None
     if (campaign / "truth.csv").is_file():

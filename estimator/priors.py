@@ -3,7 +3,8 @@
 A parameter the excitation data do not determine ends on a bound in a plain least-squares
 fit (the optimiser bends it to absorb structure the model lacks: U_win 0.001 W/m²K for real
 glazing of 2-6 W/m²K). A Gaussian prior on each parameter, centred on a nominal value from
-the building's EnergyPlus description where it holds one (window U-factor and SHGC) and on
+the building's EnergyPlus description where it holds one (window U-factor and SHGC, the
+exterior walls' solar absorptance) and on
 handbook values otherwise, keeps such parameters where physics puts them and leaves the
 well-determined ones to the data.
 
@@ -29,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from zonecast.estimator.idf import Building
+from zonecast.estimator.rc.network import outer_absorptance
 from zonecast.estimator.rc.parameters import ParameterSet
 
 __all__ = ["CONVECTIVE_FILMS", "Prior", "building_priors", "prior_jacobian", "prior_residuals"]
@@ -112,7 +114,10 @@ def building_priors(params: ParameterSet, building: Building | None = None, *,
         The parameters (names) to give priors.
     building : Building, optional
         When its windows carry a U-factor and SHGC (simple glazing systems), the
-        area-weighted means are the nominal U_win and gamma_winSolAbs.
+        area-weighted means are the nominal U_win and gamma_winSolAbs; the area-weighted
+        solar absorptance of its exterior walls' outer layers (EnergyPlus's 0.7 where a
+        material gives none) is gamma_absorp's (since 2026-12-06; the handbook's 0.6
+        without walls), with the handbook's spread.
     window_sd : float
         Relative standard deviation [-] of the window priors taken from the building.
     convective : bool
@@ -143,6 +148,17 @@ def building_priors(params: ParameterSet, building: Building | None = None, *,
             area = sum(w.area for w in with_u)
             u = sum(w.u_value * w.area for w in with_u) / area
             out["U_win"] = Prior(u, window_sd * u, "area-weighted window U-factor of the IDF")
+        walls = [sf for sf in building.surfaces.values()
+                 if sf.boundary == "Outdoors" and sf.surface_type.lower() == "wall"
+                 and sf.construction in building.constructions
+                 and not building.constructions[sf.construction].is_window and sf.area > 0]
+        if walls:  # gamma_absorp scales the walls' sun: their own absorptance is its nominal
+            area = sum(sf.area for sf in walls)
+            a = sum(outer_absorptance(building.constructions[sf.construction]) * sf.area
+                    for sf in walls) / area
+            out["gamma_absorp"] = Prior(a, _HANDBOOK["gamma_absorp"][1],
+                                        "area-weighted outer solar absorptance of the IDF's "
+                                        "exterior walls")
         with_g = [w for w in wins if w.shgc is not None]
         if with_g:
             area = sum(w.area for w in with_g)

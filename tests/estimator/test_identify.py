@@ -191,6 +191,15 @@ def test_building_priors_take_window_u_and_shgc_from_the_idf(five_zone):
     conv = building_priors(model.params, five_zone, convective=True)
     assert conv["gamma_IW"].mean == pytest.approx(3.1) and conv["gamma_ceil"].mean < 4.1
     assert conv["U_win"] == pri["U_win"] and pri["gamma_IW"].mean == pytest.approx(8.3)
+    # gamma_absorp centred on the exterior walls' own outer solar absorptance (by area)
+    walls = [s for s in five_zone.surfaces.values() if s.boundary == "Outdoors"
+             and s.surface_type.lower() == "wall" and s.area > 0]
+    absorp = [five_zone.constructions[s.construction].layers[0].solar_absorptance
+              for s in walls]
+    expected = np.dot(absorp, [s.area for s in walls]) / sum(s.area for s in walls)
+    assert pri["gamma_absorp"].mean == pytest.approx(expected)
+    assert pri["gamma_absorp"].mean != 0.6 and "exterior walls" in pri["gamma_absorp"].source
+    assert building_priors(model.params)["gamma_absorp"].mean == 0.6  # no building: handbook
 
 
 def test_log_normal_priors_hold_positive_coefficients_away_from_zero(five_zone):

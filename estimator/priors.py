@@ -143,26 +143,21 @@ def building_priors(params: ParameterSet, building: Building | None = None, *,
         out.update({name: Prior(*v) for name, v in CONVECTIVE_FILMS.items()})
     if building is not None:
         wins = [w for w in building.windows.values() if w.area > 0]
-        with_u = [w for w in wins if w.u_value is not None]
-        if with_u:
-            area = sum(w.area for w in with_u)
-            u = sum(w.u_value * w.area for w in with_u) / area
+        u = _area_mean([(w.u_value, w.area) for w in wins if w.u_value is not None])
+        if u is not None:
             out["U_win"] = Prior(u, window_sd * u, "area-weighted window U-factor of the IDF")
-        walls = [sf for sf in building.surfaces.values()
-                 if sf.boundary == "Outdoors" and sf.surface_type.lower() == "wall"
-                 and sf.construction in building.constructions
-                 and not building.constructions[sf.construction].is_window and sf.area > 0]
-        if walls:  # gamma_absorp scales the walls' sun: their own absorptance is its nominal
-            area = sum(sf.area for sf in walls)
-            a = sum(outer_absorptance(building.constructions[sf.construction]) * sf.area
-                    for sf in walls) / area
+        # gamma_absorp scales the walls' sun: their own absorptance is its nominal value
+        a = _area_mean([(outer_absorptance(building.constructions[sf.construction]), sf.area)
+                        for sf in building.surfaces.values()
+                        if sf.boundary == "Outdoors" and sf.surface_type.lower() == "wall"
+                        and sf.construction in building.constructions
+                        and not building.constructions[sf.construction].is_window])
+        if a is not None:
             out["gamma_absorp"] = Prior(a, _HANDBOOK["gamma_absorp"][1],
                                         "area-weighted outer solar absorptance of the IDF's "
                                         "exterior walls")
-        with_g = [w for w in wins if w.shgc is not None]
-        if with_g:
-            area = sum(w.area for w in with_g)
-            g = sum(w.shgc * w.area for w in with_g) / area
+        g = _area_mean([(w.shgc, w.area) for w in wins if w.shgc is not None])
+        if g is not None:
             out["gamma_winSolAbs"] = Prior(g, max(window_sd * g, 0.05),
                                            "area-weighted window SHGC of the IDF")
     if positive not in POSITIVE_PRIORS:
@@ -174,6 +169,12 @@ def building_priors(params: ParameterSet, building: Building | None = None, *,
         if name.startswith("c_IG"):
             out[name] = Prior(*_C_IG)
     return {n: out[n] for n in params.param_names}
+
+
+def _area_mean(pairs: list[tuple[float, float]]) -> float | None:
+    """Area-weighted mean of (value, area [m2]) pairs; None when no area."""
+    area = sum(a for _, a in pairs if a > 0)
+    return sum(v * a for v, a in pairs if a > 0) / area if area > 0 else None
 
 
 def _arrays(priors: Mapping[str, Prior], names: list[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -188,6 +189,10 @@ def _log_mask(priors: Mapping[str, Prior], names: list[str]) -> np.ndarray:
     return np.array([priors[n].log for n in names], dtype=bool)
 
 
+def _log_sds(priors: Mapping[str, Prior], names: list[str], mask: np.ndarray) -> np.ndarray:
+    return np.array([priors[n].log_sd for n, m in zip(names, mask) if m])
+
+
 def prior_residuals(theta: np.ndarray, priors: Mapping[str, Prior], names: list[str],
                     sigma_e: float) -> np.ndarray:
     """Prior rows of the MAP least squares: ``sigma_e (theta - mu) / sd`` [K], and
@@ -197,7 +202,7 @@ def prior_residuals(theta: np.ndarray, priors: Mapping[str, Prior], names: list[
     out = (theta - mu) / sd
     log = _log_mask(priors, names)
     if log.any():
-        out[log] = np.log(np.maximum(theta[log], 1e-12) / mu[log]) * mu[log] / sd[log]
+        out[log] = np.log(np.maximum(theta[log], 1e-12) / mu[log]) / _log_sds(priors, names, log)
     return sigma_e * out
 
 
@@ -205,12 +210,12 @@ def prior_jacobian(priors: Mapping[str, Prior], names: list[str], sigma_e: float
                    theta: np.ndarray | None = None) -> np.ndarray:
     """Jacobian of :func:`prior_residuals` (diagonal); ``theta`` is needed when a prior is
     log-normal (its row's slope is ``sigma_e mu / (sd theta)``)."""
-    mu, sd = _arrays(priors, names)
+    _, sd = _arrays(priors, names)
     diag = 1.0 / sd
     log = _log_mask(priors, names)
     if log.any():
         if theta is None:
             raise ValueError("a log-normal prior's Jacobian depends on theta; pass it")
         t = np.maximum(np.asarray(theta, float)[log], 1e-12)
-        diag[log] = mu[log] / (sd[log] * t)
+        diag[log] = 1.0 / (_log_sds(priors, names, log) * t)
     return np.diag(sigma_e * diag)

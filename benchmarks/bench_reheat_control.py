@@ -57,7 +57,10 @@ half-width moved by the served intervals' misses (``streaming.INTERVAL_ADAPT``).
 ``--side settled-calibration``: the library's defaults, the second without calibration
 forecasts from the filter's first ``YOUNG_STEPS`` steps after each start
 (``streaming.CALIBRATE_YOUNG``; docs/forecasts.md "The calibration after a restart"; a
-shadow calibrator as well).
+shadow calibrator as well). ``--side weather-blend``: the library's defaults, the first
+with the weather forecast served as received, the second combined with the diurnal
+fallback by weights learned per lead (``streaming.WEATHER_BLEND``; docs/forecasts.md
+"Forecast and the recent days, combined").
 ``--side defaults``: one run with the library's defaults. ``--dump DIR`` writes
 each run's forecasts, intervals, measurements and target times (``.npz``) for analyses
 after the run (``benchmarks/coverage_analysis.py``). ``--stream FAMILY`` replays the
@@ -150,7 +153,7 @@ def served(campaign: Path, model: Path, control: bool,
               streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
               streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY,
               streaming.AFTER_OFF_INTERVALS, streaming.ACI_FEEDBACK,
-              streaming.INTERVAL_ADAPT, streaming.CALIBRATE_YOUNG)
+              streaming.INTERVAL_ADAPT, streaming.CALIBRATE_YOUNG, streaming.WEATHER_BLEND)
     # read by each OnlineEstimator the pipeline makes
     if side == "reheat":
         streaming.REHEAT_CONTROL = control
@@ -188,6 +191,8 @@ def served(campaign: Path, model: Path, control: bool,
         streaming.INTERVAL_ADAPT = "scale" if control else "level"
     elif side == "settled-calibration":  # the library's defaults but the calibration
         streaming.CALIBRATE_YOUNG = not control  # without the young filter's forecasts
+    elif side == "weather-blend":  # the library's defaults but the weather forecast
+        streaming.WEATHER_BLEND = control  # combined with the fallback by learned weights
     # "defaults": the library's defaults (one run, ``control`` ignored)
     # the second setting's calibrator beside the first's, in the same replay
     shadow = side in SHADOW_SIDES and not control
@@ -218,7 +223,7 @@ def served(campaign: Path, model: Path, control: bool,
          streaming.CLOSED_LOOP_STD, forecast_module.PROFILE_FILL,
          streaming.DEADBAND_CONTROL, streaming.PROFILE_LEARN_EMPTY,
          streaming.AFTER_OFF_INTERVALS, streaming.ACI_FEEDBACK,
-         streaming.INTERVAL_ADAPT, streaming.CALIBRATE_YOUNG) = before
+         streaming.INTERVAL_ADAPT, streaming.CALIBRATE_YOUNG, streaming.WEATHER_BLEND) = before
         if patched is not None:
             for (owner, name), fn in patched.items():
                 setattr(owner, name, fn)
@@ -427,7 +432,7 @@ def main() -> None:
                                        "weather-spread", "gains-level", "spread-sides",
                                        "closed-loop", "monday-fill", "deadband", "learn-empty",
                                        "after-off", "aci-feedback", "interval-scale",
-                                       "settled-calibration", "defaults"),
+                                       "settled-calibration", "weather-blend", "defaults"),
                     default="reheat",
                     help="what is compared off and on: the reheat controller (the cooling "
                          "off), the cooling controller (the reheat on in both), or the young "
@@ -519,6 +524,7 @@ def main() -> None:
             "aci-feedback": ("level moved by the current interval", "by the served interval"),
             "interval-scale": ("level moved", "a factor moved, level fixed"),
             "settled-calibration": ("calibrated from every start", "from a settled filter"),
+            "weather-blend": ("forecast as received", "combined with the recent days"),
             "defaults": ("defaults", "defaults (not run again)")}[args.side]
     print(f"| member | {head[0]} | {head[1]} | / known inputs | coverage (zones) "
           "| working / other days / after a day off | seconds off / on |")

@@ -62,7 +62,7 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-__all__ = ["CALIBRATION_DEFAULTS", "IntervalCalibrator", "WeatherSpread"]
+__all__ = ["CALIBRATION_DEFAULTS", "IntervalCalibrator", "WeatherBlend", "WeatherSpread"]
 
 #: window chosen on office6's training weeks; gamma re-chosen on the validation weeks of the
 #: family's training buildings (docs/forecasts.md "Served forecast"); since 2026-12-05 the
@@ -390,7 +390,68 @@ def _class_rows(rows, n_classes: int, nz: int) -> np.ndarray:
     return np.concatenate([rows] + [rows[:1]] * (n_classes - len(rows)))
 
 
-class WeatherSpread:
+class _LeadScores:
+    """What :class:`WeatherSpread` and :class:`WeatherBlend` share: forecasts kept by the
+    grid step they were issued at until their horizon has passed, scored by lead in bins of
+    ``lead_bin`` steps, with sums that decay by ``lam`` per step (an effective memory of
+    ``window_days`` days of data)."""
+
+    def __init__(self, n_channels: int, horizon: int, steps_per_day: int,
+                 window_days: float, lead_bin: int):
+        if window_days <= 0 or lead_bin < 1:
+            raise ValueError(f"window_days must be > 0 and lead_bin >= 1, got {window_days}, "
+                             f"{lead_bin}")
+        self.nc, self.horizon, self.lead_bin = int(n_channels), int(horizon), int(lead_bin)
+        self.lam = 1.0 - 1.0 / (window_days * steps_per_day)
+        self.n_bins = -(-self.horizon // self.lead_bin)
+        self._lead_bin_of = np.arange(self.horizon) // self.lead_bin  # lead h at h - 1
+        self.pending: deque = deque(maxlen=horizon + 1)
+
+    def _due(self, step_index: int):
+        """(lead bin, lead h, kept entry) of every kept forecast that step ``step_index``
+        scores (1 <= h < horizon)."""
+        for entry in self.pending:
+            h = step_index - entry[0]
+            if 1 <= h < self.horizon:
+                yield self._lead_bin_of[h - 1], h, entry
+
+    def _drop_past(self, step_index: int) -> None:
+        while self.pending and step_index - self.pending[0][0] >= self.horizon:
+            self.pending.popleft()
+
+    #: the subclass's decaying (lead bins, channels) sums, the arrays each kept forecast
+    #: holds after its step, and the checkpoint keys' prefix
+    _SUMS: tuple[str, ...] = ()
+    _KEPT: tuple[str, ...] = ()
+    _PREFIX = ""
+
+    def state_arrays(self, prefix: str | None = None) -> dict[str, np.ndarray]:
+        """The sums and the kept forecasts as named arrays (a checkpoint's)."""
+        p = self._PREFIX if prefix is None else prefix
+        out = {f"{p}{name}": getattr(self, name) for name in self._SUMS}
+        out[f"{p}steps"] = np.array([e[0] for e in self.pending], dtype=np.int64)
+        for i, name in enumerate(self._KEPT, start=1):
+            out[f"{p}{name}"] = np.array([e[i] for e in self.pending]).reshape(
+                -1, self.horizon, self.nc)
+        return out
+
+    def load_state_arrays(self, arrays: Mapping[str, np.ndarray],
+                          prefix: str | None = None) -> bool:
+        """Restore :meth:`state_arrays`; False (and nothing changed) when absent or of
+        another shape."""
+        p = self._PREFIX if prefix is None else prefix
+        first = f"{p}{self._SUMS[0]}"
+        if first not in arrays or np.shape(arrays[first]) != getattr(self, self._SUMS[0]).shape:
+            return False
+        for name in self._SUMS:
+            setattr(self, name, np.array(arrays[f"{p}{name}"], float))
+        self.pending.clear()
+        for k, *kept in zip(arrays[f"{p}steps"], *(arrays[f"{p}{n}"] for n in self._KEPT)):
+            self.pending.append((int(k), *(np.array(v, float) for v in kept)))
+        return True
+
+
+class WeatherSpread(_LeadScores):
     """Errors of the weather inputs the served forecasts used, by lead, learned online.
 
     Each calibration forecast's weather inputs (H, channels) are kept until the horizon
@@ -421,20 +482,18 @@ class WeatherSpread:
         Scores a (lead bin, channel) needs before it perturbs (none before).
     """
 
+    _SUMS, _KEPT, _PREFIX = ("sq_err", "sq_val", "weight"), ("values",), "wsp_"
+
     def __init__(self, n_channels: int, horizon: int, steps_per_day: int, relative, *,
                  window_days: float = 7.0, lead_bin: int = 4, min_weight: float = 30.0):
-        self.nc, self.horizon, self.lead_bin = int(n_channels), int(horizon), int(lead_bin)
+        super().__init__(n_channels, horizon, steps_per_day, window_days, lead_bin)
         self.relative = np.asarray(relative, dtype=bool)
         if self.relative.shape != (self.nc,):
             raise ValueError(f"relative needs one flag per channel ({self.nc})")
-        self.lam = 1.0 - 1.0 / (window_days * steps_per_day)
         self.min_weight = float(min_weight)
-        nl = -(-self.horizon // self.lead_bin)
-        self.sq_err = np.zeros((nl, self.nc))
-        self.sq_val = np.zeros((nl, self.nc))
-        self.weight = np.zeros((nl, self.nc))
-        self._lead_bin_of = np.arange(self.horizon) // self.lead_bin  # lead h at h - 1
-        self.pending: deque[tuple[int, np.ndarray]] = deque(maxlen=horizon + 1)
+        self.sq_err = np.zeros((self.n_bins, self.nc))
+        self.sq_val = np.zeros((self.n_bins, self.nc))
+        self.weight = np.zeros((self.n_bins, self.nc))
 
     def add(self, step_index: int, values: np.ndarray) -> None:
         """Keep the weather inputs (horizon, channels) of a forecast issued at grid step
@@ -445,19 +504,15 @@ class WeatherSpread:
         """Score the kept inputs against the weather ``measured`` (channels,) at grid step
         ``step_index``; decays once."""
         obs = np.asarray(measured, float)
-        for k0, vals in self.pending:
-            h = step_index - k0
-            if 1 <= h < self.horizon:
-                v = vals[h]
-                ok = np.isfinite(obs) & np.isfinite(v)
-                lb = self._lead_bin_of[h - 1]
-                self.sq_err[lb, ok] += (v[ok] - obs[ok]) ** 2
-                self.sq_val[lb, ok] += v[ok] ** 2
-                self.weight[lb, ok] += 1.0
+        for lb, h, (_, vals) in self._due(step_index):
+            v = vals[h]
+            ok = np.isfinite(obs) & np.isfinite(v)
+            self.sq_err[lb, ok] += (v[ok] - obs[ok]) ** 2
+            self.sq_val[lb, ok] += v[ok] ** 2
+            self.weight[lb, ok] += 1.0
         for a in (self.sq_err, self.sq_val, self.weight):
             a *= self.lam
-        while self.pending and step_index - self.pending[0][0] >= self.horizon:
-            self.pending.popleft()
+        self._drop_past(step_index)
 
     def spread(self, values: np.ndarray) -> np.ndarray:
         """One-sided perturbation (horizon, channels) of weather inputs ``values``: 0 at
@@ -474,21 +529,80 @@ class WeatherSpread:
         out[1:] = np.where(self.relative[None, :], ratio[lb] * np.abs(values[1:]), absolute[lb])
         return np.nan_to_num(out)
 
-    def state_arrays(self, prefix: str = "wsp_") -> dict[str, np.ndarray]:
-        steps = np.array([k for k, _ in self.pending], dtype=np.int64)
-        vals = np.array([v for _, v in self.pending]).reshape(-1, self.horizon, self.nc)
-        return {f"{prefix}sq_err": self.sq_err, f"{prefix}sq_val": self.sq_val,
-                f"{prefix}weight": self.weight, f"{prefix}steps": steps,
-                f"{prefix}values": vals}
 
-    def load_state_arrays(self, arrays: Mapping[str, np.ndarray], prefix: str = "wsp_") -> bool:
-        if (f"{prefix}sq_err" not in arrays
-                or np.shape(arrays[f"{prefix}sq_err"]) != self.sq_err.shape):
-            return False
-        self.sq_err = np.array(arrays[f"{prefix}sq_err"], float)
-        self.sq_val = np.array(arrays[f"{prefix}sq_val"], float)
-        self.weight = np.array(arrays[f"{prefix}weight"], float)
-        self.pending.clear()
-        for k, v in zip(arrays[f"{prefix}steps"], arrays[f"{prefix}values"]):
-            self.pending.append((int(k), np.array(v, float)))
-        return True
+
+class WeatherBlend(_LeadScores):
+    """Combination weights of a weather forecast with the diurnal fallback, by lead,
+    learned online (:mod:`zonecast.estimator.weather_forecast`'s docstring; an option of
+    the streaming estimator, ``streaming.WEATHER_BLEND``).
+
+    For each (lead bin, channel) it keeps exponentially weighted sums of (F - D)^2 and
+    (O - D)(F - D) over the scored pairs, F the forecast's value, D the fallback's and O
+    the measured weather at the forecast interval; the weight is their ratio clipped to
+    [0, 1], or 1 while the bin's effective number of scored pairs is below
+    ``min_weight``. Only intervals that the forecast supplied are kept and scored.
+
+    Parameters
+    ----------
+    n_channels, horizon : int
+        Weather channels and forecast steps.
+    steps_per_day : int
+        Steps per day (for ``window_days``).
+    window_days : float
+        Effective memory [days of data].
+    lead_bin : int
+        Steps per lead bin.
+    min_weight : float
+        Effective number of scored pairs a (lead bin, channel) needs before its weight is
+        used.
+    """
+
+    _SUMS, _KEPT, _PREFIX = ("s_ff", "s_of", "weight"), ("forecast", "fallback"), "wbl_"
+
+    def __init__(self, n_channels: int, horizon: int, steps_per_day: int, *,
+                 window_days: float = 14.0, lead_bin: int = 4, min_weight: float = 30.0):
+        super().__init__(n_channels, horizon, steps_per_day, window_days, lead_bin)
+        self.min_weight = float(min_weight)
+        self.s_ff = np.zeros((self.n_bins, self.nc))
+        self.s_of = np.zeros((self.n_bins, self.nc))
+        self.weight = np.zeros((self.n_bins, self.nc))
+
+    def add(self, step_index: int, forecast: np.ndarray, fallback: np.ndarray) -> None:
+        """Keep the forecast's and the fallback's values (horizon, channels) of a forecast
+        issued at grid step ``step_index`` (row h lead h; NaN where the forecast did not
+        supply the interval)."""
+        self.pending.append((int(step_index), np.array(forecast, dtype=float),
+                             np.array(fallback, dtype=float)))
+
+    def resolve(self, step_index: int, measured: np.ndarray) -> None:
+        """Score the kept pairs against the weather ``measured`` (channels,) at grid step
+        ``step_index``; decays once."""
+        obs = np.asarray(measured, float)
+        for a in (self.s_ff, self.s_of, self.weight):
+            a *= self.lam
+        for lb, h, (_, f, d) in self._due(step_index):
+            ok = np.isfinite(obs) & np.isfinite(f[h]) & np.isfinite(d[h])
+            dev = f[h, ok] - d[h, ok]
+            self.s_ff[lb, ok] += dev ** 2
+            self.s_of[lb, ok] += (obs[ok] - d[h, ok]) * dev
+            self.weight[lb, ok] += 1.0
+        self._drop_past(step_index)
+
+    def weights(self) -> np.ndarray:
+        """(lead bins, channels) weights a in [0, 1]; 1 where too few pairs are scored or
+        the forecast never departed from the fallback."""
+        ok = (self.weight >= self.min_weight) & (self.s_ff > 0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            a = np.where(ok, self.s_of / np.where(self.s_ff > 0, self.s_ff, 1.0), 1.0)
+        return np.clip(a, 0.0, 1.0)
+
+    def blend(self, forecast: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+        """(horizon, channels) D + a (F - D) at rows 1 .. horizon - 1 where both are
+        finite; the forecast elsewhere (row 0 is the measured interval)."""
+        f = np.array(forecast, dtype=float)
+        d = np.asarray(fallback, float)
+        a = self.weights()[self._lead_bin_of[:len(f) - 1]]
+        both = np.isfinite(f[1:]) & np.isfinite(d[1:])
+        f[1:] = np.where(both, d[1:] + a * (f[1:] - d[1:]), f[1:])
+        return f
+

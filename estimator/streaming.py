@@ -77,7 +77,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from zonecast.estimator.artifact import ModelBundle, load_model_file
-from zonecast.estimator.calibration import IntervalCalibrator, WeatherSpread
+from zonecast.estimator.calibration import IntervalCalibrator, WeatherBlend, WeatherSpread
 from zonecast.estimator.constants import (
     DAYAHEAD_TAU,
     DAYAHEAD_WINDOW,
@@ -199,6 +199,12 @@ INTERVAL_ADAPT = "scale"
 #: model's std in quadrature before the calibration scales it (docs/forecasts.md
 #: "Intervals that know the weather's error")
 WEATHER_SPREAD = True
+#: combine a received weather forecast with the diurnal fallback by lead, with weights
+#: learned from the building's own forecasts and measured weather
+#: (:class:`~zonecast.estimator.calibration.WeatherBlend`); measured on the 12
+#: training members and not adopted: better on the Tampa members, worse on office6 and a
+#: Chicago member (docs/forecasts.md "Forecast and the recent days, combined")
+WEATHER_BLEND = False
 #: perturb the weather both ways (its learned error added and subtracted, the two changes'
 #: mean square in quadrature with the model's std: two sigma points) instead of one way
 #: (added): a thermostat that holds a room at its set point on a sunnier or warmer day
@@ -979,6 +985,8 @@ class OnlineEstimator:
         self.weather_spread = (WeatherSpread(len(self._w_cols), HORIZON, cal.per_day,
                                              [False] + [True] * (len(self._w_cols) - 1))
                                if WEATHER_SPREAD else None)
+        self.weather_blend = (WeatherBlend(len(self._w_cols), HORIZON, cal.per_day)
+                              if WEATHER_BLEND else None)
         self.weather_max_age = pd.Timedelta(hours=WEATHER_DEFAULTS["max_age_h"])
         self.weather_obs_tau_h = WEATHER_DEFAULTS["obs_tau_h"]
         self._experiments = [(pd.Timestamp(e.start).value, pd.Timestamp(e.end).value)
@@ -1055,6 +1063,8 @@ class OnlineEstimator:
         if self.weather_spread is not None:
             self.weather_spread.resolve(k, inputs[self._w_cols] if operating
                                         else np.full(len(self._w_cols), np.nan))
+        if self.weather_blend is not None:  # the weather is the weather, experiment or not
+            self.weather_blend.resolve(k, inputs[self._w_cols])
         self.calibrator.resolve(k, y if operating else np.full(self._nz, np.nan), steady)
         if operating and self.started and self.time == t and self.calibrator.due(k):
             ins = self.forecast_inputs()
@@ -1070,6 +1080,10 @@ class OnlineEstimator:
                     self._due = (self._due_key(self.reheat_control), ins, f_ig, mean, scale)
                 if self.weather_spread is not None:
                     self.weather_spread.add(k, ins[:, self._w_cols])
+            if self.weather_blend is not None:
+                raw, fb, from_wf = self._weather_parts()
+                if from_wf.any():
+                    self.weather_blend.add(k, np.where(from_wf[:, None], raw, np.nan), fb)
 
     def _learn_profile(self, tn: int, f: np.ndarray) -> None:
         """One per-step f_IG estimate ``f`` (n_zones,) [W/m2] of the interval from ``tn``
@@ -1217,7 +1231,19 @@ class OnlineEstimator:
         N and the horizontal [W/m2] over the forecast intervals, and a (HORIZON,) mask of
         the intervals taken from the weather forecast. Interval t is the measured row;
         later ones come from the weather forecast in use when it is fresh and covers them,
-        else from the diurnal fallback, else persistence."""
+        combined with the diurnal fallback by the learned weights of :attr:`weather_blend`
+        (:class:`~zonecast.estimator.calibration.WeatherBlend`), else from the
+        fallback, else persistence."""
+        out, fb, from_wf = self._weather_parts()
+        if self.weather_blend is not None and from_wf.any():
+            out[from_wf] = self.weather_blend.blend(out, fb)[from_wf]
+        return out, from_wf
+
+    def _weather_parts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`weather_inputs` before the combination: the inputs with the weather
+        forecast's values as received (its temperature corrected by the measurement), the
+        fallback's (HORIZON, 6) values (NaN in bins it has not seen) and the mask of the
+        forecast's intervals."""
         t = self.time.value
         nb = self.bundle.model.n_boxes
         pers = self.persistence_inputs()
@@ -1244,7 +1270,7 @@ class OnlineEstimator:
                 out[good, 0] += observation_correction(vals[idx[0], 0], pers[0, cols[0]],
                                                        lead_h[good], self.weather_obs_tau_h)
             from_wf = good
-        return out, from_wf
+        return out, fb, from_wf
 
     def forecast_inputs(self) -> np.ndarray:
         """(HORIZON, n_boxes + 7) served inputs: weather from :meth:`weather_inputs`,
@@ -1346,6 +1372,8 @@ class OnlineEstimator:
         arrays.update(self.calibrator.state_arrays())
         if self.weather_spread is not None:
             arrays.update(self.weather_spread.state_arrays())
+        if self.weather_blend is not None:
+            arrays.update(self.weather_blend.state_arrays())
         if self.weather is not None:  # the weather forecast in use, raw
             wf = self.weather
             arrays["wf_issued"] = np.array([wf.issued.value], dtype=np.int64)
@@ -1422,6 +1450,8 @@ class OnlineEstimator:
         self.calibrator.load_state_arrays(arr)
         if self.weather_spread is not None:
             self.weather_spread.load_state_arrays(arr)
+        if self.weather_blend is not None:
+            self.weather_blend.load_state_arrays(arr)
         if "wf_times" in arr:
             vals = arr["wf_values"]
             self.set_weather_forecast(WeatherForecast(

@@ -23,6 +23,19 @@ value of the next day that is known exactly). ``obs_tau`` is the fallback's ``ta
 separate knob. The irradiance is not corrected (its error is cloud cover, which the current
 value says little about a few hours ahead).
 
+Optionally (``streaming.WEATHER_BLEND``, off by default: docs/forecasts.md "Forecast and
+the recent days, combined") a received forecast F is then combined with the fallback D by
+lead (:class:`~zonecast.estimator.calibration.WeatherBlend`):
+served = D + a (F - D), with the weight a per lead bin and channel the least-squares
+slope of the measured weather's departure from D on the forecast's, O - D ~ a (F - D),
+learned online from the building's own pairs (exponential forgetting) and clipped to
+[0, 1]; a = 1 (the forecast as received) until enough pairs are scored. This is the
+combination of a forecast with climatology of forecast post-processing (model output
+statistics): where a day-ahead forecast's error is as large as the weather's own
+day-to-day change, the conditional mean of the weather given the forecast lies between the
+forecast and the recent days' shape, and a shrinks towards it; where the forecast is sharp
+a stays near 1.
+
 :func:`from_open_meteo` reads Open-Meteo's JSON forecast format (``hourly`` arrays
 ``time``, ``temperature_2m``, ``shortwave_radiation``, ``direct_normal_irradiance``,
 ``diffuse_radiation``; the radiation values are means over the preceding hour, so they are
@@ -329,3 +342,4 @@ class DiurnalWeather:
         self.w = np.array(arrays[f"{prefix}w"], float)
         self.mean = np.array(arrays[f"{prefix}mean"], float)
         return True
+

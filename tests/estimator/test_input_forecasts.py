@@ -585,3 +585,63 @@ def test_tracked_factor_carries_over_another_class_count():
     arrays = dict(two.state_arrays(), cal_log_scale=np.ones((2, 3)))  # three zones' factors
     assert new.load_state_arrays(arrays)
     assert np.all(new.log_scale == 0)
+
+
+def test_weather_blend_learns_the_least_squares_weight_of_the_forecast_by_lead():
+    """Weather O = D + s with the day's departure s ~ N(0, 1) from the fallback D, and a
+    forecast F = O + e, e ~ N(0, sd(h)^2) growing with lead: the learned weight of F - D
+    is the conditional-mean slope 1 / (1 + sd(h)^2) per lead bin, clipped to [0, 1]; 1
+    before enough pairs; the measured row and the rows the forecast did not supply are
+    left as they are; the state survives a checkpoint."""
+    from zonecast.estimator.calibration import WeatherBlend
+
+    rng = np.random.default_rng(11)
+    H, n = 96, 96 * 60
+    wb = WeatherBlend(1, H, 96, window_days=60)
+    assert np.all(wb.weights() == 1.0)
+    fb = np.full((H, 1), 5.0)
+    raw = np.full((H, 1), 7.0)
+    assert np.array_equal(wb.blend(raw, fb), raw)  # nothing learned: the forecast
+    sd = 0.2 + 2.0 * np.arange(H) / H
+    d_all = np.full(n + H, 5.0)
+    obs = d_all + rng.standard_normal(n + H)
+    for k in range(n):
+        wb.resolve(k, obs[k:k + 1])
+        if k % 8 == 0:
+            f = obs[k:k + H] + sd * rng.standard_normal(H)
+            wb.add(k, f[:, None], d_all[k:k + H, None])
+    a = wb.weights()[:, 0]
+    mid = np.arange(len(a)) * 4 + 2  # lead (steps) in the middle of each bin
+    np.testing.assert_allclose(a, 1.0 / (1.0 + sd[np.minimum(mid, H - 1)] ** 2), atol=0.06)
+    assert a[0] > 0.9 and a[-1] < 0.3
+    out = wb.blend(raw, fb)
+    assert out[0, 0] == 7.0  # the issue row is measured
+    np.testing.assert_allclose(out[1:, 0], 5.0 + 2.0 * a[np.arange(H - 1) // 4])
+    gap = raw.copy()
+    gap[10:20] = np.nan  # not supplied by the forecast: untouched
+    assert np.isnan(wb.blend(gap, fb)[10:20]).all()
+    other = WeatherBlend(1, H, 96, window_days=60)
+    assert other.load_state_arrays(wb.state_arrays())
+    assert np.array_equal(other.weights(), wb.weights())
+    assert len(other.pending) == len(wb.pending)
+    assert not WeatherBlend(2, H, 96).load_state_arrays(wb.state_arrays())  # other shape
+    with pytest.raises(ValueError, match="window_days must be > 0"):
+        WeatherBlend(1, H, 96, window_days=0)
+
+
+def test_weather_blend_never_extrapolates_beyond_the_forecast_or_the_fallback():
+    """A forecast anti-correlated with the weather gets weight 0 (the fallback), one that
+    over-reacts by half its departure gets at most 1 (the forecast): the weight is
+    clipped to [0, 1]."""
+    from zonecast.estimator.calibration import WeatherBlend
+
+    rng = np.random.default_rng(3)
+    H = 16
+    for gain, expected in ((-1.0, 0.0), (0.5, 1.0)):
+        wb = WeatherBlend(1, H, 96, window_days=30, min_weight=5)
+        obs = rng.standard_normal(96 * 10 + H)
+        for k in range(96 * 10):
+            wb.resolve(k, obs[k:k + 1])
+            if k % 4 == 0:
+                wb.add(k, (gain * obs[k:k + H])[:, None], np.zeros((H, 1)))
+        assert np.all(wb.weights() == expected)

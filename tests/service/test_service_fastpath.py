@@ -645,3 +645,48 @@ def test_settled_calibration_skips_the_young_filters_forecasts_after_each_start(
     c = S.OnlineEstimator(bundle)
     c.load_bytes(raw[:4] + len(head).to_bytes(4, "big") + head + raw[8 + n:])
     assert c._age == S.YOUNG_STEPS
+
+
+def test_served_weather_is_the_forecast_combined_with_the_fallback_by_learned_weights(
+        bundle, telemetry, monkeypatch):
+    """With weather forecasts in use, the served weather inputs are D + a (F - D) on the
+    forecast's intervals, F the forecast as received (its temperature corrected by the
+    measurement), D the diurnal fallback and a the weights learned from the building's
+    own forecasts and measured weather; the weights survive a checkpoint; without the
+    option (the default) the forecast is served as received."""
+    from zonecast.estimator import streaming
+    from zonecast.estimator.streaming import OnlineEstimator, rows_from_frame
+    from zonecast.estimator.weather_forecast import parse_weather_forecast
+    from zonecast.testbed.forecasts import weather_forecasts
+
+    monkeypatch.setattr(streaming, "WEATHER_BLEND", True)
+    frame = si_frame(bundle, telemetry.iloc[:1000])
+    wfs = [parse_weather_forecast(b) for b in weather_forecasts(bundle.site, frame, seed=2)]
+    tt, u, v, y = rows_from_frame(bundle, frame.iloc[:800])  # the forecasts reach beyond
+    est = OnlineEstimator(bundle)
+    j = 0
+    for k in range(len(tt)):
+        while j < len(wfs) and wfs[j].issued <= tt[k]:
+            est.set_weather_forecast(wfs[j])
+            j += 1
+        est.advance(tt[k], u[k], v[k], y[k])
+    wb = est.weather_blend
+    assert wb is not None and wb.weight.max() >= wb.min_weight
+    a = wb.weights()
+    assert (a < 1.0).any() and (a >= 0).all()
+    raw, fb, from_wf = est._weather_parts()
+    assert from_wf[1:].all()
+    served, mask = est.weather_inputs()
+    assert np.array_equal(mask, from_wf)
+    lb = np.arange(len(raw) - 1) // wb.lead_bin
+    np.testing.assert_allclose(served[1:], fb[1:] + a[lb] * (raw[1:] - fb[1:]), atol=1e-9)
+    assert np.array_equal(served[0], raw[0])
+    assert not np.allclose(served[1:], raw[1:])
+    other = OnlineEstimator(bundle)
+    other.load_bytes(est.to_bytes())
+    assert np.array_equal(other.weather_inputs()[0], served)
+    monkeypatch.setattr(streaming, "WEATHER_BLEND", False)
+    plain = OnlineEstimator(bundle)
+    plain.load_bytes(est.to_bytes())
+    assert plain.weather_blend is None
+    assert np.array_equal(plain.weather_inputs()[0], raw)

@@ -396,6 +396,12 @@ class _LeadScores:
     ``lead_bin`` steps, with sums that decay by ``lam`` per step (an effective memory of
     ``window_days`` days of data)."""
 
+    #: the subclass's decaying (lead bins, channels) sums, the arrays each kept forecast
+    #: holds after its step, and the checkpoint keys' prefix
+    _SUMS: tuple[str, ...] = ()
+    _KEPT: tuple[str, ...] = ()
+    _PREFIX = ""
+
     def __init__(self, n_channels: int, horizon: int, steps_per_day: int,
                  window_days: float, lead_bin: int):
         if window_days <= 0 or lead_bin < 1:
@@ -418,12 +424,6 @@ class _LeadScores:
     def _drop_past(self, step_index: int) -> None:
         while self.pending and step_index - self.pending[0][0] >= self.horizon:
             self.pending.popleft()
-
-    #: the subclass's decaying (lead bins, channels) sums, the arrays each kept forecast
-    #: holds after its step, and the checkpoint keys' prefix
-    _SUMS: tuple[str, ...] = ()
-    _KEPT: tuple[str, ...] = ()
-    _PREFIX = ""
 
     def state_arrays(self, prefix: str | None = None) -> dict[str, np.ndarray]:
         """The sums and the kept forecasts as named arrays (a checkpoint's)."""
@@ -528,7 +528,6 @@ class WeatherSpread(_LeadScores):
         lb = self._lead_bin_of[:len(values) - 1]
         out[1:] = np.where(self.relative[None, :], ratio[lb] * np.abs(values[1:]), absolute[lb])
         return np.nan_to_num(out)
-
 
 
 class WeatherBlend(_LeadScores):

@@ -255,9 +255,12 @@ AIRFLOW_FLOOR_DAYS = 14
 #: gains' slow level")
 GAINS_LEVEL_TAU: pd.Timedelta | None = None
 #: the controlled step's reheat is solved to this shortfall [K], in at most REHEAT_ITER
-#: exact steps with the last responses before they are recomputed
+#: exact steps with the last responses before they are recomputed; recomputed at once when
+#: an iteration does not cut the shortfall by REHEAT_RATE (it would not reach the
+#: tolerance in REHEAT_ITER iterations)
 REHEAT_TOL = 1e-9
-REHEAT_ITER = 3
+REHEAT_ITER = 8
+REHEAT_RATE = 0.05
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
            "StepReport", "checkpoint_header", "has_discharge", "model_rows",
@@ -865,7 +868,8 @@ class OnlineEstimator:
         r is found by Newton steps with the responses last computed for these rooms in
         this run (at an earlier step's airflows; the step is linear in r, so each
         iteration is one exact step) to :data:`REHEAT_TOL`; the responses are recomputed
-        at ``u`` when that has not converged in :data:`REHEAT_ITER` steps. Every run
+        at ``u`` when that has not converged in :data:`REHEAT_ITER` steps, or earlier, at
+        the first iteration that does not cut the shortfall by :data:`REHEAT_RATE`. Every run
         starts without responses (but the weather-perturbed run of a served forecast,
         which follows its forecast's run with the same airflows and starts from its
         responses), so a forecast is a function of its state and inputs alone (replay
@@ -888,17 +892,18 @@ class OnlineEstimator:
         f = forcing.copy()
         for attempt in range(2):
             M = G[np.ix_(rows, slots)] * g[None, :]
+            err = np.inf
             for _ in range(REHEAT_ITER):
                 r = r + _solve_square(M, need - got)
                 f[rows] = forcing[rows] + r * g
                 x = stepper.step(x0, u, f, ts)
                 got = x[rows] - free[rows]
-                if np.abs(need - got).max() <= REHEAT_TOL:
+                last, err = err, np.abs(need - got).max()
+                if err <= REHEAT_TOL or (attempt == 0 and err > REHEAT_RATE * last):
                     break
-            else:
-                if attempt == 0:  # the old responses are too far off: recompute at u
-                    self._air_responses(stepper, u, rows)
-                    continue
+            if err > REHEAT_TOL and attempt == 0:  # the old responses are too far off:
+                self._air_responses(stepper, u, rows)  # recompute at u
+                continue
             break
         rc = np.minimum(sign * np.maximum(sign * r, 0.0), hi)
         if (rc != r).any():  # a neighbour's heat (or cooling) is enough, or r is at its most

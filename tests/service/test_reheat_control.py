@@ -127,6 +127,40 @@ def test_controlled_run_equals_exact_responses_and_depends_on_its_inputs_only(es
     np.testing.assert_array_equal(est._controlled_run(stepper, u, forcing, v[:, 1], rise, sp), xs)
 
 
+def test_older_responses_are_kept_while_they_converge_and_every_policy_agrees(est, monkeypatch):
+    """However long the Newton solve keeps the older responses (REHEAT_ITER, REHEAT_RATE),
+    the controlled run is the same to the solver's tolerance; the default keeps them while
+    each iteration cuts the shortfall twentyfold, so it recomputes fewer responses than
+    three iterations would, and recomputing at once (REHEAT_RATE 0) at every heated step
+    recomputes the most."""
+    import zonecast.estimator.streaming as S
+
+    m, nb, ins, u, v, forcing, stepper = _parts(est)
+    rise = ins[:, -nb:]
+    rooms = est._coil_rooms
+    free = stepper.run(est._x, u, forcing + m.reheat_forcing(u, np.zeros_like(rise)), v[:, 1])
+    sp = np.full(len(u), float(np.percentile(free[1:, rooms], 70)))
+    counted = {"n": 0}
+    inner = est._air_responses
+
+    def counting(stepper_, u_, rows):
+        counted["n"] += len(rows)
+        return inner(stepper_, u_, rows)
+
+    monkeypatch.setattr(est, "_air_responses", counting)
+    runs, columns = {}, {}
+    for policy in [(S.REHEAT_ITER, S.REHEAT_RATE), (3, 1.0), (1, 0.0)]:
+        monkeypatch.setattr(S, "REHEAT_ITER", policy[0])
+        monkeypatch.setattr(S, "REHEAT_RATE", policy[1])
+        counted["n"] = 0
+        runs[policy] = est._controlled_run(stepper, u, forcing, v[:, 1], rise, sp)
+        columns[policy] = counted["n"]
+    default, three, always = runs
+    for policy in (three, always):
+        np.testing.assert_allclose(runs[policy], runs[default], rtol=0, atol=1e-7)
+    assert columns[default] < columns[three] <= columns[always]
+
+
 def test_cooling_holds_the_cooling_setpoint_and_heat_and_cool_solve_together(est):
     """With a cooling set point the rooms with a running box end every step at or below
     it, at it where they would be above (the least cooling), never colder than without

@@ -41,6 +41,11 @@ class Effects(BaseModel):
         EnergyPlus's own (from the weather file's horizontal infrared), or ``"dry_bulb"``,
         the outdoor air temperature (``WeatherProperty:SkyTemperature``), a building without
         the sky's long-wave deficit: what a model with that physics exactly right would see.
+    inside_convection : EnergyPlus's inside convection algorithm: ``"tarp"`` (its default,
+        natural convection whose coefficient follows the face-air temperature difference
+        and the heat flow's direction; nothing written to the file) or ``"simple"``
+        (``SurfaceConvectionAlgorithm:Inside, Simple``: a constant coefficient per face
+        orientation), a building whose films are the constants a linear model has.
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -58,6 +63,7 @@ class Effects(BaseModel):
     discharge_sensors: bool = True
     power_meters: bool = True
     sky: Literal["weather", "dry_bulb"] = "weather"
+    inside_convection: Literal["tarp", "simple"] = "tarp"
 
     def gain_scale(self, zone: str) -> float:
         return self.gains.get(zone, 1.0)
@@ -78,7 +84,8 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
 
     ``EFFECT`` is one of reheat, infiltration, gains[.ZONE], window_solar,
     sensor_noise, sensor_bias, supply_offset; ``--set`` also takes shgc, sensor_resolution,
-    airflow_noise, sky (``weather`` or ``dry_bulb``), bias.ZONE, mass.ZONE and mixing.ZONE.
+    airflow_noise, sky (``weather`` or ``dry_bulb``), inside_convection (``tarp`` or
+    ``simple``), bias.ZONE, mass.ZONE and mixing.ZONE.
     """
     data: dict = {"gains": {}, "sensor_bias": {}, "mass": {}, "mixing": {}}
 
@@ -127,6 +134,11 @@ def parse_switches(disable: list[str] | None, set_: list[str] | None, zones: lis
                 raise ValueError(f"--set sky={value}: choose 'weather' (EnergyPlus's sky from "
                                  "the weather file) or 'dry_bulb' (the sky at the outdoor air)")
             data["sky"] = value
+        elif key == "inside_convection":
+            if value not in get_args(Effects.model_fields["inside_convection"].annotation):
+                raise ValueError(f"--set inside_convection={value}: choose 'tarp' "
+                                 "(EnergyPlus's default) or 'simple' (constant films)")
+            data["inside_convection"] = value
         elif key.startswith("gains."):
             data["gains"][zone_of(key)] = _num(key, value)
         elif key.startswith("bias."):

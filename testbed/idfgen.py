@@ -86,6 +86,8 @@ def build_idf(cfg: BuildingConfig, periods: list[tuple[dt.date, dt.date]], effec
     add(obj("SimulationControl", "Yes", "Yes", "Yes", "No", "Yes", "No", 1))
     add(obj("Building", cfg.name, float(cfg.north_axis), "City", 0.04, 0.4, "FullExterior", 25, 6))
     add(obj("Timestep", 4))
+    if effects.inside_convection == "simple":  # constant inside films (default TARP)
+        add(obj("SurfaceConvectionAlgorithm:Inside", "Simple"))
     if cfg.shading is not None:  # shadows of overhangs and fins recomputed every day
         add(obj("ShadowCalculation", "PolygonClipping", "Periodic", 1))
     add(obj("Site:Location", cfg.name + " site", cfg.location.latitude, cfg.location.longitude,

@@ -53,6 +53,7 @@ Disable = Annotated[list[str] | None, typer.Option(
 Set = Annotated[list[str] | None, typer.Option(
     "--set", help="Set an effect: infiltration=SCALE, shgc=VALUE, sensor_noise=SIGMA, "
                   "sensor_resolution=DEGC, airflow_noise=REL, sky=weather|dry_bulb, "
+                  "inside_convection=tarp|simple, "
                   "gains.ZONE=SCALE, bias.ZONE=DEGC (repeatable).")]
 Seed = Annotated[int, typer.Option(help="Seed of every random draw (occupancy, excitation, noise).")]
 Building = Annotated[str, typer.Option(help="Building config name in configs/buildings, or a path.")]

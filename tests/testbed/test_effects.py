@@ -97,3 +97,21 @@ def test_sky_switch_puts_the_sky_at_the_dry_bulb_in_the_idf():
             "    Sky Below Dry Bulb,\n    No;") in idf
     assert "Schedule:Constant,\n    Sky Below Dry Bulb,\n    Any Number,\n    0;" in idf
     assert "WeatherProperty:SkyTemperature" not in build_idf(cfg, week, Effects(), [])
+
+
+def test_inside_convection_switch_writes_energyplus_constant_films_only_when_asked():
+    import datetime as dt
+
+    from zonecast.testbed.config import load_config
+    from zonecast.testbed.effects import Effects
+    from zonecast.testbed.idfgen import build_idf
+
+    cfg = load_config("office6")
+    week = [(dt.date(2015, 4, 12), dt.date(2015, 4, 19))]
+    e = parse_switches(None, ["inside_convection=simple"], ZONES)
+    assert e.inside_convection == "simple"
+    assert parse_switches(None, None, ZONES).inside_convection == "tarp"
+    assert "SurfaceConvectionAlgorithm:Inside,\n    Simple;" in build_idf(cfg, week, e, [])
+    assert "SurfaceConvectionAlgorithm:Inside" not in build_idf(cfg, week, Effects(), [])
+    with pytest.raises(ValueError, match="inside_convection=adaptive: choose 'tarp'"):
+        parse_switches(None, ["inside_convection=adaptive"], ZONES)

@@ -155,7 +155,7 @@ def test_older_responses_are_kept_while_they_converge_and_every_policy_agrees(es
         counted["n"] = 0
         runs[policy] = est._controlled_run(stepper, u, forcing, v[:, 1], rise, sp)
         columns[policy] = counted["n"]
-    default, three, always = runs
+    default, three, always = list(runs)  # the three policies, in the order run
     for policy in (three, always):
         np.testing.assert_allclose(runs[policy], runs[default], rtol=0, atol=1e-7)
     assert columns[default] < columns[three] <= columns[always]

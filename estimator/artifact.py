@@ -242,7 +242,7 @@ def _noise(doc: dict, path: Path) -> NoiseSettings:
 _OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration", "facades", "ground",
                 "shading", "return_air", "sky", "interior_radiation", "internal_gains",
                 "window_angle", "roof_exterior", "envelope_radiation", "solar_enclosure",
-                "adiabatic", "layers", "internal_mass")
+                "adiabatic", "layers", "internal_mass", "inside_convection")
 #: what a model file without an option was built with (options added later)
 _LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal", "ground": "adiabatic",
                     "shading": "none", "return_air": "none", "roof_solar": "mean",
@@ -250,7 +250,7 @@ _LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal", "ground": "ad
                     "window_angle": "none", "roof_exterior": "fitted",
                     "envelope_radiation": "none", "solar_enclosure": "room",
                     "adiabatic": "zero_flux", "layers": "lumped",
-                    "internal_mass": "both_faces"}
+                    "internal_mass": "both_faces", "inside_convection": "constant"}
 #: what a model file without ``model_options`` was built with (files written before the
 #: key existed put window solar on the room air, the paper's placement)
 LEGACY_OPTIONS = {"window_solar": "air"}
@@ -438,6 +438,13 @@ def save_structure(path: str | Path, structure: RCStructure,
         meta["shading"] = structure.shading
     if structure.window_panes:  # likewise
         meta["window_panes"] = int(structure.window_panes)
+    if structure.switched:  # likewise
+        sw = structure.switched
+        meta["switched_rooms"] = list(sw["rooms"])
+        arrays["switched.links"] = np.asarray(sw["links"], dtype=np.int64)
+        arrays["switched.area"] = np.asarray(sw["area"], dtype=float)
+        arrays["switched.param"] = np.asarray(sw["param"], dtype=np.int64)
+        arrays["switched.factor"] = np.asarray(sw["factor"], dtype=float)
     path = Path(path)
     with path.open("wb") as fh:
         np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)
@@ -473,7 +480,11 @@ def load_structure(path: str | Path) -> tuple[RCStructure, dict[str, float]]:
             scheduled=dict(meta.get("scheduled", {})),
             shading=list(meta.get("shading", [])),
             return_of_box=z["return_of_box"] if "return_of_box" in z.files else None,
-            window_panes=int(meta.get("window_panes", 0)))
+            window_panes=int(meta.get("window_panes", 0)),
+            switched=({"links": z["switched.links"], "area": z["switched.area"],
+                       "param": z["switched.param"], "factor": z["switched.factor"],
+                       "rooms": list(meta["switched_rooms"])}
+                      if "switched_rooms" in meta else {}))
     return structure, {k: float(v) for k, v in meta["room_volume"].items()}
 
 

@@ -322,7 +322,8 @@ def _heat_response(model: BilinearModel, data: ModelData, base: Baseline, q: np.
         # arithmetic as its own run of H single steps)
         qw = q[r:r + H]
         xs = stepper.run_columns(np.zeros((n, nz)), data.u[r:r + H], bcols,
-                                 np.where(np.isfinite(qw), qw, 0.0), np.zeros(H))
+                                 np.where(np.isfinite(qw), qw, 0.0), np.zeros(H),
+                                 model.modes(data.u[r:r + H], data.reheat[r:r + H]))
         out[r + 1:r + H + 1] = np.einsum("zi,kij->kzj", model.C, xs[1:])
     return out
 
@@ -441,7 +442,8 @@ def _bias_response(model: BilinearModel, data: ModelData, base: Baseline, steppe
     for _, r, H in _forecast_windows(base):
         X0 = bias_offset_states(model, data.u[r])
         xs = stepper.run_columns(X0, data.u[r:r + H], np.zeros((model.n, nz)),
-                                 np.zeros((H, nz)), np.zeros(H))
+                                 np.zeros((H, nz)), np.zeros(H),
+                                 model.modes(data.u[r:r + H], data.reheat[r:r + H]))
         cols = -np.einsum("zi,kij->kzj", model.C, xs[1:])
         cols[:, np.arange(nz), np.arange(nz)] += 1.0
         out[r + 1:r + H + 1] = cols
@@ -500,8 +502,10 @@ def _secant_columns(model: BilinearModel, data: ModelData, base: Baseline,
         stepper = stepper_for(m, data.u)
         forcing = (data.v @ m.Bv.T + (m.params.c_ig + gains) @ m.B_ig.T
                    + m.reheat_forcing(data.u, data.reheat))
+        modes = m.modes(data.u, data.reheat)
         for i, r, H in windows:
-            xs = stepper.run(base.x0[i], data.u[r:r + H], forcing[r:r + H], data.v[r:r + H, 1])
+            xs = stepper.run(base.x0[i], data.u[r:r + H], forcing[r:r + H], data.v[r:r + H, 1],
+                             None if modes is None else modes[r:r + H])
             d[r + 1:r + 1 + H] = xs[1:] @ m.C.T - base.pred[r + 1:r + 1 + H]
         return d
 

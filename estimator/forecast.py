@@ -259,7 +259,7 @@ def filter_day(model: BilinearModel, data: ModelData, start: int, issue: int, *,
     prior = np.zeros_like(f) if prior is None else np.asarray(prior, float)
     for i in range(issue - start):
         k = start + i
-        phi, gv, gi = model.step_matrices(data.u[k])
+        phi, gv, gi = model.step_matrices(data.u[k], model.modes(data.u[k], data.reheat[k]))
         kf.predict(phi, gv @ data.v[k] + gi @ (c_ig + prior[i])
                    + model.reheat_step(data.u[k], data.reheat[k]))
         inn = kf.update(y[i + 1])
@@ -348,13 +348,15 @@ def _gains(method: str, data: ModelData, issue: int, horizon: int, profile: Week
 
 def propagate_std(model: BilinearModel, P: np.ndarray, u: np.ndarray, *,
                   sigma_air: float = SIGMA_AIR_FORECAST, sigma_wall: float = SIGMA_WALL_FORECAST,
-                  sigma_meas: float = SIGMA_MEAS) -> np.ndarray:
-    """Std of C x(h) + e over the horizon: P <- Phi(u_h) P Phi(u_h)' + Q, var = C P C' + R."""
+                  sigma_meas: float = SIGMA_MEAS, reheat: np.ndarray | None = None) -> np.ndarray:
+    """Std of C x(h) + e over the horizon: P <- Phi(u_h) P Phi(u_h)' + Q, var = C P C' + R
+    (``reheat`` [K]: the discharge air's rise, for the films' regimes, :meth:`.modes`)."""
+    modes = model.modes(u, reheat)
     air = model.structure.air_states()
     q = np.diag(air_wall_covariance(model.n, air, sigma_air, sigma_wall))
     out = np.empty((len(u), model.n_zones))
     for h in range(len(u)):
-        phi = model.step_matrices(u[h])[0]
+        phi = model.step_matrices(u[h], None if modes is None else modes[h])[0]
         P = phi @ P @ phi.T
         P[np.diag_indices_from(P)] += q
         out[h] = np.einsum("ij,jk,ik->i", model.C, P, model.C) + sigma_meas**2
@@ -398,7 +400,8 @@ def issue_forecast(model: BilinearModel, data: ModelData, issue: int, profile: W
                     sigma_wall=sigma_wall, sigma_meas=sigma_meas)
     u, v = data.u[issue:issue + horizon], data.v[issue:issue + horizon]
     std = (propagate_std(model, fd.P, u, sigma_air=sigma_air_forecast, sigma_wall=sigma_wall,
-                         sigma_meas=sigma_meas) if intervals
+                         sigma_meas=sigma_meas, reheat=data.reheat[issue:issue + horizon])
+           if intervals
            else np.full((horizon, model.n_zones), np.nan))
     step = data.times[1] - data.times[0]
     times = pd.date_range(data.times[issue] + step, periods=horizon, freq=step)

@@ -36,6 +36,7 @@ from zonecast.estimator.integrate import (
     _run_block,
     chebyshev_coefficients,
     return_rho,
+    switched_matrix,
     tight_bound,
 )
 from zonecast.estimator.kalman import (
@@ -165,15 +166,18 @@ def kalman_state(model: BilinearModel, data: ModelData, start: int, stop: int,
     u_max = np.max(data.u[rows], axis=0)
     stepper = ExactStepper(model.structure.A(model.params.physical), model._rooms,
                            model._bxu, model.step, u_max, capacity=model.structure.capacity,
-                           ret=model._ret, retc=model._retc)
+                           ret=model._ret, retc=model._retc, switched=model.switched)
     forcing = data.v[rows] @ model.Bv.T + model.reheat_forcing(data.u[rows], data.reheat[rows])
+    modes = model.modes(data.u[rows], data.reheat[rows])
     zero = np.zeros(model.n)
 
     def step(k):
         u = data.u[start + k]
         g = gains if f_ig is None else gains + f_ig[start + k]
         b = forcing[k] + model.B_ig @ g
-        return stepper.propagator(u), stepper.step(zero, u, b, data.v[start + k, 1])
+        mode = None if modes is None else modes[k]
+        return (stepper.propagator(u, mode),
+                stepper.step(zero, u, b, data.v[start + k, 1], mode))
 
     res = run_filter(x0, default_initial_covariance(model.n, air), step, y, model.C,
                      default_process_noise(model.n, air, sigma_air=sigma_air),
@@ -466,15 +470,35 @@ class _Problem:
         self.C = model.C
         # the discharge air's known forcing does not depend on theta (room air capacity fixed)
         self.rh = [model.reheat_forcing(data.u[a:b], data.reheat[a:b]) for a, b in spans]
+        # the films' convection regimes per span (none: zero columns) and the switched
+        # links, whose conductance follows theta (RCStructure.switched)
+        sw = st.switched
+        self.swi = model._swi
+        self.sw_area = (np.zeros(0) if not sw
+                        else (np.asarray(sw["factor"]) - 1.0) * np.asarray(sw["area"]))
+        self.sw_param = np.zeros(0, np.int64) if not sw else np.asarray(sw["param"], np.int64)
+        self.modes = [np.ascontiguousarray(
+            model.modes(data.u[a:b], data.reheat[a:b]) if model.n_modes
+            else np.zeros((b - a, 0))) for a, b in spans]
         if f_ig is not None:  # known time-varying gains (identify(gains=...)): fixed forcing
             self.rh = [r + f_ig[a:b] @ model.B_ig.T for r, (a, b) in zip(self.rh, spans)]
 
+    def switch_gains(self, phys: np.ndarray) -> np.ndarray:
+        """(k, 2) the switched links' extra conductance over each end's capacity [1/s] at
+        the physical parameters ``phys``."""
+        dg = self.sw_area * np.asarray(phys, float)[self.sw_param]
+        return np.ascontiguousarray(np.column_stack([dg / self.capacity[self.swi[:, 0]],
+                                                     dg / self.capacity[self.swi[:, 1]]])
+                                    if len(dg) else np.zeros((0, 2)))
+
     def bound(self, theta: np.ndarray) -> float:
-        """Spectral bound L [1/s] of A(theta) at the spans' largest airflows."""
+        """Spectral bound L [1/s] of A(theta) at the spans' largest airflows (the films'
+        stiffest regimes)."""
 
         phys = np.asarray(theta, float)[:self.n_phys]
         n = len(self.capacity)
         A = sp.csr_matrix((self.d0 + phys @ self.dp, self.indices, self.indptr), shape=(n, n))
+        A = A + switched_matrix(n, self.swi, self.switch_gains(phys))
         return tight_bound(A, self.rooms, self.bxu, self.u_max[None, :], self.capacity,
                            ret=self.ret, retc=self.retc)
 
@@ -501,6 +525,7 @@ class _Problem:
                 self.rooms, self.bxu, self.ret, self.retc, self.u_max, L)
         coef = chebyshev_coefficients(r, rho=self._rho)
         Bv = self.bv0 + np.tensordot(phys, self.bvp, axes=1)
+        swg = self.switch_gains(phys)
         out = []
         for i, ((a, b), x0, rh) in enumerate(zip(self.spans, self.x0s, self.rh)):
             u, v = self.data.u[a:b], self.data.v[a:b]
@@ -511,8 +536,8 @@ class _Problem:
                 x0 = x0 + self.x0_basis @ offsets
             xs = np.empty((b - a + 1, n))
             _run(self.indptr, self.indices, data_vals, self.rooms, self.bxu, self.ret, self.retc,
-                 np.ascontiguousarray(x0, float), np.ascontiguousarray(u, float),
-                 np.ascontiguousarray(forcing), np.ascontiguousarray(v[:, 1]),
+                 self.swi, swg, np.ascontiguousarray(x0, float), np.ascontiguousarray(u, float),
+                 self.modes[i], np.ascontiguousarray(forcing), np.ascontiguousarray(v[:, 1]),
                  float(self.model.step), float(r), coef, xs)
             out.append(xs[1:] @ self.C.T)
         self.n_evaluations += 1
@@ -577,12 +602,13 @@ class _Problem:
             self.simulate(theta, L)  # sets rho (the first evaluation always comes first)
         coef = chebyshev_coefficients(r, rho=self._rho)
         bcols = np.ascontiguousarray(bcols, dtype=float)
+        swg = self.switch_gains(phys)
         out = []
-        for (a, b), w in zip(self.spans, weights):
+        for (a, b), w, modes in zip(self.spans, weights, self.modes):
             u = np.ascontiguousarray(self.data.u[a:b], dtype=float)
             xs = np.empty((b - a + 1, n, m))
             _run_block(self.indptr, self.indices, data_vals, self.rooms, self.bxu, self.ret,
-                       self.retc, np.array(x0, dtype=float), u, bcols,
+                       self.retc, self.swi, swg, np.array(x0, dtype=float), u, modes, bcols,
                        np.ascontiguousarray(w, dtype=float), np.zeros(b - a),
                        float(self.model.step), float(r), coef, xs)
             dy = np.einsum("oi,kiz->koz", self.C, xs[1:])

@@ -95,9 +95,13 @@ def chebyshev_coefficients(r: float, tol: float = TOL, rho: float = 1.0) -> np.n
 
 
 @njit(cache=True, nogil=True)
-def _return_terms(rooms, ret, retc, u, scale, dd):
+def _return_terms(rooms, ret, retc, u, swi, swg, mode, scale, dd):
     # the plenums' outflow added to the diagonal dd (in place) and the rooms' inflow into
-    # each plenum row as CSR lists: row pointers cnt, source rooms rr, scaled gains rg
+    # each plenum row as CSR lists: row pointers cnt, source rooms rr, scaled gains rg; then
+    # the switched links active at this step (swi[e] = state a, state b, mode column; swg[e]
+    # = the link's extra conductance over C_a and over C_b [1/s] at mode 1): their diagonal
+    # in dd and their two off-diagonal entries in the same lists. Without switched links the
+    # lists, and so the arithmetic, are those of the return air alone.
     n = dd.shape[0]
     cnt = np.zeros(n + 1, dtype=np.int64)
     m = 0
@@ -107,6 +111,16 @@ def _return_terms(rooms, ret, retc, u, scale, dd):
             dd[p] -= retc[j] * u[j]
             cnt[p + 1] += 1
             m += 1
+    for e in range(swi.shape[0]):
+        w = mode[swi[e, 2]]
+        if w != 0.0:
+            a = swi[e, 0]
+            b = swi[e, 1]
+            dd[a] -= swg[e, 0] * w
+            dd[b] -= swg[e, 1] * w
+            cnt[a + 1] += 1
+            cnt[b + 1] += 1
+            m += 2
     for i in range(n):
         cnt[i + 1] += cnt[i]
     rr = np.empty(m, dtype=np.int64)
@@ -118,11 +132,23 @@ def _return_terms(rooms, ret, retc, u, scale, dd):
             rr[fill[p]] = rooms[j]
             rg[fill[p]] = retc[j] * u[j] * scale
             fill[p] += 1
+    for e in range(swi.shape[0]):
+        w = mode[swi[e, 2]]
+        if w != 0.0:
+            a = swi[e, 0]
+            b = swi[e, 1]
+            rr[fill[a]] = b
+            rg[fill[a]] = swg[e, 0] * w * scale
+            fill[a] += 1
+            rr[fill[b]] = a
+            rg[fill[b]] = swg[e, 1] * w * scale
+            fill[b] += 1
     return cnt, rr, rg
 
 
 @njit(cache=True, nogil=True)
-def _step(indptr, indices, data, rooms, bxu, ret, retc, x, u, b_fixed, ts, h, r, coef, out):
+def _step(indptr, indices, data, rooms, bxu, ret, retc, swi, swg, x, u, mode, b_fixed, ts, h, r,
+          coef, out):
     n = x.shape[0]
     # t = 1 + M h / r acting on [w; c] (the augmented component c is 1 for every T_k);
     # the scaled generator (A + diag(dd)) h / r and forcing b h / r are formed once
@@ -138,7 +164,7 @@ def _step(indptr, indices, data, rooms, bxu, ret, retc, x, u, b_fixed, ts, h, r,
     # leaving (diagonal) and the room's air entering (off-diagonal entries of the plenum's
     # row, per step: cnt/rr/rg in CSR form, added inside each row's product; empty without
     # return air, which leaves the arithmetic of the symmetric model unchanged)
-    cnt, rr, rg = _return_terms(rooms, ret, retc, u, scale, dd)
+    cnt, rr, rg = _return_terms(rooms, ret, retc, u, swi, swg, mode, scale, dd)
     for i in range(n):
         diag[i] = 1.0 + dd[i] * scale
     d = data * scale
@@ -171,7 +197,8 @@ def _step(indptr, indices, data, rooms, bxu, ret, retc, x, u, b_fixed, ts, h, r,
 
 
 @njit(cache=True, nogil=True)
-def _block(indptr, indices, data, rooms, bxu, ret, retc, u, X, bcols, sk, ts, h, r, coef, out):
+def _block(indptr, indices, data, rooms, bxu, ret, retc, swi, swg, u, mode, X, bcols, sk, ts, h, r,
+           coef, out):
     # out = one step of _step for m states at once: column c starts at X[:, c] and is forced
     # by bcols[:, c] * sk[c] (plus the supply-air term with ts); the series of _step with the
     # same arithmetic per column, the rows' columns contiguous (the inner loops vectorise)
@@ -184,7 +211,7 @@ def _block(indptr, indices, data, rooms, bxu, ret, retc, u, X, bcols, sk, ts, h,
     for i in range(n):
         for c in range(m):
             b[i, c] = (bcols[i, c] * sk[c] - dd[i] * ts) * scale
-    cnt, rr, rg = _return_terms(rooms, ret, retc, u, scale, dd)
+    cnt, rr, rg = _return_terms(rooms, ret, retc, u, swi, swg, mode, scale, dd)
     diag = np.empty(n)
     for i in range(n):
         diag[i] = 1.0 + dd[i] * scale
@@ -226,16 +253,16 @@ def _block(indptr, indices, data, rooms, bxu, ret, retc, u, X, bcols, sk, ts, h,
 
 
 @njit(cache=True, nogil=True)
-def _run_block(indptr, indices, data, rooms, bxu, ret, retc, X0, u, bcols, s, ts, h, r, coef,
-               xs):
+def _run_block(indptr, indices, data, rooms, bxu, ret, retc, swi, swg, X0, u, modes, bcols, s, ts,
+               h, r, coef, xs):
     xs[0] = X0
     for k in range(u.shape[0]):
-        _block(indptr, indices, data, rooms, bxu, ret, retc, u[k], xs[k], bcols, s[k], ts[k],
-               h, r, coef, xs[k + 1])
+        _block(indptr, indices, data, rooms, bxu, ret, retc, swi, swg, u[k], modes[k], xs[k],
+               bcols, s[k], ts[k], h, r, coef, xs[k + 1])
 
 
 @njit(cache=True, nogil=True)
-def _columns(indptr, indices, data, rooms, bxu, ret, retc, u, B, h, r, coef, out):
+def _columns(indptr, indices, data, rooms, bxu, ret, retc, swi, swg, u, mode, B, h, r, coef, out):
     # out[:, j] = Gamma B[:, j]: the response after one step of a zero state to the unit
     # forcing B[:, j] held over the step (supply-temperature term off)
     n = B.shape[0]
@@ -245,17 +272,19 @@ def _columns(indptr, indices, data, rooms, bxu, ret, retc, u, B, h, r, coef, out
     for j in range(B.shape[1]):
         for i in range(n):
             col[i] = B[i, j]
-        _step(indptr, indices, data, rooms, bxu, ret, retc, zero, u, col, 0.0, h, r, coef, res)
+        _step(indptr, indices, data, rooms, bxu, ret, retc, swi, swg, zero, u, mode, col, 0.0, h, r,
+              coef, res)
         for i in range(n):
             out[i, j] = res[i]
 
 
 @njit(cache=True, nogil=True)
-def _run(indptr, indices, data, rooms, bxu, ret, retc, x0, u, b_fixed, ts, h, r, coef, xs):
+def _run(indptr, indices, data, rooms, bxu, ret, retc, swi, swg, x0, u, modes, b_fixed, ts, h, r,
+         coef, xs):
     xs[0] = x0
     for k in range(u.shape[0]):
-        _step(indptr, indices, data, rooms, bxu, ret, retc, xs[k], u[k], b_fixed[k], ts[k], h, r,
-              coef, xs[k + 1])
+        _step(indptr, indices, data, rooms, bxu, ret, retc, swi, swg, xs[k], u[k], modes[k],
+              b_fixed[k], ts[k], h, r, coef, xs[k + 1])
 
 
 def _no_returns(n_boxes: int) -> tuple[np.ndarray, np.ndarray]:
@@ -266,6 +295,39 @@ def _returns(ret, retc, n_boxes: int) -> tuple[np.ndarray, np.ndarray]:
     if ret is None:
         return _no_returns(n_boxes)
     return np.ascontiguousarray(ret, dtype=np.int64), np.ascontiguousarray(retc, dtype=float)
+
+
+def no_switches() -> tuple[np.ndarray, np.ndarray]:
+    """Empty switched links (:class:`ExactStepper`'s ``switched``): swi (0, 3), swg (0, 2)."""
+    return np.zeros((0, 3), dtype=np.int64), np.zeros((0, 2))
+
+
+def _switches(switched) -> tuple[np.ndarray, np.ndarray]:
+    if switched is None:
+        return no_switches()
+    swi, swg = switched
+    swi = np.ascontiguousarray(np.reshape(swi, (-1, 3)), dtype=np.int64)
+    swg = np.ascontiguousarray(np.reshape(swg, (-1, 2)), dtype=float)
+    if len(swi) != len(swg):
+        raise ValueError("switched links: one row of gains per row of indices")
+    if not np.isfinite(swg).all():
+        raise ValueError("switched links: gains must be finite")
+    return swi, swg
+
+
+def switched_matrix(n: int, swi: np.ndarray, swg: np.ndarray,
+                    mode: np.ndarray | None = None) -> sp.csr_matrix:
+    """The switched links' part of A [1/s] with the modes ``mode`` (default: every link on
+    whose extra conductance is positive, the stiffest case: the spectral bound's)."""
+    if len(swi) == 0:
+        return sp.csr_matrix((n, n))
+    w = (swg[:, 0] > 0).astype(float) if mode is None else np.asarray(mode, float)[swi[:, 2]]
+    a, b = swi[:, 0], swi[:, 1]
+    ga, gb = swg[:, 0] * w, swg[:, 1] * w
+    rows = np.concatenate([a, a, b, b])
+    cols = np.concatenate([a, b, b, a])
+    vals = np.concatenate([-ga, ga, -gb, gb])
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
 
 
 def spectral_bound(A, rooms: np.ndarray, bxu: np.ndarray, u: np.ndarray,
@@ -328,7 +390,8 @@ def tight_bound(A, rooms: np.ndarray, bxu: np.ndarray, u: np.ndarray, capacity: 
 def simulate_exact(A, rooms: np.ndarray, bxu: np.ndarray, x0: np.ndarray, u: np.ndarray,
                    b_fixed: np.ndarray, ts: np.ndarray, h: float, tol: float = TOL,
                    capacity: np.ndarray | None = None, ret: np.ndarray | None = None,
-                   retc: np.ndarray | None = None) -> np.ndarray:
+                   retc: np.ndarray | None = None, switched=None,
+                   modes: np.ndarray | None = None) -> np.ndarray:
     """States (N + 1, n) [degC] of the model stepped exactly with inputs held per step.
 
     Parameters
@@ -346,26 +409,42 @@ def simulate_exact(A, rooms: np.ndarray, bxu: np.ndarray, x0: np.ndarray, u: np.
         from the symmetric form's extreme eigenvalue (fewer terms), else from Gershgorin.
     ret, retc : (n_boxes,) each box's return plenum state (-1: none) and c_p / C_plenum
         (:attr:`~.rc.network.RCStructure.returns`); default none.
+    switched, modes : switched links and their modes per step ((N, n_modes), 0 or 1), as
+        :class:`ExactStepper`; default none.
     """
     ret, retc = _returns(ret, retc, len(rooms))
+    swi, swg = _switches(switched)
     As = sp.csr_matrix(A)
     As.sum_duplicates()
     u = np.ascontiguousarray(u, dtype=float)
     if np.any(u < 0):
         raise ValueError("airflows u must be >= 0 kg/s")
-    L = (tight_bound(As, rooms, bxu, u, capacity, ret=ret, retc=retc) if capacity is not None
-         else spectral_bound(As, rooms, bxu, u, ret, retc))
+    Ab = As + switched_matrix(As.shape[0], swi, swg)  # the stiffest modes bound the spectrum
+    L = (tight_bound(Ab, rooms, bxu, u, capacity, ret=ret, retc=retc) if capacity is not None
+         else spectral_bound(Ab, rooms, bxu, u, ret, retc))
     r = max(L * h / 2.0, 1e-12)
-    coef = chebyshev_coefficients(r, tol, return_rho(As, rooms, bxu, ret, retc,
+    coef = chebyshev_coefficients(r, tol, return_rho(Ab, rooms, bxu, ret, retc,
                                                       np.max(u, axis=0), L))
     if len(coef) < 2:
         coef = np.append(coef, 0.0)
     xs = np.empty((len(u) + 1, As.shape[0]))
     _run(As.indptr.astype(np.int64), As.indices.astype(np.int64), As.data.astype(np.float64),
          np.ascontiguousarray(rooms, dtype=np.int64), np.ascontiguousarray(bxu, float),
-         ret, retc, np.ascontiguousarray(x0, float), u, np.ascontiguousarray(b_fixed, float),
+         ret, retc, swi, swg, np.ascontiguousarray(x0, float), u,
+         _mode_rows(modes, len(u), swi), np.ascontiguousarray(b_fixed, float),
          np.ascontiguousarray(ts, float), float(h), float(r), coef, xs)
     return xs
+
+
+def _mode_rows(modes, N: int, swi: np.ndarray) -> np.ndarray:
+    """(N, n_modes) modes as the kernels take them: zeros (every link off) when None."""
+    width = int(swi[:, 2].max()) + 1 if len(swi) else 0
+    if modes is None:
+        return np.zeros((N, width))
+    modes = np.ascontiguousarray(np.reshape(modes, (N, -1)), dtype=float)
+    if modes.shape[1] < width:
+        raise ValueError(f"modes have {modes.shape[1]} columns, the switched links use {width}")
+    return modes
 
 
 class ExactStepper:
@@ -376,40 +455,59 @@ class ExactStepper:
     ----------
     A, rooms, bxu, h, capacity, ret, retc : as :func:`simulate_exact`
     u_max : (n_boxes,) the largest airflows [kg/s] that will be stepped (bounds the spectrum)
+    switched : (swi, swg), optional
+        Links whose conductance changes with a known mode (the inside films' convection
+        regime, :attr:`~.rc.network.RCStructure.switched`): ``swi`` (k, 3) the two states
+        and the mode column of each link, ``swg`` (k, 2) its extra conductance over the
+        first and the second state's capacity [1/s] when its mode is 1 (negative: weaker).
+        The methods take the mode of each column per step (``mode``/``modes``; default 0,
+        every link as in A). The series' bound covers every combination of modes.
     """
 
     def __init__(self, A, rooms, bxu, h: float, u_max: np.ndarray,
                  capacity: np.ndarray | None = None, tol: float = TOL,
-                 ret: np.ndarray | None = None, retc: np.ndarray | None = None):
+                 ret: np.ndarray | None = None, retc: np.ndarray | None = None,
+                 switched=None):
         self.A = sp.csr_matrix(A, dtype=float)
         self.A.sum_duplicates()
         self.rooms = np.ascontiguousarray(rooms, dtype=np.int64)
         self.bxu = np.ascontiguousarray(bxu, dtype=float)
         self.ret, self.retc = _returns(ret, retc, len(self.rooms))
+        self.swi, self.swg = _switches(switched)
+        self.n_modes = int(self.swi[:, 2].max()) + 1 if len(self.swi) else 0
         self.u_max = np.asarray(u_max, dtype=float)
         um = self.u_max[None, :]
-        L = (tight_bound(self.A, self.rooms, self.bxu, um, capacity, ret=self.ret,
+        Ab = self.A + switched_matrix(self.A.shape[0], self.swi, self.swg)
+        L = (tight_bound(Ab, self.rooms, self.bxu, um, capacity, ret=self.ret,
                          retc=self.retc) if capacity is not None
-             else spectral_bound(self.A, self.rooms, self.bxu, um, self.ret, self.retc))
+             else spectral_bound(Ab, self.rooms, self.bxu, um, self.ret, self.retc))
         self.h = float(h)
         self.r = max(L * h / 2.0, 1e-12)
         self.coef = chebyshev_coefficients(self.r, tol, return_rho(
-            self.A, self.rooms, self.bxu, self.ret, self.retc, self.u_max, L))
+            Ab, self.rooms, self.bxu, self.ret, self.retc, self.u_max, L))
         if len(self.coef) < 2:
             self.coef = np.append(self.coef, 0.0)
         self._ip = self.A.indptr.astype(np.int64)
         self._ix = self.A.indices.astype(np.int64)
         self._d = self.A.data.astype(np.float64)
 
-    def step(self, x: np.ndarray, u: np.ndarray, b_fixed: np.ndarray, ts: float) -> np.ndarray:
-        """x(k+1) [degC] from x(k) with airflows ``u`` [kg/s], forcing ``b_fixed`` [K/s] and
-        supply temperature ``ts`` [degC] held over the step."""
+    def step(self, x: np.ndarray, u: np.ndarray, b_fixed: np.ndarray, ts: float,
+             mode: np.ndarray | None = None) -> np.ndarray:
+        """x(k+1) [degC] from x(k) with airflows ``u`` [kg/s], forcing ``b_fixed`` [K/s],
+        supply temperature ``ts`` [degC] and the switched links' ``mode`` held over the
+        step."""
         u = self._check(u)
         out = np.empty_like(np.asarray(x, dtype=float))
-        _step(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc,
-              np.ascontiguousarray(x, dtype=float), u, np.ascontiguousarray(b_fixed, float),
-              float(ts), self.h, self.r, self.coef, out)
+        _step(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc, self.swi,
+              self.swg, np.ascontiguousarray(x, dtype=float), u, self._mode(mode),
+              np.ascontiguousarray(b_fixed, float), float(ts), self.h, self.r, self.coef, out)
         return out
+
+    def _mode(self, mode) -> np.ndarray:
+        return _mode_rows(mode, 1, self.swi)[0]
+
+    def _modes(self, modes, N: int) -> np.ndarray:
+        return _mode_rows(modes, N, self.swi)
 
     def _check(self, u: np.ndarray) -> np.ndarray:
         u = np.ascontiguousarray(u, dtype=float)
@@ -419,30 +517,32 @@ class ExactStepper:
         return u
 
     def run(self, x0: np.ndarray, u: np.ndarray, b_fixed: np.ndarray,
-            ts: np.ndarray) -> np.ndarray:
+            ts: np.ndarray, modes: np.ndarray | None = None) -> np.ndarray:
         """States (N + 1, n) [degC] from ``x0`` over N steps with inputs held per step
-        (rows of ``u`` [kg/s], ``b_fixed`` [K/s], ``ts`` [degC]); one compiled call, the
-        same arithmetic as N calls of :meth:`step`."""
+        (rows of ``u`` [kg/s], ``b_fixed`` [K/s], ``ts`` [degC], ``modes``); one compiled
+        call, the same arithmetic as N calls of :meth:`step`."""
         u = self._check(np.atleast_2d(u))
         xs = np.empty((len(u) + 1, self.A.shape[0]))
-        _run(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc,
-             np.ascontiguousarray(x0, dtype=float), u, np.ascontiguousarray(b_fixed, float),
-             np.ascontiguousarray(ts, float), self.h, self.r, self.coef, xs)
+        _run(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc, self.swi,
+             self.swg, np.ascontiguousarray(x0, dtype=float), u, self._modes(modes, len(u)),
+             np.ascontiguousarray(b_fixed, float), np.ascontiguousarray(ts, float), self.h,
+             self.r, self.coef, xs)
         return xs
 
-    def propagator(self, u: np.ndarray) -> np.ndarray:
+    def propagator(self, u: np.ndarray, mode: np.ndarray | None = None) -> np.ndarray:
         """``Phi(u) = exp(A(u) h)`` (n, n) as a dense matrix, by the step's series applied to
         the identity (for filters that propagate a covariance): no eigendecomposition, a
         few milliseconds for ~400 states."""
         u = self._check(u)
         n = self.A.shape[0]
         out = np.empty((n, n))
-        _block(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc, u,
-               np.eye(n), np.zeros((n, n)), np.zeros(n), 0.0, self.h, self.r, self.coef, out)
+        _block(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc, self.swi,
+               self.swg, u, self._mode(mode), np.eye(n), np.zeros((n, n)), np.zeros(n), 0.0,
+               self.h, self.r, self.coef, out)
         return out
 
     def run_columns(self, X0: np.ndarray, u: np.ndarray, bcols: np.ndarray, s: np.ndarray,
-                    ts: np.ndarray) -> np.ndarray:
+                    ts: np.ndarray, modes: np.ndarray | None = None) -> np.ndarray:
         """States (N + 1, n, m) [degC] of m simulations that share the airflows: column c
         starts at ``X0[:, c]`` and is forced by ``bcols[:, c] * s[k, c]`` [K/s] at step k
         (plus the supply-air term with ``ts`` [degC]). Column c equals :meth:`run` with
@@ -452,13 +552,14 @@ class ExactStepper:
         X0 = np.ascontiguousarray(X0, dtype=float)
         n, m = X0.shape
         xs = np.empty((len(u) + 1, n, m))
-        _run_block(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc, X0,
-                   u, np.ascontiguousarray(bcols, dtype=float),
+        _run_block(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc,
+                   self.swi, self.swg, X0, u, self._modes(modes, len(u)),
+                   np.ascontiguousarray(bcols, dtype=float),
                    np.ascontiguousarray(s, dtype=float), np.ascontiguousarray(ts, float),
                    self.h, self.r, self.coef, xs)
         return xs
 
-    def columns(self, u: np.ndarray, B: np.ndarray) -> np.ndarray:
+    def columns(self, u: np.ndarray, B: np.ndarray, mode: np.ndarray | None = None) -> np.ndarray:
         """``Gamma(u) B`` (n, m): the one-step response of a zero state to each column of
         ``B`` [K/s per unit] held over the step, i.e. the discrete input matrix
         ``int_0^h exp(A(u) s) ds B`` of that forcing (paper eq:model_dt's B_IG for
@@ -466,8 +567,8 @@ class ExactStepper:
         u = self._check(u)
         B = np.ascontiguousarray(B, dtype=float)
         out = np.empty(B.shape)
-        _columns(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc, u, B,
-                 self.h, self.r, self.coef, out)
+        _columns(self._ip, self._ix, self._d, self.rooms, self.bxu, self.ret, self.retc, self.swi,
+                 self.swg, u, self._mode(mode), B, self.h, self.r, self.coef, out)
         return out
 
 
@@ -481,7 +582,7 @@ class StepperLadder:
 
     Parameters
     ----------
-    A, rooms, bxu, h, capacity : as :func:`simulate_exact`
+    A, rooms, bxu, h, capacity, ret, retc, switched : as :class:`ExactStepper`
     u_base : float
         Airflow bound of level 0 [kg/s per box], > 0.
     fixed : array (n_boxes,), optional
@@ -494,7 +595,7 @@ class StepperLadder:
 
     def __init__(self, A, rooms, bxu, h: float, capacity: np.ndarray | None, u_base: float,
                  fixed: np.ndarray | None = None, ret: np.ndarray | None = None,
-                 retc: np.ndarray | None = None):
+                 retc: np.ndarray | None = None, switched=None):
         if not u_base > 0:
             raise ValueError(f"u_base must be > 0 kg/s, got {u_base}")
         self.A = sp.csr_matrix(A, dtype=float)
@@ -503,6 +604,7 @@ class StepperLadder:
         self.h = float(h)
         self.capacity = capacity
         self.ret, self.retc = _returns(ret, retc, len(self.rooms))
+        self.switched = switched
         self.u_base = float(u_base)
         self.fixed = (np.zeros(len(self.rooms)) if fixed is None
                       else np.asarray(fixed, dtype=float))
@@ -531,6 +633,6 @@ class StepperLadder:
             top = self.u_base * 2.0**k
             bound = np.where(self._free, top, np.maximum(self.fixed, top))
             st = ExactStepper(self.A, self.rooms, self.bxu, self.h, bound, self.capacity,
-                              ret=self.ret, retc=self.retc)
+                              ret=self.ret, retc=self.retc, switched=self.switched)
             self._levels[k] = st
         return st

@@ -43,7 +43,7 @@ def stepper_for(model: BilinearModel, u: np.ndarray) -> ExactStepper:
     """An :class:`ExactStepper` of ``model`` valid for airflows up to the max of ``u``."""
     return ExactStepper(model.structure.A(model.params.physical), model._rooms, model._bxu,
                         model.step, np.max(u, axis=0), capacity=model.structure.capacity,
-                        ret=model._ret, retc=model._retc)
+                        ret=model._ret, retc=model._retc, switched=model.switched)
 
 
 def track_gains(model: BilinearModel, data: ModelData, start: int, stop: int,
@@ -54,6 +54,7 @@ def track_gains(model: BilinearModel, data: ModelData, start: int, stop: int,
     base = (data.v[start:stop] @ model.Bv.T + model.params.c_ig @ model.B_ig.T
             + model.reheat_forcing(data.u[start:stop], data.reheat[start:stop]))
     N = stop - start
+    modes = model.modes(data.u[start:stop], data.reheat[start:stop])
     f = np.zeros((N, nz))
     cb = np.zeros((N, nz, nz))
     xs = np.empty((N + 1, n))
@@ -62,8 +63,9 @@ def track_gains(model: BilinearModel, data: ModelData, start: int, stop: int,
     prev = np.zeros(nz)
     for i in range(N):
         k = start + i
-        xt = st.step(x, data.u[k], base[i], data.v[k, 1])
-        gam = st.columns(data.u[k], model.B_ig)
+        mode = None if modes is None else modes[i]
+        xt = st.step(x, data.u[k], base[i], data.v[k, 1], mode)
+        gam = st.columns(data.u[k], model.B_ig, mode)
         cb[i] = model.C @ gam
         y_meas = data.y[k + 1] if k + 1 < len(data) else np.full(nz, np.nan)
         if np.isfinite(y_meas).any():

@@ -40,7 +40,13 @@ import scipy.linalg as sla
 from zonecast.estimator.constants import STEP_S
 from zonecast.estimator.idf import Building
 from zonecast.estimator.integrate import simulate_exact
-from zonecast.estimator.rc.network import DISTURBANCES, ModelOptions, RCStructure, build_structure
+from zonecast.estimator.rc.network import (
+    DISTURBANCES,
+    REGIME_RISE,
+    ModelOptions,
+    RCStructure,
+    build_structure,
+)
 from zonecast.estimator.rc.parameters import ParameterSet
 
 __all__ = ["BilinearModel", "DiscreteBilinear", "SimulationResult", "write_model_summary"]
@@ -158,6 +164,22 @@ class BilinearModel:
         self._sq = np.sqrt(cap)
         self._isq = 1.0 / self._sq
         self._fixed: DiscreteBilinear | None = None
+        # films switched by their room's convection regime (RCStructure.switched): the
+        # extra conductance dg [W/K] of each link at mode 1, with the current parameters
+        sw = structure.switched
+        if sw:
+            self._swi = np.ascontiguousarray(sw["links"], dtype=np.int64)
+            self._sw_dg = (np.asarray(sw["factor"]) - 1.0) * np.asarray(sw["area"]) \
+                * theta[np.asarray(sw["param"])]
+            self._swg = np.column_stack([self._sw_dg / cap[self._swi[:, 0]],
+                                         self._sw_dg / cap[self._swi[:, 1]]])
+            self._mode_col = structure.mode_of_box()
+            self.n_modes = len(sw["rooms"])
+        else:
+            self._swi, self._swg = np.zeros((0, 3), np.int64), np.zeros((0, 2))
+            self._sw_dg = np.zeros(0)
+            self._mode_col = np.full(len(structure.boxes), -1, dtype=np.int64)
+            self.n_modes = 0
 
     def with_params(self, values: Mapping[str, float] | Sequence[float] | ParameterSet) -> BilinearModel:
         """Same structure, new parameter values (cheap: A = A0 + sum theta_p A_p)."""
@@ -179,6 +201,39 @@ class BilinearModel:
     def n_zones(self) -> int:
         return len(self.structure.zones)
 
+    # convection regimes ----------------------------------------------------------
+    @property
+    def switched(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The switched links as :class:`~zonecast.estimator.integrate.ExactStepper` takes
+        them (``switched=``), None when the structure has none."""
+        return (self._swi, self._swg) if self.n_modes else None
+
+    def modes(self, u: np.ndarray, reheat: np.ndarray | None) -> np.ndarray | None:
+        """Mode of each room's films per step ((N, n_modes) or (n_modes,), 0 or 1): 1 while
+        a box of the room with airflow blows air :data:`~.rc.network.REGIME_RISE` above the
+        supply air (``reheat`` [K], as :meth:`reheat_forcing`); None without switched
+        links."""
+        if not self.n_modes:
+            return None
+        u = np.asarray(u, dtype=float)
+        out = np.zeros(u.shape[:-1] + (self.n_modes,))
+        if reheat is None:
+            return out
+        on = (np.asarray(reheat, dtype=float) > REGIME_RISE) & (u > 0)
+        has = self._mode_col >= 0
+        if u.ndim == 1:
+            out[self._mode_col[has][on[has]]] = 1.0
+        else:
+            rows, cols = np.nonzero(on[:, has])
+            out[rows, self._mode_col[has][cols]] = 1.0
+        return out
+
+    def _mode_key(self, mode) -> bytes:
+        if not self.n_modes:
+            return b""
+        m = np.zeros(self.n_modes) if mode is None else np.asarray(mode, dtype=float)
+        return np.ascontiguousarray(m, dtype=float).tobytes()
+
     # continuous matrices ------------------------------------------------------
     def Bxu(self, j: int) -> np.ndarray:
         """Continuous B_xu_j [1/(s kg/s)] (paper eq:ct_model); nonzero at the room and, with a
@@ -198,10 +253,18 @@ class BilinearModel:
         out[self._rooms[j], 1] = -self._bxu[j]
         return out
 
-    def system_matrix(self, u: np.ndarray) -> np.ndarray:
-        """A + sum_j u_j B_xu_j [1/s] (return air included exactly)."""
+    def system_matrix(self, u: np.ndarray, mode: np.ndarray | None = None) -> np.ndarray:
+        """A + sum_j u_j B_xu_j [1/s] (return air included exactly), with the switched
+        films of ``mode`` (:meth:`modes`; default every room in its usual regime)."""
         m = self.A.copy()
         u = np.asarray(u, dtype=float)
+        if self.n_modes and mode is not None:
+            w = np.asarray(mode, dtype=float)[self._swi[:, 2]]
+            a, b = self._swi[:, 0], self._swi[:, 1]
+            np.add.at(m, (a, a), -self._swg[:, 0] * w)
+            np.add.at(m, (a, b), self._swg[:, 0] * w)
+            np.add.at(m, (b, b), -self._swg[:, 1] * w)
+            np.add.at(m, (b, a), self._swg[:, 1] * w)
         np.add.at(m, (self._rooms, self._rooms), self._bxu * u)
         if self._has_ret:
             has = self._ret >= 0
@@ -225,16 +288,25 @@ class BilinearModel:
         )
 
     # exact zero-order hold -----------------------------------------------------
-    def _stiffness(self, u: np.ndarray) -> np.ndarray:
-        """Symmetric K(u) = -Cap (A + sum_j u_j B_xu_j) [W/K], stacked over rows of u."""
+    def _stiffness(self, u: np.ndarray, modes: np.ndarray | None = None) -> np.ndarray:
+        """Symmetric K(u) = -Cap (A + sum_j u_j B_xu_j) [W/K], stacked over rows of u, with
+        the switched films of the rows of ``modes``."""
         u = np.atleast_2d(u)
         k = np.broadcast_to(self._k0, (len(u), self.n, self.n)).copy()
         d = -self.structure.capacity[self._rooms] * self._bxu * u  # c_p u_j [W/K]
         for j, r in enumerate(self._rooms):
             k[:, r, r] += d[:, j]
+        if self.n_modes and modes is not None:
+            g = np.atleast_2d(modes)[:, self._swi[:, 2]] * self._sw_dg  # (N, links) [W/K]
+            for e, (a, b, _) in enumerate(self._swi):
+                k[:, a, a] += g[:, e]
+                k[:, b, b] += g[:, e]
+                k[:, a, b] -= g[:, e]
+                k[:, b, a] -= g[:, e]
         return k
 
-    def _propagators(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _propagators(self, u: np.ndarray,
+                     modes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Exact Phi = e^{M h} and Gamma = int_0^h e^{M s} ds for rows of u (batched).
 
         M(u) = -Cap^-1 K(u) with K symmetric, so with S = Cap^-1/2 K Cap^-1/2 = Q L Q^T:
@@ -243,8 +315,8 @@ class BilinearModel:
         symmetric: :meth:`_propagators_general`.
         """
         if self._general:
-            return self._propagators_general(np.atleast_2d(u))
-        s = self._isq[None, :, None] * self._stiffness(u) * self._isq[None, None, :]
+            return self._propagators_general(np.atleast_2d(u), modes)
+        s = self._isq[None, :, None] * self._stiffness(u, modes) * self._isq[None, None, :]
         lam, q = np.linalg.eigh(s)
         lam = np.maximum(lam, 0.0)
         h = self.step
@@ -257,7 +329,8 @@ class BilinearModel:
         gam = np.matmul(left * integral[:, None, :], qt_c)
         return phi, gam
 
-    def _propagators_general(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _propagators_general(self, u: np.ndarray,
+                             modes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Phi and Gamma of :meth:`_propagators` for a generator that is not symmetric (return
         air): Phi = e^{M h} by scaling and squaring (:func:`scipy.linalg.expm`) and
         Gamma = M^-1 (Phi - I) from an LU factorisation of M, which is nonsingular when every
@@ -268,14 +341,16 @@ class BilinearModel:
         phis, gams = [], []
         eye = np.eye(self.n)
         h = self.step
-        for row in u:
-            m = self.system_matrix(row)
+        for i, row in enumerate(u):
+            mode = None if modes is None else np.atleast_2d(modes)[i]
+            m = self.system_matrix(row) if mode is None else self.system_matrix(row, mode)
             with warnings.catch_warnings():  # a singular M is handled below
                 warnings.simplefilter("ignore", sla.LinAlgWarning)
                 lu, piv = sla.lu_factor(m, check_finite=False)
             pivots = np.abs(np.diag(lu))
             if pivots.min() <= 1e-10 * pivots.max():
-                phi, gam = self._propagators_eig(row[None, :])
+                phi, gam = self._propagators_eig(
+                    row[None, :], None if mode is None else mode[None, :])
                 phis.append(phi[0])
                 gams.append(gam[0])
                 continue
@@ -284,12 +359,14 @@ class BilinearModel:
             gams.append(sla.lu_solve((lu, piv), phi - eye, check_finite=False))
         return np.stack(phis), np.stack(gams)
 
-    def _propagators_eig(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _propagators_eig(self, u: np.ndarray,
+                         modes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Phi and Gamma of a non-symmetric generator from its eigendecomposition:
         S = Cap^1/2 M Cap^-1/2 = V diag(lam) V^-1 (nearly symmetric, well conditioned),
         e^{M h} = Cap^-1/2 V e^{lam h} V^-1 Cap^1/2, Gamma likewise with (e^{lam h} - 1) / lam
         (also right for a singular M, lam = 0 giving h)."""
-        mats = np.stack([self.system_matrix(row) for row in u])
+        mats = np.stack([self.system_matrix(row) if modes is None
+                         else self.system_matrix(row, modes[i]) for i, row in enumerate(u)])
         s = self._sq[None, :, None] * mats * self._isq[None, None, :]
         lam, vec = np.linalg.eig(s)
         inv = np.linalg.inv(vec)
@@ -304,11 +381,13 @@ class BilinearModel:
         gam = np.real(np.matmul(left * integral[:, None, :], right))
         return phi, gam
 
-    def _lookup(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        key = np.ascontiguousarray(u, dtype=float).tobytes()
+    def _lookup(self, u: np.ndarray, mode: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+        key = np.ascontiguousarray(u, dtype=float).tobytes() + self._mode_key(mode)
         hit = self._cache.get(key)
         if hit is None:
-            phi, gam = self._propagators(u[None, :])
+            phi, gam = self._propagators(
+                u[None, :], None if mode is None or not self.n_modes else np.atleast_2d(mode))
             hit = (phi[0], gam[0])
             self._store(key, hit)
         else:
@@ -323,12 +402,17 @@ class BilinearModel:
     def _batch(self) -> int:
         return max(1, int(2e7 // (self.n * self.n)))  # ~160 MB of float64 per batch
 
-    def _chunk_propagators(self, u: np.ndarray) -> dict[bytes, tuple[np.ndarray, np.ndarray]]:
-        """Propagators of all distinct rows of u (cache first, the rest batched)."""
+    def _chunk_propagators(self, u: np.ndarray, modes: np.ndarray | None = None
+                           ) -> dict[bytes, tuple[np.ndarray, np.ndarray]]:
+        """Propagators of all distinct rows of u (with ``modes``) (cache first, the rest
+        batched), keyed as :meth:`_lookup`."""
         out: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         todo = []
-        for row in np.unique(np.ascontiguousarray(u, dtype=float), axis=0):
-            key = row.tobytes()
+        u = np.ascontiguousarray(u, dtype=float)
+        both = u if not self.n_modes or modes is None else np.hstack([u, modes])
+        nb = u.shape[1]
+        for row in np.unique(both, axis=0):
+            key = row[:nb].tobytes() + (self._mode_key(row[nb:]) if self.n_modes else b"")
             hit = self._cache.get(key)
             if hit is None:
                 todo.append(row)
@@ -336,19 +420,24 @@ class BilinearModel:
                 out[key] = hit
         if todo:
             rows = np.array(todo)
-            phi, gam = self._propagators(rows)
+            phi, gam = self._propagators(rows[:, :nb], rows[:, nb:] if rows.shape[1] > nb
+                                         else None)
             for row, p, g in zip(rows, phi, gam):
-                out[row.tobytes()] = (p, g)
-                self._store(row.tobytes(), (p, g))
+                key = row[:nb].tobytes() + (self._mode_key(row[nb:]) if self.n_modes else b"")
+                out[key] = (p, g)
+                self._store(key, (p, g))
         return out
 
-    def step_matrices(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def step_matrices(self, u: np.ndarray, mode: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Exact one-step matrices for airflows u held over the step.
 
         Parameters
         ----------
         u : ndarray (n_boxes,)
             Airflow per box [kg/s].
+        mode : ndarray (n_modes,), optional
+            The rooms' convection regimes (:meth:`modes`); default the usual regime.
 
         Returns
         -------
@@ -358,7 +447,7 @@ class BilinearModel:
             x(k+1) = Phi x + Gamma_v v + Gamma_ig (c_IG + f_IG).
         """
         u = np.asarray(u, dtype=float)
-        phi, gam = self._lookup(u)
+        phi, gam = self._lookup(u, mode)
         return phi, gam @ self.input_matrix(u), gam @ self.B_ig
 
     def reheat_step(self, u: np.ndarray, reheat: np.ndarray | None) -> np.ndarray:
@@ -367,7 +456,7 @@ class BilinearModel:
         u = np.asarray(u, dtype=float)
         if reheat is None or not np.any(reheat):
             return np.zeros(self.n)
-        _, gam = self._lookup(u)
+        _, gam = self._lookup(u, self.modes(u, reheat))
         return gam @ self.reheat_forcing(u, reheat)
 
     # paper fixed-matrix form -------------------------------------------------
@@ -501,26 +590,33 @@ class BilinearModel:
         gains = f_ig + self.params.c_ig
         x = x0
         extra = self.reheat_forcing(u, reheat) if reheat is not None else 0.0
+        modes = self.modes(u, reheat)
         if method == "exact":
             forcing = v @ self.Bv.T + gains @ self.B_ig.T + extra
             xs = simulate_exact(self.structure.A(self.params.physical), self._rooms, self._bxu,
                                 x0, u, forcing, v[:, 1], self.step,
                                 capacity=self.structure.capacity, ret=self._ret,
-                                retc=self._retc)
+                                retc=self._retc, switched=self.switched, modes=modes)
         elif method == "eig":
             forcing = v @ self.Bv.T + gains @ self.B_ig.T + extra  # u held per step
             ts = v[:, 1]
             props: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
             for k in range(nsteps):
                 if k % self._batch() == 0:
-                    props = self._chunk_propagators(u[k:k + self._batch()])
-                phi, gam = props[np.ascontiguousarray(u[k]).tobytes()]
+                    props = self._chunk_propagators(
+                        u[k:k + self._batch()],
+                        None if modes is None else modes[k:k + self._batch()])
+                phi, gam = props[np.ascontiguousarray(u[k]).tobytes()
+                                 + (b"" if modes is None else self._mode_key(modes[k]))]
                 w = forcing[k].copy()
                 np.add.at(w, self._rooms, -self._bxu * u[k] * ts[k])  # B_vu_j v u_j
                 x = phi @ x + gam @ w
                 xs[k + 1] = x
         elif method == "bilinear":
             d = self.discrete_bilinear()
+            if self.n_modes:
+                raise ValueError("the 'bilinear' method (paper's fixed matrices) has no "
+                                 "convection regimes; simulate with method='exact'")
             if reheat is not None:
                 raise ValueError("the 'bilinear' method (paper's fixed matrices) has no "
                                  "discharge-air input; simulate with method='exact'")

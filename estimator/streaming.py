@@ -420,6 +420,11 @@ class OnlineEstimator:
         self.bundle = bundle
         self.max_gap = pd.Timedelta(max_gap)
         m = bundle.model
+        if m.n_modes:
+            raise ValueError("this model switches its floor and ceiling films with the rooms' "
+                             "convection regimes (inside_convection='regime'), which the "
+                             "online estimator does not step yet; identify the model for the "
+                             "service with inside_convection='constant'")
         self._n, self._nz = m.n, m.n_zones
         self._rh = has_discharge(bundle)  # inputs end with the boxes' discharge-air rise
         self._nin = m.n_boxes + NV + (m.n_boxes if self._rh else 0)

@@ -317,6 +317,11 @@ InternalMass = Annotated[str, typer.Option(
     help="the IDF's InternalMass objects: 'both_faces' (both faces of the given area meet "
          "the zone; the default) or 'one_face' (one face meets the zone and the back face "
          "is held as an Adiabatic surface's, as EnergyPlus does; docs/model.md \"States\")")]
+InsideConvection = Annotated[str, typer.Option(
+    help="the films of floors and ceilings: 'constant' (the default, the paper) or 'regime' "
+         "(switched while a room's boxes reheat: floor film x0.5, ceiling film x2, Walton's "
+         "stable/unstable ratio, no parameter; offline only, not the service; "
+         "docs/model.md \"Inside convection regimes\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -408,6 +413,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  adiabatic: Adiabatic = ModelOptions.adiabatic,
                  layers: Layers = ModelOptions.layers,
                  internal_mass: InternalMass = ModelOptions.internal_mass,
+                 inside_convection: InsideConvection = ModelOptions.inside_convection,
                  films: Films = None,
                  positive_priors: PositivePriors = "log",
                  weekend_gains: Annotated[str, typer.Option(
@@ -445,6 +451,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  envelope_radiation=envelope_radiation,
                                  solar_enclosure=solar_enclosure, adiabatic=adiabatic,
                                  layers=layers, internal_mass=internal_mass,
+                                 inside_convection=inside_convection,
                                  x0_profile_days=x0_profile_days,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  positive_priors=positive_priors,
@@ -555,6 +562,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   adiabatic: Adiabatic = ModelOptions.adiabatic,
                   layers: Layers = ModelOptions.layers,
                   internal_mass: InternalMass = ModelOptions.internal_mass,
+                  inside_convection: InsideConvection = ModelOptions.inside_convection,
                   films: Films = None,
                   positive_priors: PositivePriors = "log",
                   weekend_gains: Annotated[str, typer.Option(
@@ -586,6 +594,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 envelope_radiation=envelope_radiation,
                                 solar_enclosure=solar_enclosure, adiabatic=adiabatic,
                                  layers=layers, internal_mass=internal_mass,
+                                 inside_convection=inside_convection,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd, positive_priors=positive_priors)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:

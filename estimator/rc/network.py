@@ -104,6 +104,18 @@ RHO_AIR = 1.2
 
 # parameter indices of the seven matrix parameters (same order as rc.parameters.PHYSICAL)
 EW, IW, FLOOR, CEIL, ABSORP, WINSOL, UWIN = range(7)
+#: inside convection of horizontal faces when a room's air is warmer than them (its boxes
+#: reheat), relative to the fitted films (``ModelOptions.inside_convection="regime"``): the
+#: fitted γ_floor and γ_ceil are those of the usual regime, faces warmer than the air (the
+#: floor's heat rises, unstable; the ceiling's is trapped, stable); reheated air above them
+#: swaps the regimes. Walton's natural-convection correlations for horizontal faces (TARP,
+#: EnergyPlus's default inside algorithm) give stable / unstable = (1.810 / 2.382) /
+#: (9.482 / 6.238) = 0.50 at the same |ΔT| (docs/model.md "Inside convection regimes")
+REGIME_FLOOR = 0.5
+REGIME_CEILING = 2.0
+#: a box's discharge air this far above the supply air [K] marks its room's air warmer
+#: than its faces (``ModelOptions.inside_convection="regime"``)
+REGIME_RISE = 1.0
 #: outside film of a roof with ``ModelOptions.roof_exterior == "idf"`` [W/(m2 K)]: the
 #: handbook's combined film, γ_EW's start and prior mean (parameters.PHYSICAL)
 ROOF_FILM = 25.0
@@ -340,8 +352,11 @@ class ModelOptions:
     adiabatic: str = "mirror"
     layers: str = "roofs_admittance"
     internal_mass: str = "both_faces"
+    inside_convection: str = "constant"
 
     def __post_init__(self):
+        if self.inside_convection not in ("constant", "regime"):
+            raise ModelDefinitionError("inside_convection must be 'constant' or 'regime'")
         if self.internal_mass not in ("both_faces", "one_face"):
             raise ModelDefinitionError("internal_mass must be 'both_faces' or 'one_face'")
         if self.layers not in LAYERS:
@@ -516,6 +531,13 @@ class RCStructure:
         With ``options.window_angle == "glass"``: the glass panes whose angular
         transmission weighs the facade columns (1 when the windows' area-weighted rated
         U-factor is at least :data:`SINGLE_PANE_U`, else 2); 0: no weighting.
+    switched : dict
+        Links whose conductance follows a room's mode (``options.inside_convection ==
+        "regime"``), empty otherwise: ``links`` (k, 3) int, the face's state, the room's
+        air state and the mode column; ``area`` (k,) [m2] and ``param`` (k,) the film's
+        parameter index (its conductance is area theta_p); ``factor`` (k,) the
+        conductance's multiplier at mode 1; ``rooms`` the mode columns' rooms (those with
+        VAV boxes). A box's mode column is its room's (:meth:`mode_of_box`).
     """
 
     labels: list[StateLabel]
@@ -540,6 +562,7 @@ class RCStructure:
     shading: list[dict] = field(default_factory=list)
     return_of_box: np.ndarray | None = None
     window_panes: int = 0
+    switched: dict = field(default_factory=dict)
 
     @property
     def returns(self) -> tuple[np.ndarray, np.ndarray]:
@@ -550,6 +573,14 @@ class RCStructure:
                else np.asarray(self.return_of_box, dtype=np.int64))
         coef = np.where(ret >= 0, self.cp_air / self.capacity[np.maximum(ret, 0)], 0.0)
         return ret, coef
+
+    def mode_of_box(self) -> np.ndarray:
+        """(n_boxes,) mode column of each box's room, -1 for none (no switched links, a
+        scheduled input)."""
+        rooms = list(self.switched.get("rooms", ()))
+        col = {r: i for i, r in enumerate(rooms)}
+        return np.array([col.get(self.boxes[b], -1) if b not in self.scheduled else -1
+                         for b in self.boxes], dtype=np.int64)
 
     @property
     def facade_shading(self):
@@ -1186,6 +1217,8 @@ def build_structure(
                          f"{', '.join(plen)}: c_p u (x_room - x_plenum)")
     cap, a_list, b_list = asm.matrices()
     n = len(cap)
+    switched = _regime_links(asm, room_state, box_rooms, scheduled, notes) \
+        if opts.inside_convection == "regime" else {}
     zone_names = list(zone_rooms)
     b_ig = np.zeros((n, len(zone_names)))
     c_mat = np.zeros((len(zone_names), n))
@@ -1241,4 +1274,34 @@ def build_structure(
         shading=shading,
         window_panes=(1 if u_nominal >= SINGLE_PANE_U else 2)
         if opts.window_angle == "glass" else 0,
+        switched=switched,
     )
+
+
+def _regime_links(asm: _Assembler, room_state: Mapping[str, int], box_rooms: Mapping[str, str],
+                  scheduled: Mapping[str, dict], notes: list[str]) -> dict:
+    """:attr:`RCStructure.switched` of ``inside_convection="regime"``: every floor or
+    ceiling film (parameter γ_floor or γ_ceil) between a face and the air of a room with VAV
+    boxes, with Walton's regime ratio for that face (:data:`REGIME_FLOOR`,
+    :data:`REGIME_CEILING`)."""
+    rooms = sorted({box_rooms[b] for b in box_rooms if b not in scheduled})
+    col = {room_state[r]: i for i, r in enumerate(rooms)}
+    links, area, param, factor = [], [], [], []
+    for i, j, g, p in asm.links:
+        if p not in (FLOOR, CEIL):
+            continue
+        face, air = (i, j) if j in col else (j, i)
+        if air not in col:
+            continue
+        links.append((face, air, col[air]))
+        area.append(g)
+        param.append(p)
+        factor.append(REGIME_FLOOR if p == FLOOR else REGIME_CEILING)
+    if not links:
+        return {}
+    notes.append(f"inside convection regimes: {len(links)} floor/ceiling films of "
+                 f"{len(rooms)} rooms switched while their boxes reheat (floor x"
+                 f"{REGIME_FLOOR:g}, ceiling x{REGIME_CEILING:g})")
+    return {"links": np.array(links, dtype=np.int64), "area": np.array(area),
+            "param": np.array(param, dtype=np.int64), "factor": np.array(factor),
+            "rooms": rooms}

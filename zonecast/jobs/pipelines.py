@@ -82,6 +82,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   roof_exterior: str = ModelOptions.roof_exterior, envelope_radiation: str = ModelOptions.envelope_radiation,
                   solar_enclosure: str = ModelOptions.solar_enclosure, adiabatic: str = ModelOptions.adiabatic,
                   layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
+        inside_convection: str = ModelOptions.inside_convection,
                   progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
                   x0_offset_sd: float | None = None,
@@ -92,7 +93,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
     ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``,
-    ``internal_mass``: as
+    ``internal_mass``, ``inside_convection``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``,
     ``positive_priors``: as :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
@@ -109,7 +110,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                                                          solar_enclosure=solar_enclosure,
                                                          adiabatic=adiabatic,
                                                          layers=layers,
-                                                         internal_mass=internal_mass))
+                                                         internal_mass=internal_mass,
+                                                   inside_convection=inside_convection))
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,

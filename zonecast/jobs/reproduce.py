@@ -463,6 +463,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         roof_exterior: str = ModelOptions.roof_exterior, envelope_radiation: str = ModelOptions.envelope_radiation,
         solar_enclosure: str = ModelOptions.solar_enclosure, adiabatic: str = ModelOptions.adiabatic,
         layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
+        inside_convection: str = ModelOptions.inside_convection,
         positive_priors: str = "log") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
@@ -473,7 +474,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     ``x0_offset_sd``, ``day_scale_sd``: as :meth:`Pipeline.identify`;
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
-    ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``, ``internal_mass``:
+    ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``, ``internal_mass``, ``inside_convection``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``films``, ``positive_priors``: as :meth:`Pipeline.identify`;
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
@@ -498,7 +499,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                                    envelope_radiation=envelope_radiation,
                                                    solar_enclosure=solar_enclosure,
                                                    adiabatic=adiabatic, layers=layers,
-                                                   internal_mass=internal_mass))
+                                                   internal_mass=internal_mass,
+                                                   inside_convection=inside_convection))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()

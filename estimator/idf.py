@@ -762,6 +762,9 @@ class Building:
     #: open boundaries between zones (Construction:AirBoundary surfaces): (zone, zone, air
     #: exchange [m3/s]) per pair of zones, the simple mixing EnergyPlus adds between them
     air_boundaries: list[tuple[str, str, float]] = field(default_factory=list)
+    #: the file's inside convection algorithm (SurfaceConvectionAlgorithm:Inside; TARP,
+    #: EnergyPlus's default, without one)
+    inside_convection: str = "TARP"
     #: ground-contact surfaces whose outer face sees other temperatures than
     #: :attr:`ground_temperature`, January to December [degC]: the F- and C-factor
     #: surfaces (``GroundFCfactorMethod``), which EnergyPlus holds at the
@@ -1344,7 +1347,10 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
     shading = _shading(data, geo, zones_raw, base, windows, notes)
     plenums = _return_plenums(data, zkey, notes)
     gains = _internal_gains(data, zkey, zones, notes)
+    algo = [str(f.get("algorithm", "TARP"))
+            for f in data.get("SurfaceConvectionAlgorithm:Inside", {}).values()]
     return Building(
+        inside_convection=algo[0] if algo else "TARP",
         ground_temperature_of=ground_of,
         name=bname, version=version_text, north_axis=north, zones=zones, surfaces=surfaces,
         windows=windows, constructions=constructions, internal_masses=masses,

@@ -45,6 +45,7 @@ from zonecast.estimator.priors import (
     POSITIVE_PRIORS,
     Prior,
     building_priors,
+    convective_films,
 )
 from zonecast.estimator.rc.network import ModelOptions, RCStructure, build_structure
 from zonecast.estimator.rc.parameters import ParameterSet
@@ -354,8 +355,11 @@ class Pipeline:
 
         ``films``: the inside films' priors and starting values: ``"combined"`` (the
         handbook's convection + radiation films), ``"convective"``
-        (:data:`~.priors.CONVECTIVE_FILMS`, convection alone); default ``"convective"``
-        for a structure with interior long-wave exchange, else ``"combined"``.
+        (:data:`~.priors.CONVECTIVE_FILMS`, convection alone, EnergyPlus's ``Simple``
+        constants) or ``"idf"`` (convection alone, of the IDF's declared inside algorithm:
+        :func:`~.priors.convective_films`, Walton's natural convection for TARP, EnergyPlus's
+        default); default ``"convective"`` for a structure with interior long-wave exchange,
+        else ``"combined"``.
 
         ``positive_priors``: ``"log"`` (the default since 2026-12-06, chosen on the
         family's training members, docs/identification.md "Log-normal priors of the films
@@ -424,8 +428,8 @@ class Pipeline:
             self._need_meters(data)
         if films is None:
             films = "convective" if self.options.interior_radiation == "star" else "combined"
-        if films not in ("combined", "convective"):
-            raise PipelineError(f"films={films!r}: use 'combined' or 'convective'")
+        if films not in ("combined", "convective", "idf"):
+            raise PipelineError(f"films={films!r}: use 'combined', 'convective' or 'idf'")
         if positive_priors not in POSITIVE_PRIORS:
             raise PipelineError(f"positive_priors={positive_priors!r}: use "
                                 f"{' or '.join(repr(v) for v in POSITIVE_PRIORS)}")
@@ -436,11 +440,14 @@ class Pipeline:
             raise PipelineError("no excitation weekend found: give the training Saturdays "
                                 "(the site's experiments list marks excitation periods)")
         start = ParameterSet(list(self.site.zones))
-        convective = films == "convective"
+        convective = films in ("convective", "idf")
+        table = (convective_films(self._building_or_none()) if films == "idf"
+                 else CONVECTIVE_FILMS)
         if convective:  # films as convection alone: start where their priors are
-            start = start.copy({k: v[0] for k, v in CONVECTIVE_FILMS.items()})
+            start = start.copy({k: v[0] for k, v in table.items()})
         if priors is True:
-            priors = building_priors(start, self._building_or_none(), convective=convective,
+            priors = building_priors(start, self._building_or_none(),
+                                     convective="idf" if films == "idf" else convective,
                                      positive=positive_priors)
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
                        seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,

@@ -33,7 +33,8 @@ from zonecast.estimator.idf import Building
 from zonecast.estimator.rc.network import outer_absorptance
 from zonecast.estimator.rc.parameters import ParameterSet
 
-__all__ = ["CONVECTIVE_FILMS", "Prior", "building_priors", "prior_jacobian", "prior_residuals"]
+__all__ = ["CONVECTIVE_FILMS", "TARP_FILMS", "Prior", "building_priors", "convective_films",
+           "prior_jacobian", "prior_residuals"]
 
 
 @dataclass(frozen=True)
@@ -92,6 +93,40 @@ CONVECTIVE_FILMS = {
     "gamma_floor": (2.5, 1.5, _HORIZONTAL),
     "gamma_ceil": (2.5, 1.5, _HORIZONTAL),
 }
+#: inside films as convection alone for a file whose inside convection is EnergyPlus's TARP
+#: (its default) or another natural-convection correlation: Walton's coefficients at a
+#: face-to-air difference of 1 K, vertical 1.31 |dT|^1/3, horizontal 1.52 |dT|^1/3 (heat
+#: flowing up) and 0.76 |dT|^1/3 (down), the mean of both directions for floors and
+#: ceilings; the same relative spread as :data:`CONVECTIVE_FILMS` (EnergyPlus Engineering
+#: Reference, "Inside Convection Algorithms"; the family's faces are 0.2-1.9 K from their
+#: air, benchmarks/bench_convection_regimes.py)
+_TARP_HORIZONTAL = ("natural convection at a horizontal face, 0.76-1.52 W/m2K at 1 K by the "
+                    "direction of heat flow (Walton, EnergyPlus TARP)")
+TARP_FILMS = {
+    "gamma_IW": (1.3, 0.65,
+                 "natural convection at a vertical face (Walton, EnergyPlus TARP, 1.31 at 1 K)"),
+    "gamma_floor": (1.1, 0.65, _TARP_HORIZONTAL),
+    "gamma_ceil": (1.1, 0.65, _TARP_HORIZONTAL),
+}
+#: EnergyPlus inside algorithms whose natural convection is Walton's (or of its size): the
+#: file's films take :data:`TARP_FILMS` with ``films="idf"``; the others (``Simple``,
+#: ``CeilingDiffuser``) :data:`CONVECTIVE_FILMS`
+NATURAL_ALGORITHMS = ("tarp", "adaptiveconvectionalgorithm", "astmc1340")
+
+
+def convective_films(building: Building | None) -> dict[str, tuple[float, float, str]]:
+    """The convective films' priors (mean, sd, source) for ``building``'s declared inside
+    convection algorithm (:attr:`~zonecast.estimator.idf.Building.inside_convection`):
+    :data:`TARP_FILMS` for TARP (EnergyPlus's default) and the other natural-convection
+    correlations, :data:`CONVECTIVE_FILMS` (EnergyPlus's ``Simple`` constants) otherwise
+    or without a building."""
+    algo = getattr(building, "inside_convection", None)
+    if algo is not None and algo.lower() in NATURAL_ALGORITHMS:
+        return {k: (m, sd, f"{src}; the IDF's inside algorithm {algo}")
+                for k, (m, sd, src) in TARP_FILMS.items()}
+    return dict(CONVECTIVE_FILMS)
+
+
 #: c_IG: background gains, weakly held near idle equipment and lighting
 _C_IG = (5.0, 10.0, "idle equipment and lighting 2-10 W/m2, weak")
 
@@ -104,7 +139,7 @@ POSITIVE_PRIORS = ("normal", "log")
 
 
 def building_priors(params: ParameterSet, building: Building | None = None, *,
-                    window_sd: float = 0.25, convective: bool = False,
+                    window_sd: float = 0.25, convective: bool | str = False,
                     positive: str = "normal") -> dict[str, Prior]:
     """Priors of every parameter of ``params``.
 
@@ -120,10 +155,11 @@ def building_priors(params: ParameterSet, building: Building | None = None, *,
         without walls), with the handbook's spread.
     window_sd : float
         Relative standard deviation [-] of the window priors taken from the building.
-    convective : bool
+    convective : bool or "idf"
         The inside films are convection alone (:data:`CONVECTIVE_FILMS`), as in a model
-        whose faces exchange long-wave radiation with each other; otherwise the handbook's
-        combined films.
+        whose faces exchange long-wave radiation with each other; ``"idf"``: convection
+        alone, of the building's declared inside algorithm (:func:`convective_films`);
+        otherwise the handbook's combined films.
     positive : {"normal", "log"}
         ``"log"``: the priors of the positive coefficients (:data:`POSITIVE`) are log-normal,
         median the nominal value and ln-spread its relative sd (:attr:`Prior.log_sd`), so a
@@ -139,7 +175,9 @@ def building_priors(params: ParameterSet, building: Building | None = None, *,
     out = {}
     for name, (mean, sd, source) in _HANDBOOK.items():
         out[name] = Prior(mean, sd, source)
-    if convective:
+    if convective == "idf":
+        out.update({name: Prior(*v) for name, v in convective_films(building).items()})
+    elif convective:
         out.update({name: Prior(*v) for name, v in CONVECTIVE_FILMS.items()})
     if building is not None:
         wins = [w for w in building.windows.values() if w.area > 0]

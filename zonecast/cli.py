@@ -281,7 +281,9 @@ PositivePriors = Annotated[str, typer.Option(
          "(docs/identification.md)")]
 Films = Annotated[str | None, typer.Option(
     help="priors and starting values of the inside films: 'combined' (the handbook's "
-         "convection + radiation films) or 'convective' (convection alone); default "
+         "convection + radiation films), 'convective' (convection alone, EnergyPlus's Simple "
+         "constants) or 'idf' (convection alone, of the IDF's inside convection algorithm: "
+         "Walton's natural convection for TARP, EnergyPlus's default); default "
          "'convective' with --interior-radiation star, else 'combined'")]
 WindowAngle = Annotated[str, typer.Option(
     help="'none' (the default): the facade columns are the global irradiance on each "

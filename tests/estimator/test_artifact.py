@@ -183,7 +183,7 @@ def test_pipeline_rejects_an_unknown_weekend_gains_mode(vb):
     with pytest.raises(PipelineError,
                        match="use 'auto', 'none', 'known', 'scaled', 'daytime' or 'metered'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), weekend_gains="sometimes")
-    with pytest.raises(PipelineError, match="films='radiant': use 'combined' or 'convective'"):
+    with pytest.raises(PipelineError, match="films='radiant': use 'combined', 'convective' or 'idf'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), films="radiant")
     with pytest.raises(PipelineError, match="positive_priors='gamma': use 'normal' or 'log'"):
         pipe.identify(pipe.data(pipe.telemetry(vb)), positive_priors="gamma")

@@ -202,6 +202,40 @@ def test_building_priors_take_window_u_and_shgc_from_the_idf(five_zone):
     assert building_priors(model.params)["gamma_absorp"].mean == 0.6  # no building: handbook
 
 
+def test_film_priors_follow_the_idf_inside_convection_algorithm(five_zone, small_office):
+    from zonecast.estimator.model import build_model
+    from zonecast.estimator.priors import (
+        CONVECTIVE_FILMS,
+        TARP_FILMS,
+        building_priors,
+        convective_films,
+    )
+
+    # the files' own SurfaceConvectionAlgorithm:Inside (TARP is EnergyPlus's default)
+    assert five_zone.inside_convection == "Simple"
+    assert small_office.inside_convection == "TARP"
+    assert convective_films(five_zone) == CONVECTIVE_FILMS
+    assert convective_films(None) == CONVECTIVE_FILMS
+    tarp = convective_films(small_office)
+    assert {k: v[:2] for k, v in tarp.items()} == {k: v[:2] for k, v in TARP_FILMS.items()}
+    assert all("TARP" in v[2] for v in tarp.values())
+    # Walton's coefficients at 1 K: about half of EnergyPlus's Simple constants
+    assert TARP_FILMS["gamma_IW"][0] == pytest.approx(1.31, abs=0.02)
+    assert TARP_FILMS["gamma_floor"][0] == pytest.approx((1.52 + 0.76) / 2, abs=0.05)
+    for k in TARP_FILMS:
+        rel = TARP_FILMS[k][1] / TARP_FILMS[k][0]
+        assert rel == pytest.approx(CONVECTIVE_FILMS[k][1] / CONVECTIVE_FILMS[k][0], abs=0.12)
+    model = build_model(five_zone, {"South": ["SPACE1-1"]}, {"VAV-1": "SPACE1-1"},
+                        options=NO_LEAK)
+    pri = building_priors(model.params, small_office, convective="idf")
+    assert pri["gamma_IW"].mean == TARP_FILMS["gamma_IW"][0]
+    assert building_priors(model.params, five_zone, convective="idf")["gamma_IW"].mean == \
+        CONVECTIVE_FILMS["gamma_IW"][0]
+    # convective=True keeps the Simple constants whatever the file says
+    assert building_priors(model.params, small_office, convective=True)["gamma_IW"].mean == \
+        CONVECTIVE_FILMS["gamma_IW"][0]
+
+
 def test_log_normal_priors_hold_positive_coefficients_away_from_zero(five_zone):
     """positive="log": films and U_win get log-normal priors of the same median and relative
     spread; near the median they weigh a deviation as the Gaussian does, near zero far more,

@@ -72,7 +72,32 @@ def run(campaign: Path, work: Path, weather: str) -> Path:
     return work / "eplusout.sql"
 
 
-def measure(sql: Path, rise: float) -> list[dict]:
+def experiment_steps(con: sqlite3.Connection, campaign: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(inside an experiment window of the campaign's ``experiments.csv``, a working day's
+    08-18 h) per reported step of the SQL (the steps' ends, local standard time)."""
+    import pandas as pd
+
+    t = pd.read_sql("select Year, Month, Day, Hour, Minute, DayType from Time "
+                    "order by TimeIndex", con)
+    # EnergyPlus's hour 1..24 and minute 0..60 mark the end of a step; the step's start
+    stamp = (pd.to_datetime({"year": t.Year, "month": t.Month, "day": t.Day})
+             + pd.to_timedelta(t.Hour, unit="h") + pd.to_timedelta(t.Minute, unit="m")
+             - pd.Timedelta(minutes=15))
+    exp = pd.read_csv(campaign / "experiments.csv")
+    inside = np.zeros(len(t), dtype=bool)
+    for a, b in zip(exp["start"], exp["end"]):
+        a = pd.Timestamp(a).tz_localize(None)
+        b = pd.Timestamp(b).tz_localize(None)
+        inside |= ((stamp >= a) & (stamp < b)).to_numpy()
+    hour = stamp.dt.hour.to_numpy()
+    working = (~t.DayType.isin(["Saturday", "Sunday", "Holiday"])).to_numpy() \
+        & (hour >= 8) & (hour < 18)
+    return inside, working
+
+
+def measure(sql: Path, rise: float, campaign: Path | None = None) -> list[dict]:
+    """Per room and face kind: mean h and face - air over two groups of steps: reheating or
+    not (``campaign`` None), or inside the campaign's experiments or in working hours."""
     con = sqlite3.connect(sql)
 
     def series(name: str, key: str) -> np.ndarray:
@@ -100,6 +125,9 @@ def measure(sql: Path, rise: float) -> list[dict]:
             continue
         sup = np.max([series("System Node Temperature", k) for k in boxes], axis=0)
         heat = sup - t_ahu > rise
+        usual = ~heat
+        if campaign is not None:
+            heat, usual = experiment_steps(con, campaign)
         row = {"room": room, "reheat": float(heat.mean())}
         acc: dict[str, list] = {}
         for face in faces:
@@ -119,7 +147,7 @@ def measure(sql: Path, rise: float) -> list[dict]:
             # the faces of a kind averaged (walls: several per room)
             h = np.mean([f[0] for f in faces_of_kind], axis=0)
             dt = np.mean([f[1] for f in faces_of_kind], axis=0)
-            for regime, sel in (("reheat", heat), ("usual", ~heat)):
+            for regime, sel in (("reheat", heat), ("usual", usual)):
                 if sel.any():
                     row[f"{kind}_h_{regime}"] = float(h[sel].mean())
                     row[f"{kind}_dt_{regime}"] = float(dt[sel].mean())
@@ -134,6 +162,9 @@ def main() -> None:
                     help="discharge air above the AHU outlet that marks reheat [K]")
     ap.add_argument("--weather", default=None,
                     help="weather file name (default: the campaign's building.yaml's)")
+    ap.add_argument("--by", choices=("reheat", "experiments"), default="reheat",
+                    help="the two groups of steps: reheating or not (default), or inside the "
+                         "campaign's experiments vs working days 08-18 h")
     ap.add_argument("--work", type=Path, default=None,
                     help="where to run EnergyPlus (default: a temporary folder)")
     args = ap.parse_args()
@@ -142,8 +173,12 @@ def main() -> None:
     for campaign in args.campaigns:
         with tempfile.TemporaryDirectory() as tmp:
             work = (args.work / campaign.name) if args.work else Path(tmp)
-            rows = measure(run(campaign, work, weather_of(campaign, args.weather)), args.rise)
-        print(f"\n{campaign.name}: h [W/(m2 K)] and face - air [K], reheat vs usual regime")
+            rows = measure(run(campaign, work, weather_of(campaign, args.weather)), args.rise,
+                           campaign if args.by == "experiments" else None)
+        groups = ("reheat vs usual regime" if args.by == "reheat"
+                  else "experiments vs working hours (column 'reheat': share of steps in "
+                       "experiments)")
+        print(f"\n{campaign.name}: h [W/(m2 K)] and face - air [K], {groups}")
         print(f"{'room':10s} {'reheat':>6s} | " + " | ".join(
             f"{k + ' h':>13s} {'ratio':>5s} {'dT':>11s}" for k in kinds))
         for r in rows:
@@ -154,15 +189,16 @@ def main() -> None:
                     cells.append(f"{'–':>13s} {'':>5s} {'':>11s}")
                     continue
                 ratio = hr / hu
-                if r["reheat"] >= 0.02:
+                if args.by == "experiments" or r["reheat"] >= 0.02:
                     ratios[kind].append(ratio)
                 cells.append(f"{hr:5.2f} / {hu:5.2f} {ratio:5.2f} "
                              f"{r[f'{kind}_dt_reheat']:+5.2f}/{r[f'{kind}_dt_usual']:+5.2f}")
             print(f"{r['room']:10s} {r['reheat']:6.2f} | " + " | ".join(cells))
     for kind, vals in ratios.items():
         if vals:
-            print(f"median {kind} h ratio reheat / usual over {len(vals)} rooms reheating in "
-                  f">= 2 % of steps: {statistics.median(vals):.2f} "
+            what = ("reheat / usual over {} rooms reheating in >= 2 % of steps"
+                    if args.by == "reheat" else "experiments / working hours over {} rooms")
+            print(f"median {kind} h ratio {what.format(len(vals))}: {statistics.median(vals):.2f} "
                   f"(range {min(vals):.2f}-{max(vals):.2f})")
 
 

@@ -472,11 +472,7 @@ class _Problem:
         self.rh = [model.reheat_forcing(data.u[a:b], data.reheat[a:b]) for a, b in spans]
         # the films' convection regimes per span (none: zero columns) and the switched
         # links, whose conductance follows theta (RCStructure.switched)
-        sw = st.switched
         self.swi = model._swi
-        self.sw_area = (np.zeros(0) if not sw
-                        else (np.asarray(sw["factor"]) - 1.0) * np.asarray(sw["area"]))
-        self.sw_param = np.zeros(0, np.int64) if not sw else np.asarray(sw["param"], np.int64)
         self.modes = [np.ascontiguousarray(
             model.modes(data.u[a:b], data.reheat[a:b]) if model.n_modes
             else np.zeros((b - a, 0))) for a, b in spans]
@@ -486,7 +482,7 @@ class _Problem:
     def switch_gains(self, phys: np.ndarray) -> np.ndarray:
         """(k, 2) the switched links' extra conductance over each end's capacity [1/s] at
         the physical parameters ``phys``."""
-        dg = self.sw_area * np.asarray(phys, float)[self.sw_param]
+        dg = self.model.structure.switched_conductance(phys)
         return np.ascontiguousarray(np.column_stack([dg / self.capacity[self.swi[:, 0]],
                                                      dg / self.capacity[self.swi[:, 1]]])
                                     if len(dg) else np.zeros((0, 2)))

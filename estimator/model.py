@@ -169,8 +169,7 @@ class BilinearModel:
         sw = structure.switched
         if sw:
             self._swi = np.ascontiguousarray(sw["links"], dtype=np.int64)
-            self._sw_dg = (np.asarray(sw["factor"]) - 1.0) * np.asarray(sw["area"]) \
-                * theta[np.asarray(sw["param"])]
+            self._sw_dg = structure.switched_conductance(theta)
             self._swg = np.column_stack([self._sw_dg / cap[self._swi[:, 0]],
                                          self._sw_dg / cap[self._swi[:, 1]]])
             self._mode_col = structure.mode_of_box()

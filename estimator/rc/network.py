@@ -574,6 +574,15 @@ class RCStructure:
         coef = np.where(ret >= 0, self.cp_air / self.capacity[np.maximum(ret, 0)], 0.0)
         return ret, coef
 
+    def switched_conductance(self, theta: np.ndarray) -> np.ndarray:
+        """(k,) extra conductance [W/K] of each switched link at mode 1 with the physical
+        parameters ``theta``: (factor - 1) area theta_param (empty without links)."""
+        sw = self.switched
+        if not sw:
+            return np.zeros(0)
+        return ((np.asarray(sw["factor"]) - 1.0) * np.asarray(sw["area"])
+                * np.asarray(theta, dtype=float)[np.asarray(sw["param"])])
+
     def mode_of_box(self) -> np.ndarray:
         """(n_boxes,) mode column of each box's room, -1 for none (no switched links, a
         scheduled input)."""

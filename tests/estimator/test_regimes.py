@@ -195,3 +195,35 @@ def test_the_online_estimator_refuses_a_regime_model_with_what_to_do(pair):
 
     with pytest.raises(ValueError, match="inside_convection='constant'"):
         OnlineEstimator(Bundle())
+
+
+def test_identification_fast_path_follows_the_modes_and_the_parameters(pair):
+    """The fit's compiled runs (identify._Problem) switch the films as the model does, with
+    the switched conductances following theta (γ_floor, γ_ceil)."""
+    import pandas as pd
+    from zonecast.estimator.dataset import ModelData
+    from zonecast.estimator.identify import _Problem
+
+    st = pair["idf"][1]
+    rng = np.random.default_rng(7)
+    N = 16
+    times = pd.date_range("2015-04-18 08:00", periods=N, freq="15min", tz="UTC")
+    u = rng.uniform(0.05, 0.5, (N, 5))
+    reheat = np.where(rng.random((N, 5)) < 0.4, 6.0, 0.0)
+    v = np.column_stack([rng.uniform(-5, 10, N), np.full(N, 13.0), rng.uniform(0, 300, (N, 5))])
+    data = ModelData(times, u, v, np.full((N, 5), 21.0), list(st.zones), list(st.boxes),
+                     [(0, N)], np.zeros(N, bool), "UTC", reheat=reheat)
+    base = BilinearModel(st)
+    theta = base.params.values.copy()
+    names = base.params.param_names
+    theta[names.index("gamma_ceil")] *= 3.0  # the switched conductances follow theta
+    model = base.with_params(theta)
+    x0 = np.full(model.n, 21.0)
+    prob = _Problem(model, data, [(0, N - 1)], [x0])
+    got = prob.simulate(theta)[0]
+    want = model.simulate(x0, u[:N - 1], v[:N - 1], reheat=reheat[:N - 1]).y[1:]
+    np.testing.assert_allclose(got, want, atol=1e-8)
+    # without the modes the runs differ: the switch is in the fast path
+    plain = BilinearModel(pair["idf"][0], model.params)
+    off = plain.simulate(x0, u[:N - 1], v[:N - 1], reheat=reheat[:N - 1]).y[1:]
+    assert np.abs(off - got).max() > 1e-4

@@ -21,9 +21,11 @@ BUILD_KEY = pytest.StashKey[tuple]()
 
 
 #: what the build's copy of the project leaves out (environments, outputs, caches)
+#: (``.hypothesis``: another xdist worker writes its temporary files while this copies, a race
+#: that failed one collection with "No such file or directory")
 _NOT_SOURCES = shutil.ignore_patterns(".venv", ".git", "runs", "build", "demo-out", "*.egg-info",
                                       "__pycache__", ".pytest_cache", ".ruff_cache",
-                                      "node_modules")
+                                      ".hypothesis", "node_modules")
 
 
 def build_venv(folder: Path) -> subprocess.Popen:

@@ -308,10 +308,11 @@ Adiabatic = Annotated[str, typer.Option(
          "2026-12-05: held at its own inner face's temperature, as EnergyPlus does; "
          "docs/model.md \"Adiabatic surfaces\") or 'zero_flux' (no heat through it)")]
 Layers = Annotated[str, typer.Option(
-    help="how constructions become nodes: 'roofs_admittance' (the default since 2026-12-06: "
-         "2 or 3 per element, BRCM-like, but sections of at most an hour's diffusion time for "
-         f"the roofs whose lumped layout is more than {ADMITTANCE_TOLERANCE:.0%} off their "
-         "daily inside admittance), "
+    help="how constructions become nodes: 'admittance_but_facades' (the default: 2 or 3 "
+         "per element, BRCM-like, but sections of at most an hour's diffusion time for the "
+         f"constructions whose lumped layout is more than {ADMITTANCE_TOLERANCE:.0%} off their "
+         "daily inside admittance, except the walls open to the outdoors), "
+         "'roofs_admittance' (that test for the roofs open to the outdoors alone), "
          "'lumped' (2 or 3 nodes everywhere), 'fine' (the sections everywhere, so heavy walls "
          "and slabs get 4-8 nodes) or 'fine_roofs' (the sections for every roof open to the "
          "outdoors); docs/model.md \"States\"")]

@@ -44,7 +44,8 @@ ADMITTANCE_PERIOD = 86400.0
 #: [W/(m2 K)] (the handbook's combined exterior film, EN ISO 6946's 1/0.04).
 ADMITTANCE_OUTER_FILM = 25.0
 #: Largest relative error of a lumped layout's daily inside admittance |Y| that
-#: ``ModelOptions(layers="roofs_admittance")`` accepts before resolving a roof finely [-].
+#: ``ModelOptions(layers="admittance_but_facades")`` (and ``"roofs_admittance"``) accepts
+#: before resolving a construction finely [-].
 ADMITTANCE_TOLERANCE = 0.10
 
 

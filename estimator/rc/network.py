@@ -96,7 +96,7 @@ WINDOW_U_DEFAULT = 2.8
 #: panes rate 5-6, double 1.5-3.3), for the panes of ``ModelOptions.window_angle``
 SINGLE_PANE_U = 4.0
 #: ``ModelOptions.layers``: how constructions become nodes
-LAYERS = ("lumped", "fine", "fine_roofs", "roofs_admittance")
+LAYERS = ("lumped", "fine", "fine_roofs", "roofs_admittance", "admittance_but_facades")
 #: Specific heat capacity of air c_p [J/(kg K)].
 CP_AIR = 1005.0
 #: Air density for room air capacity [kg/m3].
@@ -289,7 +289,7 @@ class ModelOptions:
         (EnergyPlus's outer-face flux on a middle floor's ceiling slab is 10 times its
         inner face's). A is then not the symmetric form diag(1/C) K; the integrators take
         the general path, as with return air (docs/model.md "Adiabatic surfaces").
-    layers : {"lumped", "fine", "fine_roofs", "roofs_admittance"}
+    layers : {"lumped", "fine", "fine_roofs", "roofs_admittance", "admittance_but_facades"}
         How a construction becomes nodes: 2 or 3 per element, BRCM-like (``"lumped"``, what
         model files without the option were built with), or sections of at most
         :data:`~zonecast.estimator.rc.elements.FINE_SECTION_TIME` of diffusion time each
@@ -300,7 +300,13 @@ class ModelOptions:
         than :data:`~zonecast.estimator.rc.elements.ADMITTANCE_TOLERANCE` (EN ISO 13786;
         :func:`~zonecast.estimator.rc.elements.admittance_error`), e.g. a concrete deck
         behind a suspended ceiling, which the lumped layout puts on the tile's face, and
-        lumped elsewhere (``"roofs_admittance"``; docs/model.md "States").
+        lumped elsewhere (``"roofs_admittance"``, the default of 2026-12-06's thirty-seventh
+        session). Or, the default since the forty-second, the same test for every construction but
+        the walls open to the outdoors, whose fine sections the training members' fits
+        were measured to prefer lumped (``"admittance_but_facades"``: roofs, internal mass
+        such as thick furniture, floors and ceilings to an attic or another zone, interior
+        walls); on the family it builds the same states as ``"roofs_admittance"``
+        (docs/model.md "States").
     internal_mass : {"both_faces", "one_face"}
         An InternalMass object: both faces of its area meet the zone (``"both_faces"``, the
         default), or one face does and the back face is held as an ``Adiabatic`` surface's
@@ -350,7 +356,7 @@ class ModelOptions:
     envelope_radiation: str = "none"
     solar_enclosure: str = "air_boundaries"
     adiabatic: str = "mirror"
-    layers: str = "roofs_admittance"
+    layers: str = "admittance_but_facades"
     internal_mass: str = "both_faces"
     inside_convection: str = "constant"
 
@@ -971,17 +977,19 @@ def build_structure(
 
     layouts: dict[str, NodeLayout] = {}
 
-    def layout_of(cons: Construction, roof: bool = False) -> NodeLayout:
+    def layout_of(cons: Construction, roof: bool = False, facade: bool = False,
+                  tested: bool = True) -> NodeLayout:
         fine = opts.layers == "fine" or (opts.layers == "fine_roofs" and roof)
         error = None
-        if opts.layers == "roofs_admittance" and roof:
-            error = admittance_error(cons.layers, layout_of(cons))
+        if tested and ((opts.layers == "roofs_admittance" and roof)
+                       or (opts.layers == "admittance_but_facades" and not facade)):
+            error = admittance_error(cons.layers, layout_of(cons, tested=False))
             fine = abs(error) > ADMITTANCE_TOLERANCE
         key = f"{cons.name}|fine" if fine else cons.name
         if key not in layouts:
             layouts[key] = discretise_layers(cons.layers, FINE_SECTION_TIME if fine else None)
             if error is not None and fine:
-                notes.append(f"roof construction {cons.name}: its 2- or 3-node layout is "
+                notes.append(f"construction {cons.name}: its 2- or 3-node layout is "
                              f"{error:+.0%} off the daily inside admittance, so it is resolved "
                              f"into {layouts[key].n} nodes (ModelOptions.layers)")
         return layouts[key]
@@ -1015,7 +1023,8 @@ def build_structure(
         if s.area <= 0:
             continue
         cons = building.constructions[s.construction]
-        layout = layout_of(cons, roof=s.surface_type == "Roof" and s.boundary == "Outdoors")
+        layout = layout_of(cons, roof=s.surface_type == "Roof" and s.boundary == "Outdoors",
+                           facade=s.surface_type == "Wall" and s.boundary == "Outdoors")
         inside_g = _INSIDE_GAMMA.get(s.surface_type, IW)
         kind = s.surface_type.lower()
         if s.parent is not None:  # doors

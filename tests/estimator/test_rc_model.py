@@ -330,7 +330,32 @@ def test_layers_roofs_admittance_refines_the_roofs_the_lumped_layout_gets_wrong(
     assert nodes["fine_roofs"]["roof"] > nodes["lumped"]["roof"]
     assert nodes["roofs_admittance"]["x"] == pytest.approx(nodes["lumped"]["x"], rel=1e-9)
     notes = " ".join(build_structure(b, {"Z": ["Room"]}, {}, ModelOptions(**_ONE_ROOM)).notes)
-    assert ("roof construction C: its 2- or 3-node layout is" in notes) == refined
+    assert ("construction C: its 2- or 3-node layout is" in notes) == refined
+
+
+@pytest.mark.parametrize(("spec", "refined"), [(_ROOF, True), (_DECK, False)])
+def test_layers_admittance_but_facades_refines_all_but_the_facade_walls(spec, refined):
+    """``ModelOptions(layers="admittance_but_facades")`` applies the admittance test to the
+    roofs, the internal mass and every other construction, and leaves the walls open to the
+    outdoors lumped whatever their error."""
+    mass = {"InternalMass": {"M": {"construction_name": "C", "zone_or_zonelist_name": "Room",
+                                   "surface_area": 10.0}}}
+    b = _wall_building(spec, roof=True, extra=mass)
+    counts = {}
+    for layers in ("lumped", "fine", "roofs_admittance", "admittance_but_facades"):
+        st = build_structure(b, {"Z": ["Room"]}, {}, ModelOptions(layers=layers, **_ONE_ROOM))
+        counts[layers] = {kind: sum(lab.kind == kind for lab in st.labels)
+                          for kind in ("roof", "internal_mass")}
+        counts[layers]["South"] = sum(lab.element == "South" for lab in st.labels)
+        counts[layers]["East"] = sum(lab.element == "East" for lab in st.labels)
+    new, old = counts["admittance_but_facades"], counts["roofs_admittance"]
+    assert new["South"] == counts["lumped"]["South"] < counts["fine"]["South"]
+    assert new["East"] == (counts["fine"] if refined else counts["lumped"])["East"]
+    assert new["roof"] == old["roof"]
+    assert old["internal_mass"] == counts["lumped"]["internal_mass"]
+    expected = counts["fine"] if refined else counts["lumped"]
+    assert new["internal_mass"] == expected["internal_mass"]
+    assert counts["fine"]["internal_mass"] > counts["lumped"]["internal_mass"]
 
 
 @settings(max_examples=25, deadline=None)

@@ -300,6 +300,11 @@ class IdentificationResult:
     #: the meters' weekend / working-day daytime rise that chose it (None without meters)
     weekend_gains: str | None = None
     weekend_metered_ratio: float | None = None
+    #: film parameter -> factor from the identified films to the films of regular
+    #: operation (``Pipeline.identify(operating_films=)``, :func:`~.priors.operating_film_ratios`);
+    #: :attr:`model` keeps the identified films (Table 2's weekends), the pipeline's
+    #: parameters carry the operating ones. None: not applied (the films everywhere)
+    operating_films: dict[str, float] | None = None
 
     def x0_offset(self) -> np.ndarray | None:
         """(n_zones,) :attr:`x0_offsets` [K] in zone order, or None."""
@@ -384,6 +389,10 @@ class IdentificationResult:
         if pairs:
             lines.append("strongly correlated (|r| >= 0.9): "
                          + "; ".join(f"{a}/{b} {r:+.2f}" for a, b, r in pairs))
+        if self.operating_films:
+            lines.append("inside films in regular operation (gains, forecasts, model file): "
+                         + ", ".join(f"{k} x{v:.3f}" for k, v in self.operating_films.items())
+                         + " of the identified (the experiments' films)")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -404,7 +413,8 @@ class IdentificationResult:
                 "x0_window": self.x0_window,
                 "x0_gains": self.x0_gains, "x0_offsets": self.x0_offsets,
                 "weekend_gains": self.weekend_gains,
-                "weekend_metered_ratio": self.weekend_metered_ratio}
+                "weekend_metered_ratio": self.weekend_metered_ratio,
+                "operating_films": self.operating_films}
 
 
 class _Problem:

@@ -42,10 +42,12 @@ from zonecast.estimator.inputs_forecast import DayCalendar
 from zonecast.estimator.model import BilinearModel
 from zonecast.estimator.priors import (
     CONVECTIVE_FILMS,
+    OPERATING_FILM_MODES,
     POSITIVE_PRIORS,
     Prior,
     building_priors,
     convective_films,
+    operating_film_ratios,
 )
 from zonecast.estimator.rc.network import ModelOptions, RCStructure, build_structure
 from zonecast.estimator.rc.parameters import ParameterSet
@@ -341,7 +343,8 @@ class Pipeline:
                  x0_profile_days: int | None = None,
                  x0_offset_sd: float | None = None,
                  day_scale_sd: float | None = None,
-                 positive_priors: str = "log") -> IdentificationResult:
+                 positive_priors: str = "log",
+                 operating_films: str = "natural") -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -369,6 +372,16 @@ class Pipeline:
 
         ``agree_rtol``: the starts stop once two reach the same cost within it
         (:func:`~.identify.identify`; 0 runs all ``n_starts``).
+
+        ``operating_films``: ``"natural"`` (the default since 2026-12-06's forty-second
+        session, chosen on the family's training members, docs/identification.md
+        "Operating films"): when the IDF declares a natural-convection inside algorithm
+        (TARP, EnergyPlus's default), the inside films of regular operation are the
+        identified ones times :data:`~.priors.OPERATING_FILMS` (the experiments hold the
+        faces further from the air than operation does, and natural convection grows with
+        that difference): :attr:`params` (gains, forecasts, the model file) carry them,
+        the result's :attr:`~.identify.IdentificationResult.model` keeps the identified
+        films (Table 2). ``"none"``: the identified films everywhere.
 
         ``weekend_gains`` (default ``"auto"`` since 2026-12-04: ``"metered"`` when the
         site's meters say its weekends are occupied (:func:`weekend_metered_ratio` at least
@@ -433,6 +446,9 @@ class Pipeline:
         if positive_priors not in POSITIVE_PRIORS:
             raise PipelineError(f"positive_priors={positive_priors!r}: use "
                                 f"{' or '.join(repr(v) for v in POSITIVE_PRIORS)}")
+        if operating_films not in OPERATING_FILM_MODES:
+            raise PipelineError(f"operating_films={operating_films!r}: use "
+                                f"{' or '.join(repr(v) for v in OPERATING_FILM_MODES)}")
         sats = [str(s.date()) for s in excitation_saturdays(data)]
         train = list(train) if train else sats[1:3]
         validation = list(validation) if validation is not None else sats[:1]
@@ -494,6 +510,11 @@ class Pipeline:
         res.weekend_metered_ratio = ratio
         self.identification = res
         self.params = res.model.params
+        factors = operating_film_ratios(self._building_or_none(), operating_films)
+        if factors:
+            res.operating_films = factors
+            self.params = res.model.params.copy(
+                {k: res.model.params[k] * f for k, f in factors.items()})
         self._bundle = None
         return res
 

@@ -33,7 +33,8 @@ from zonecast.estimator.idf import Building
 from zonecast.estimator.rc.network import outer_absorptance
 from zonecast.estimator.rc.parameters import ParameterSet
 
-__all__ = ["CONVECTIVE_FILMS", "TARP_FILMS", "Prior", "building_priors", "convective_films",
+__all__ = ["CONVECTIVE_FILMS", "OPERATING_FILMS", "TARP_FILMS", "Prior", "building_priors",
+           "convective_films", "operating_film_ratios",
            "prior_jacobian", "prior_residuals"]
 
 
@@ -125,6 +126,38 @@ def convective_films(building: Building | None) -> dict[str, tuple[float, float,
         return {k: (m, sd, f"{src}; the IDF's inside algorithm {algo}")
                 for k, (m, sd, src) in TARP_FILMS.items()}
     return dict(CONVECTIVE_FILMS)
+
+
+#: Inside films in regular operation relative to the films identified on the excitation
+#: experiments [-], for the natural-convection algorithms (:data:`NATURAL_ALGORITHMS`):
+#: EnergyPlus's TARP films of 69 rooms of five training members of the seed-0 family
+#: (office6, f0-03, f0-13, f0-17, f0-18) are 1.30x (floors), 1.14x (walls) and 1.04x
+#: (ceilings) as large in the experiments as in working hours, because the experiments'
+#: widened thermostat and forced airflows hold the faces 1.3-2.8 K from the air against
+#: -0.4 to +1.9 K in operation and a natural-convection film grows as |dT|^(1/3)
+#: (benchmarks/bench_convection_regimes.py --by experiments; docs/identification.md
+#: "Operating films"). gamma_IW's ratio is the walls' (internal mass included).
+OPERATING_FILMS = {"gamma_floor": 1 / 1.30, "gamma_IW": 1 / 1.14, "gamma_ceil": 1 / 1.04}
+#: ``Pipeline.identify(operating_films=)``: the ratios above for a natural-convection
+#: algorithm (``"natural"``) or the identified films everywhere (``"none"``)
+OPERATING_FILM_MODES = ("natural", "none")
+
+
+def operating_film_ratios(building: Building | None, mode: str = "natural"
+                          ) -> dict[str, float]:
+    """Film parameter -> factor [-] from the identified (experiment) films to the films
+    of regular operation: :data:`OPERATING_FILMS` when ``mode`` is ``"natural"`` and the
+    building's declared inside algorithm is a natural-convection one
+    (:data:`NATURAL_ALGORITHMS`: TARP, EnergyPlus's default, and the adaptive and ASTM
+    C1340 algorithms), empty otherwise (``Simple``'s films are constants, ``CeilingDiffuser``'s
+    follow the airflow; no building: nothing known)."""
+    if mode not in OPERATING_FILM_MODES:
+        raise ValueError(f"operating_films={mode!r}: use one of "
+                         f"{', '.join(map(repr, OPERATING_FILM_MODES))}")
+    algo = getattr(building, "inside_convection", None)
+    if mode == "none" or algo is None or algo.lower() not in NATURAL_ALGORITHMS:
+        return {}
+    return dict(OPERATING_FILMS)
 
 
 #: c_IG: background gains, weakly held near idle equipment and lighting

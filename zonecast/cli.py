@@ -279,6 +279,12 @@ PositivePriors = Annotated[str, typer.Option(
          "log-normal, same median and relative spread as the Gaussians, so a film near zero "
          "is as improbable as one many times its nominal value; 'normal': Gaussian "
          "(docs/identification.md)")]
+OperatingFilms = Annotated[str, typer.Option(
+    help="inside films outside the identification's weekends: 'natural' (the default since "
+         "2026-12-06: for a natural-convection inside algorithm such as TARP, EnergyPlus's "
+         "default, the identified films x 0.77 floors, 0.88 walls, 0.96 ceilings, because the "
+         "experiments hold the faces further from the air than operation does) or 'none' "
+         "(the identified films everywhere); docs/identification.md \"Operating films\"")]
 Films = Annotated[str | None, typer.Option(
     help="priors and starting values of the inside films: 'combined' (the handbook's "
          "convection + radiation films), 'convective' (convection alone, EnergyPlus's Simple "
@@ -419,6 +425,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  inside_convection: InsideConvection = ModelOptions.inside_convection,
                  films: Films = None,
                  positive_priors: PositivePriors = "log",
+                 operating_films: OperatingFilms = "natural",
                  weekend_gains: Annotated[str, typer.Option(
                      help="'auto' (the default since 2026-12-04): 'metered' when the site's "
                           "lights and plug-load meters show occupied weekends (their weekend "
@@ -458,6 +465,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  x0_profile_days=x0_profile_days,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  positive_priors=positive_priors,
+                                 operating_films=operating_films,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -568,6 +576,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   inside_convection: InsideConvection = ModelOptions.inside_convection,
                   films: Films = None,
                   positive_priors: PositivePriors = "log",
+                  operating_films: OperatingFilms = "natural",
                   weekend_gains: Annotated[str, typer.Option(
                       help="'auto' (the default since 2026-12-04: 'metered' when the "
                            "site's meters show occupied weekends, else 'daytime'), 'daytime' "
@@ -599,7 +608,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                  layers=layers, internal_mass=internal_mass,
                                  inside_convection=inside_convection,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
-                                day_scale_sd=day_scale_sd, positive_priors=positive_priors)
+                                day_scale_sd=day_scale_sd, positive_priors=positive_priors,
+                                operating_films=operating_films)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

@@ -284,6 +284,42 @@ def test_metered_mode_fits_the_daytime_scale_with_the_metered_gains_known(vb, mo
     assert seen[1]["shape_prior"] == (1.0, 1.0)
 
 
+def test_operating_films_scale_the_pipelines_films_and_keep_the_identified_model(
+        vb, monkeypatch):
+    """Pipeline.identify(operating_films="natural") on a TARP building: the result's model
+    keeps the identified films (Table 2), the pipeline's parameters (gains, forecasts, the
+    model file) are the films times OPERATING_FILMS and every other parameter as
+    identified; "none" keeps the identified films."""
+    import types
+
+    import zonecast.estimator.pipeline as pl
+    from zonecast.estimator.priors import OPERATING_FILMS
+
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    assert pipe.building().inside_convection == "TARP"
+    data = pipe.data(pipe.telemetry(vb))
+    fitted = pipe.model().params.copy({"gamma_IW": 3.0, "gamma_floor": 2.0, "gamma_ceil": 1.5})
+
+    def fake(model, *args, **kwargs):
+        return types.SimpleNamespace(model=pipe.model(fitted), weekend_gains=None,
+                                     weekend_metered_ratio=None, operating_films=None,
+                                     to_dict=lambda: {})
+
+    monkeypatch.setattr(pl, "identify", fake)
+    res = pipe.identify(data, train=["2015-04-18"], validation=[])
+    assert res.operating_films == OPERATING_FILMS
+    np.testing.assert_array_equal(res.model.params.values, fitted.values)
+    for name in pipe.params.param_names:
+        factor = OPERATING_FILMS.get(name, 1.0)
+        assert pipe.params[name] == pytest.approx(fitted[name] * factor, rel=1e-12)
+    assert pipe.params["gamma_floor"] == pytest.approx(2.0 / 1.30)
+    res = pipe.identify(data, train=["2015-04-18"], validation=[], operating_films="none")
+    assert res.operating_films is None
+    np.testing.assert_array_equal(pipe.params.values, fitted.values)
+    with pytest.raises(PipelineError, match="operating_films='always': use 'natural' or 'none'"):
+        pipe.identify(data, operating_films="always")
+
+
 def test_weekend_metered_ratio_is_the_weekend_daytime_rise_over_the_working_days(vb):
     """The building's summed meters: mean between 08 and 18 h less the median between 00
     and 06 h local, weekends over working days; rows where a zone's meter is unknown are

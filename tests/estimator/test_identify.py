@@ -236,6 +236,26 @@ def test_film_priors_follow_the_idf_inside_convection_algorithm(five_zone, small
         CONVECTIVE_FILMS["gamma_IW"][0]
 
 
+def test_operating_films_follow_the_idf_inside_convection_algorithm(five_zone, small_office):
+    """The films of regular operation: the experiments' films scaled down for a
+    natural-convection algorithm (TARP), unchanged for EnergyPlus's constant Simple films,
+    without a building or with mode "none"; an unknown mode says what to give."""
+    from zonecast.estimator.priors import OPERATING_FILMS, operating_film_ratios
+
+    assert operating_film_ratios(small_office) == OPERATING_FILMS
+    assert set(OPERATING_FILMS) == {"gamma_floor", "gamma_IW", "gamma_ceil"}
+    # a natural film grows with the face-to-air difference, which the experiments make
+    # larger than operation: smaller films in operation, the floors' the most
+    assert all(0.5 < f < 1.0 for f in OPERATING_FILMS.values())
+    assert OPERATING_FILMS["gamma_floor"] < OPERATING_FILMS["gamma_IW"] < \
+        OPERATING_FILMS["gamma_ceil"]
+    assert operating_film_ratios(five_zone) == {}
+    assert operating_film_ratios(None) == {}
+    assert operating_film_ratios(small_office, "none") == {}
+    with pytest.raises(ValueError, match="operating_films='tarp': use one of 'natural', 'none'"):
+        operating_film_ratios(small_office, "tarp")
+
+
 def test_log_normal_priors_hold_positive_coefficients_away_from_zero(five_zone):
     """positive="log": films and U_win get log-normal priors of the same median and relative
     spread; near the median they weigh a deviation as the Gaussian does, near zero far more,

@@ -87,7 +87,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   x0_profile_days: int | None = None,
                   x0_offset_sd: float | None = None,
                   day_scale_sd: float | None = None,
-                  positive_priors: str = "log") -> IdentifyOutcome:
+                  positive_priors: str = "log",
+                  operating_films: str = "natural") -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
@@ -96,7 +97,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     ``internal_mass``, ``inside_convection``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``,
-    ``positive_priors``: as :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
+    ``positive_priors``, ``operating_films``: as
+    :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
     pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar,
                                                          infiltration=infiltration,
                                                          ground=ground, shading=shading,
@@ -117,7 +119,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,
                         films=films, progress=lambda m: progress(f"identification: {m}"),
                         x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
-                        day_scale_sd=day_scale_sd, positive_priors=positive_priors)
+                        day_scale_sd=day_scale_sd, positive_priors=positive_priors,
+                        operating_films=operating_films)
     if profile_weeks:
         pipe.weekly_profile(d, progress=lambda m: progress(f"weekly internal-gains profile: {m}"))
     out.parent.mkdir(parents=True, exist_ok=True)

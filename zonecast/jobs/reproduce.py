@@ -124,6 +124,15 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                      f"{ident['jacobian_condition']:.3g}; strongly correlated pairs (|r| >= 0.9): "
                      + ("; ".join(f"{a}/{b} {r:+.2f}" for a, b, r in ident["strongly_correlated"])
                         or "none") + ".")
+    operating = ident.get("operating_films")
+    if operating:
+        lines.append("Inside films in regular operation (internal gains, Table 3, the model "
+                     "file): the identified ones × "
+                     + ", ".join(f"{k} {v:.3f}" for k, v in operating.items())
+                     + ", the building's inside convection being natural (the experiments hold "
+                     "the faces further from the air than operation does; `--operating-films "
+                     "none` keeps the identified films; docs/identification.md \"Operating "
+                     "films\"). Table 1 and Table 2 are the identified films.")
     spans = (results.identification or {}).get("spans") or []
     mode = (results.identification or {}).get("weekend_gains")
     lines += ["", "## Table 2: identification RMS [°C] (weekend data, "
@@ -464,7 +473,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         solar_enclosure: str = ModelOptions.solar_enclosure, adiabatic: str = ModelOptions.adiabatic,
         layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
         inside_convection: str = ModelOptions.inside_convection,
-        positive_priors: str = "log") -> Results:
+        positive_priors: str = "log", operating_films: str = "natural") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
@@ -476,7 +485,9 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
     ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``, ``internal_mass``, ``inside_convection``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
-    ``films``, ``positive_priors``: as :meth:`Pipeline.identify`;
+    ``films``, ``positive_priors``, ``operating_films``: as :meth:`Pipeline.identify`
+    (the forecasts and gains use the pipeline's operating parameters, Table 2 and Fig. 1
+    the identified ones);
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
     the forecast study's split (never its validation weeks)."""
     out.mkdir(parents=True, exist_ok=True)
@@ -512,14 +523,15 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                        if weekend_gains not in (False, None, "none")
                                        or x0_profile_days else None),
                           x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
-                          day_scale_sd=day_scale_sd, positive_priors=positive_priors)
+                          day_scale_sd=day_scale_sd, positive_priors=positive_priors,
+                          operating_films=operating_films)
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
     progress("identification with window solar on the room air (paper's placement)")
     ident_air = pipe.with_options(replace(pipe.options, window_solar="air")).identify(
         data, n_starts=1, seed=seed, priors=priors, sigma_e=sigma_e,
         window=window, positive_priors=positive_priors) if sensitivity else None
-    fitted = ident.model
+    fitted = pipe.model()  # the films of regular operation (Pipeline.identify)
     truth = None
     if (campaign / "truth.csv").is_file():
         truth = pd.read_csv(campaign / "truth.csv", index_col=0)
@@ -571,7 +583,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                   timings_s={k: round(v, 1) for k, v in timings.items()})
     (out / "results.json").write_text(res.model_dump_json(indent=2))
     figures = []
-    sims = weekend_simulations(fitted, data, ident.train_weekends + ident.validation_weekends,
+    sims = weekend_simulations(ident.model, data,
+                               ident.train_weekends + ident.validation_weekends,
                                window=ident.window,
                                f_ig=_daytime_gains(ident.weekend_gains, ident, data, pipe),
                                x0_gains=pipe.x0_gains, x0_window=ident.x0_window,

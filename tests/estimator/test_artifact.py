@@ -303,7 +303,7 @@ def test_operating_films_scale_the_pipelines_films_and_keep_the_identified_model
     def fake(model, *args, **kwargs):
         return types.SimpleNamespace(model=pipe.model(fitted), weekend_gains=None,
                                      weekend_metered_ratio=None, operating_films=None,
-                                     to_dict=lambda: {})
+                                     to_dict=dict)
 
     monkeypatch.setattr(pl, "identify", fake)
     res = pipe.identify(data, train=["2015-04-18"], validation=[])

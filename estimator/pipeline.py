@@ -344,7 +344,7 @@ class Pipeline:
                  x0_offset_sd: float | None = None,
                  day_scale_sd: float | None = None,
                  positive_priors: str = "log",
-                 operating_films: str = "natural") -> IdentificationResult:
+                 operating_films: str = "none") -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -373,15 +373,16 @@ class Pipeline:
         ``agree_rtol``: the starts stop once two reach the same cost within it
         (:func:`~.identify.identify`; 0 runs all ``n_starts``).
 
-        ``operating_films``: ``"natural"`` (the default since 2026-12-06's forty-second
-        session, chosen on the family's training members, docs/identification.md
+        ``operating_films``: ``"none"`` (the default): the identified films everywhere.
+        ``"natural"`` (measured 2026-12-06 and not the default, docs/identification.md
         "Operating films"): when the IDF declares a natural-convection inside algorithm
         (TARP, EnergyPlus's default), the inside films of regular operation are the
-        identified ones times :data:`~.priors.OPERATING_FILMS` (the experiments hold the
-        faces further from the air than operation does, and natural convection grows with
-        that difference): :attr:`params` (gains, forecasts, the model file) carry them,
-        the result's :attr:`~.identify.IdentificationResult.model` keeps the identified
-        films (Table 2). ``"none"``: the identified films everywhere.
+        identified ones times :data:`~.priors.OPERATING_FILMS`, the ratios EnergyPlus shows
+        on the family's VAV floors between their experiments and working hours:
+        :attr:`params` (gains, forecasts, the model file) carry them, the result's
+        :attr:`~.identify.IdentificationResult.model` keeps the identified films (Table 2).
+        The ratios are not general: the DOE small office's packaged units give the reverse
+        on its walls.
 
         ``weekend_gains`` (default ``"auto"`` since 2026-12-04: ``"metered"`` when the
         site's meters say its weekends are occupied (:func:`weekend_metered_ratio` at least

@@ -136,7 +136,8 @@ def convective_films(building: Building | None) -> dict[str, tuple[float, float,
 #: widened thermostat and forced airflows hold the faces 1.3-2.8 K from the air against
 #: -0.4 to +1.9 K in operation and a natural-convection film grows as |dT|^(1/3)
 #: (benchmarks/bench_convection_regimes.py --by experiments; docs/identification.md
-#: "Operating films"). gamma_IW's ratio is the walls' (internal mass included).
+#: "Operating films"). gamma_IW's ratio is the walls' (internal mass included). Not
+#: general: the DOE small office's packaged units give walls 0.80x, floors about 1x.
 OPERATING_FILMS = {"gamma_floor": 1 / 1.30, "gamma_IW": 1 / 1.14, "gamma_ceil": 1 / 1.04}
 #: ``Pipeline.identify(operating_films=)``: the ratios above for a natural-convection
 #: algorithm (``"natural"``) or the identified films everywhere (``"none"``)

@@ -280,11 +280,12 @@ PositivePriors = Annotated[str, typer.Option(
          "is as improbable as one many times its nominal value; 'normal': Gaussian "
          "(docs/identification.md)")]
 OperatingFilms = Annotated[str, typer.Option(
-    help="inside films outside the identification's weekends: 'natural' (the default since "
-         "2026-12-06: for a natural-convection inside algorithm such as TARP, EnergyPlus's "
-         "default, the identified films x 0.77 floors, 0.88 walls, 0.96 ceilings, because the "
-         "experiments hold the faces further from the air than operation does) or 'none' "
-         "(the identified films everywhere); docs/identification.md \"Operating films\"")]
+    help="inside films outside the identification's weekends: 'none' (the default: the "
+         "identified films everywhere) or 'natural' (for a natural-convection inside algorithm "
+         "such as TARP, EnergyPlus's default, the identified films x 0.77 floors, 0.88 walls, "
+         "0.96 ceilings, the ratios EnergyPlus shows on the testbed family's VAV floors "
+         "between their experiments and working hours; measured, not the default); "
+         "docs/identification.md \"Operating films\"")]
 Films = Annotated[str | None, typer.Option(
     help="priors and starting values of the inside films: 'combined' (the handbook's "
          "convection + radiation films), 'convective' (convection alone, EnergyPlus's Simple "
@@ -425,7 +426,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  inside_convection: InsideConvection = ModelOptions.inside_convection,
                  films: Films = None,
                  positive_priors: PositivePriors = "log",
-                 operating_films: OperatingFilms = "natural",
+                 operating_films: OperatingFilms = "none",
                  weekend_gains: Annotated[str, typer.Option(
                      help="'auto' (the default since 2026-12-04): 'metered' when the site's "
                           "lights and plug-load meters show occupied weekends (their weekend "
@@ -576,7 +577,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   inside_convection: InsideConvection = ModelOptions.inside_convection,
                   films: Films = None,
                   positive_priors: PositivePriors = "log",
-                  operating_films: OperatingFilms = "natural",
+                  operating_films: OperatingFilms = "none",
                   weekend_gains: Annotated[str, typer.Option(
                       help="'auto' (the default since 2026-12-04: 'metered' when the "
                            "site's meters show occupied weekends, else 'daytime'), 'daytime' "

@@ -289,7 +289,7 @@ def test_operating_films_scale_the_pipelines_films_and_keep_the_identified_model
     """Pipeline.identify(operating_films="natural") on a TARP building: the result's model
     keeps the identified films (Table 2), the pipeline's parameters (gains, forecasts, the
     model file) are the films times OPERATING_FILMS and every other parameter as
-    identified; "none" keeps the identified films."""
+    identified; "none", the default, keeps the identified films."""
     import types
 
     import zonecast.estimator.pipeline as pl
@@ -306,14 +306,14 @@ def test_operating_films_scale_the_pipelines_films_and_keep_the_identified_model
                                      to_dict=dict)
 
     monkeypatch.setattr(pl, "identify", fake)
-    res = pipe.identify(data, train=["2015-04-18"], validation=[])
+    res = pipe.identify(data, train=["2015-04-18"], validation=[], operating_films="natural")
     assert res.operating_films == OPERATING_FILMS
     np.testing.assert_array_equal(res.model.params.values, fitted.values)
     for name in pipe.params.param_names:
         factor = OPERATING_FILMS.get(name, 1.0)
         assert pipe.params[name] == pytest.approx(fitted[name] * factor, rel=1e-12)
     assert pipe.params["gamma_floor"] == pytest.approx(2.0 / 1.30)
-    res = pipe.identify(data, train=["2015-04-18"], validation=[], operating_films="none")
+    res = pipe.identify(data, train=["2015-04-18"], validation=[])  # the default: "none"
     assert res.operating_films is None
     np.testing.assert_array_equal(pipe.params.values, fitted.values)
     with pytest.raises(PipelineError, match="operating_films='always': use 'natural' or 'none'"):

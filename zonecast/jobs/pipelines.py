@@ -88,7 +88,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   x0_offset_sd: float | None = None,
                   day_scale_sd: float | None = None,
                   positive_priors: str = "log",
-                  operating_films: str = "natural") -> IdentifyOutcome:
+                  operating_films: str = "none") -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,

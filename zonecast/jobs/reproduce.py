@@ -129,10 +129,10 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
         lines.append("Inside films in regular operation (internal gains, Table 3, the model "
                      "file): the identified ones × "
                      + ", ".join(f"{k} {v:.3f}" for k, v in operating.items())
-                     + ", the building's inside convection being natural (the experiments hold "
-                     "the faces further from the air than operation does; `--operating-films "
-                     "none` keeps the identified films; docs/identification.md \"Operating "
-                     "films\"). Table 1 and Table 2 are the identified films.")
+                     + " (`--operating-films natural`: the building's inside convection is "
+                     "natural, and on the testbed family's VAV floors the experiments hold the "
+                     "faces further from the air than operation does; docs/identification.md "
+                     "\"Operating films\"). Table 1 and Table 2 are the identified films.")
     spans = (results.identification or {}).get("spans") or []
     mode = (results.identification or {}).get("weekend_gains")
     lines += ["", "## Table 2: identification RMS [°C] (weekend data, "
@@ -473,7 +473,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         solar_enclosure: str = ModelOptions.solar_enclosure, adiabatic: str = ModelOptions.adiabatic,
         layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
         inside_convection: str = ModelOptions.inside_convection,
-        positive_priors: str = "log", operating_films: str = "natural") -> Results:
+        positive_priors: str = "log", operating_films: str = "none") -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);

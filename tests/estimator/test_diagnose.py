@@ -497,9 +497,19 @@ def test_scaled_internal_mass_scales_capacity_and_links_together(furnished):
     room = [i for i in others if np.any(A[i, states] != 0)]
     assert room  # the room air (at least) is linked to the furniture
     np.testing.assert_allclose(A3[np.ix_(room, states)], 3 * A[np.ix_(room, states)])
-    # the conductance matrix diag(C) A stays symmetric (reciprocal links)
+    # the links between the set and the rest stay reciprocal in diag(C) A, the rest's own
+    # block is as before (with internal_mass="one_face" and the mirror, every furniture's
+    # back face is held at its inner face's temperature, a one-way term, not a link), and
+    # inside the set everything scales with the area
     G, G3 = st.capacity[:, None] * A, s3.capacity[:, None] * A3
-    np.testing.assert_allclose(G3, G3.T, atol=1e-9 * abs(G3).max())
+    tol = 1e-9 * abs(G3).max()
+    np.testing.assert_allclose(G3[np.ix_(states, others)], G3[np.ix_(others, states)].T,
+                               atol=tol)
+    np.testing.assert_allclose(G3[np.ix_(others, others)] - np.diag(np.diag(G3)[others]),
+                               G[np.ix_(others, others)] - np.diag(np.diag(G)[others]),
+                               atol=tol)
+    np.testing.assert_allclose(G3[np.ix_(states, states)], 3 * G[np.ix_(states, states)],
+                               rtol=1e-12, atol=1e-12 * abs(G).max())
     # each other node loses to the set three times as much; its row still sums as before
     # apart from that (the links cancel in a row sum: diag = -sum of links)
     np.testing.assert_allclose(G3[room].sum(axis=1), G[room].sum(axis=1),

@@ -34,6 +34,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -225,6 +226,39 @@ def _profile(doc: dict, zones: list[str], timezone: str, path: Path, notes: list
     return WeeklyProfile(values, counts, timezone)
 
 
+def _reheat_scale(doc: dict, path: Path, boxes: Sequence[str]) -> np.ndarray | None:
+    """Per box of the structure, the factor on its measured reheat heat (the model file's
+    ``reheat_scale``: box id -> factor, from :meth:`Pipeline.fit_reheat_leak
+    <zonecast.estimator.pipeline.Pipeline.fit_reheat_leak>`; a box it does not name, and
+    every box of a file without it, takes 1)."""
+    raw = doc.get("reheat_scale")
+    if raw is None:
+        return None
+    if not isinstance(raw, dict):
+        raise ModelFileError(f"{path}: 'reheat_scale' must be null or an object "
+                             "(box id -> factor)")
+    unknown = sorted(set(raw) - set(boxes))
+    if unknown:
+        raise ModelFileError(f"{path}: reheat_scale names boxes the model does not have: "
+                             f"{unknown}")
+    out = np.ones(len(boxes))
+    for i, b in enumerate(boxes):
+        if b in raw:
+            v = raw[b]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v < 10:
+                raise ModelFileError(f"{path}: reheat_scale[{b!r}] must be a number in "
+                                     f"[0, 10), got {v!r}")
+            out[i] = float(v)
+    return out
+
+
+def _reheat_from_faces(doc: dict, path: Path) -> bool:
+    raw = doc.get("reheat_from_faces", False)
+    if not isinstance(raw, bool):
+        raise ModelFileError(f"{path}: 'reheat_from_faces' must be true or false, got {raw!r}")
+    return raw
+
+
 def _noise(doc: dict, path: Path) -> NoiseSettings:
     raw = doc.get("noise") or {}
     if not isinstance(raw, dict):
@@ -324,7 +358,9 @@ def load_model_file(path: str | Path) -> ModelBundle:
     options = _model_options(doc, path, notes)
     if doc.get("structure") is not None:
         structure, volume = _stored_structure(doc, path, site, options)
-        model = BilinearModel(structure, params)
+        model = BilinearModel(structure, params,
+                              reheat_scale=_reheat_scale(doc, path, structure.boxes),
+                              reheat_from_faces=_reheat_from_faces(doc, path))
     else:
         notes.append("no structure file: model rebuilt from the site's EnergyPlus file")
         try:
@@ -334,6 +370,10 @@ def load_model_file(path: str | Path) -> ModelBundle:
         model = build_model(building, site.zones,
                             {b: box.room for b, box in site.boxes.items()}, params,
                             options=options)
+        scale = _reheat_scale(doc, path, model.structure.boxes)
+        if scale is not None:
+            model = BilinearModel(model.structure, params, reheat_scale=scale,
+                                  reheat_from_faces=_reheat_from_faces(doc, path))
         volume = {name: z.volume for name, z in building.zones.items()}
     return ModelBundle(
         building=site.building, site=site, model=model, profile=profile, noise=noise,

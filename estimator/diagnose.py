@@ -253,7 +253,9 @@ def scaled_internal_mass(model: BilinearModel, states: np.ndarray, scale: float)
     new = dataclasses.replace(
         st, capacity=capacity, A0=_link_scaled(st.A0, inside, scale),
         A_p=[_link_scaled(a, inside, scale) for a in st.A_p])
-    return BilinearModel(new, model.params, model.step, model.method, model.u_nominal)
+    return BilinearModel(new, model.params, model.step, model.method, model.u_nominal,
+                         reheat_scale=model.reheat_scale,
+                         reheat_from_faces=model.reheat_from_faces)
 
 
 def exchanged_air(model: BilinearModel, j: int, conductance: float) -> BilinearModel:
@@ -274,7 +276,9 @@ def exchanged_air(model: BilinearModel, j: int, conductance: float) -> BilinearM
     D = sp.lil_matrix((model.n, model.n))
     D[:nr, :nr] = -L / st.capacity[:nr, None]
     new = dataclasses.replace(st, A0=(st.A0 + D.tocsr()).tocsr())
-    return BilinearModel(new, model.params, model.step, model.method, model.u_nominal)
+    return BilinearModel(new, model.params, model.step, model.method, model.u_nominal,
+                         reheat_scale=model.reheat_scale,
+                         reheat_from_faces=model.reheat_from_faces)
 
 
 def furniture_rebuilder(building, zones: Mapping[str, Sequence[str]], boxes: Mapping[str, str],

@@ -31,15 +31,18 @@ import pandas as pd
 from zonecast.estimator.constants import HORIZON, STEP
 
 __all__ = [
+    "REHEAT_LEAK_BOUNDS",
     "DayAheadGains",
     "GainsInputError",
     "GainsSeries",
     "GainsStep",
     "OnlineGains",
     "RankDeficientError",
+    "ReheatLeak",
     "WeeklyProfile",
     "estimate_gains_series",
     "estimate_gains_step",
+    "fit_reheat_leak",
     "fit_weekly_profile",
     "online_gains_series",
     "time_of_week_bin",
@@ -415,6 +418,98 @@ def fit_weekly_profile(
     values[mean.index.to_numpy()] = mean.to_numpy()
     counts[count.index.to_numpy()] = count.to_numpy()
     return WeeklyProfile(values=values, counts=counts, timezone=timezone, step=pd.Timedelta(step))
+
+
+@dataclass(frozen=True)
+class ReheatLeak:
+    """The share of the measured reheat heat that the per-step gains estimate carries
+    (:func:`fit_reheat_leak`).
+
+    Attributes
+    ----------
+    k : numpy.ndarray, shape (p,)
+        Heat of the estimate per heat of the zone's reheat [W/W] as used (0 where the
+        fitted value was not significant); the model's reheat heat is scaled by 1 + k.
+    fitted : numpy.ndarray, shape (p,)
+        The least-squares value before the test and the bounds [W/W].
+    stderr : numpy.ndarray, shape (p,)
+        Its standard error [W/W] (white residuals assumed: a lower bound).
+    rows : int
+        Rows with a finite estimate that entered the fit.
+    """
+
+    k: np.ndarray
+    fitted: np.ndarray
+    stderr: np.ndarray
+    rows: int
+
+
+#: bounds of :func:`fit_reheat_leak`'s k [W/W]: at -0.5 the air takes half the measured
+#: reheat heat, at 1 twice it
+REHEAT_LEAK_BOUNDS = (-0.5, 1.0)
+
+
+def fit_reheat_leak(times, f_ig, q_reheat, timezone: str, *,
+                    step: str | pd.Timedelta = "15min", min_t: float = 3.0,
+                    bounds: tuple[float, float] = REHEAT_LEAK_BOUNDS) -> ReheatLeak:
+    """How much of each zone's measured reheat heat its gains estimate carries.
+
+    The model of the estimate is the fixed weekly profile of paper Eq:fixed_ig plus a
+    term in the zone's reheat heat, ``f(t) = profile(bin(t)) + k q(t) + e(t)``: within a
+    time-of-week bin the occupants' heat repeats from week to week while the reheat
+    follows the weather, so the within-bin least squares (the bins as fixed effects)
+    separates the two without knowing the true gains. A perfect model has k = 0; a
+    model whose air answers the boxes' heat too weakly (films too strong in operation,
+    docs/identification.md "The reheat leak is EnergyPlus's inside convection") has k > 0.
+    Days of more occupants need less reheat, so k is biased towards zero, not away.
+
+    Parameters
+    ----------
+    times : tz-aware timestamps, shape (N,)
+    f_ig : array_like, shape (N, p)
+        Per-step gains estimates [W/m²] (NaN skipped).
+    q_reheat : array_like, shape (N, p)
+        Each zone's reheat heat, c_p sum_j u_j r_j per zone floor area [W/m²].
+    timezone : str
+        The building's IANA time zone (the profile's time-of-week axis).
+    step : bin width of the time-of-week axis.
+    min_t : float
+        A zone's k is used only when |k| / stderr reaches this [-].
+    bounds : (float, float)
+        k is clipped to these [W/W].
+
+    Returns
+    -------
+    ReheatLeak
+    """
+    F = np.asarray(f_ig, dtype=float)
+    Q = np.asarray(q_reheat, dtype=float)
+    if F.ndim != 2 or Q.shape != F.shape:
+        raise GainsInputError(f"f_ig and q_reheat must both have shape (N, p); got {F.shape} "
+                              f"and {Q.shape}")
+    bins = time_of_week_bin(times, timezone, step)
+    if len(bins) != len(F):
+        raise GainsInputError(f"one time per row: {len(bins)} times for {len(F)} rows")
+    p = F.shape[1]
+    k, fitted, se = np.zeros(p), np.zeros(p), np.full(p, np.inf)
+    ok_all = np.isfinite(F) & np.isfinite(Q)
+    for j in range(p):
+        ok = ok_all[:, j]
+        if ok.sum() < 3:
+            continue
+        frame = pd.DataFrame({"f": F[ok, j], "q": Q[ok, j], "b": bins[ok]})
+        means = frame.groupby("b")[["f", "q"]].transform("mean")
+        ft, qt = (frame["f"] - means["f"]).to_numpy(), (frame["q"] - means["q"]).to_numpy()
+        sq = float(qt @ qt)
+        dof = len(qt) - frame["b"].nunique() - 1
+        if sq <= 1e-12 * float(frame["q"] @ frame["q"]) or dof < 1:
+            continue  # the reheat repeats every week: the profile holds all of it
+        fitted[j] = float(ft @ qt) / sq
+        resid = ft - fitted[j] * qt
+        se[j] = float(np.sqrt(resid @ resid / dof / sq))
+        if abs(fitted[j]) >= min_t * se[j]:
+            k[j] = float(np.clip(fitted[j], *bounds))
+    return ReheatLeak(k, fitted, se, int(ok_all.all(axis=1).sum()))
 
 
 # --------------------------------------------------------------------------- online

@@ -115,6 +115,15 @@ class BilinearModel:
         Airflow per box [kg/s] for the ``"bilinear"`` linearisation.
     cache_size : int, optional
         Number of per-u step propagators kept; default fits in about 256 MB.
+    reheat_scale : array, optional
+        Per box, the factor on its measured reheat heat reaching the room air in
+        :meth:`reheat_forcing` (default 1: the heat as measured);
+        :meth:`Pipeline.fit_reheat_leak
+        <zonecast.estimator.pipeline.Pipeline.fit_reheat_leak>` sets it from operation.
+    reheat_from_faces : bool
+        With ``reheat_scale``: the air's extra (or missing) heat is drawn from (or given to)
+        the room's inside faces in proportion to their film conductances to the air, so
+        the reheat's total heat stays the measured one (default False: added).
     """
 
     def __init__(
@@ -125,6 +134,8 @@ class BilinearModel:
         method: str = "exact",
         u_nominal: float | Sequence[float] = 0.3,
         cache_size: int | None = None,
+        reheat_scale: Sequence[float] | np.ndarray | None = None,
+        reheat_from_faces: bool = False,
     ):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}")
@@ -151,6 +162,13 @@ class BilinearModel:
         self.C = structure.C
         self._bxu = structure.Bxu_diag()  # one nonzero per box: (room, room)
         self._rooms = structure.room_of_box
+        nb = len(structure.boxes)
+        self.reheat_scale = (np.ones(nb) if reheat_scale is None
+                             else np.broadcast_to(np.asarray(reheat_scale, float), (nb,)).copy())
+        if not np.all(np.isfinite(self.reheat_scale)) or np.any(self.reheat_scale < 0):
+            raise ValueError(f"reheat_scale must be finite and >= 0, got {self.reheat_scale}")
+        self.reheat_from_faces = bool(reheat_from_faces)
+        self._rh_faces: np.ndarray | None = None  # (n, n_boxes) [1/(J/K)], built when used
         # return air into plenums: the plenum's air state and c_p / C_plenum per box (-1, 0:
         # none); the room's air enters at its value at the step's start (docs/model.md)
         self._ret, self._retc = structure.returns
@@ -184,8 +202,8 @@ class BilinearModel:
         """Same structure, new parameter values (cheap: A = A0 + sum theta_p A_p)."""
         params = values if isinstance(values, ParameterSet) else self.params.copy(values)
         return BilinearModel(
-            self.structure, params, self.step, self.method, self.u_nominal, self._cache_size
-        )
+            self.structure, params, self.step, self.method, self.u_nominal, self._cache_size,
+            self.reheat_scale, self.reheat_from_faces)
 
     # sizes -----------------------------------------------------------------------
     @property
@@ -496,7 +514,8 @@ class BilinearModel:
         The supply-air term of paper eq:ct_model, c_p u_j (T_s - T_room), assumes every box
         blows air at the AHU supply temperature. A box with a discharge-air point blows it
         at T_s + r_j (r_j: the reheat coil's rise, measured); the difference,
-        c_p u_j r_j / C_room, is a known input added here (zero when ``reheat`` is None).
+        c_p u_j r_j / C_room, is a known input added here (zero when ``reheat`` is None),
+        times the box's :attr:`reheat_scale`.
 
         Parameters
         ----------
@@ -511,12 +530,35 @@ class BilinearModel:
         out = np.zeros(u.shape[:-1] + (self.n,))
         if reheat is None:
             return out
-        q = -self._bxu * u * np.asarray(reheat, dtype=float)  # K/s per box (bxu < 0)
+        # K/s per box (bxu < 0)
+        q = -self._bxu * self.reheat_scale * u * np.asarray(reheat, dtype=float)
         if u.ndim == 1:
             np.add.at(out, self._rooms, q)
         else:
             np.add.at(out.T, self._rooms, q.T)
+        if self.reheat_from_faces and np.any(self.reheat_scale != 1.0):
+            # the air's extra heat (scale - 1) c_p u r [W] taken from the room's faces
+            extra = (-self.structure.capacity[self._rooms] * self._bxu
+                     * (self.reheat_scale - 1.0) * u * np.asarray(reheat, dtype=float))
+            out += extra @ self._reheat_faces().T
         return out
+
+    def _reheat_faces(self) -> np.ndarray:
+        """(n, n_boxes): minus each face's share of its box room's film conductance over
+        the face's capacity [K/J]; the room air's links to states that are not air."""
+        if self._rh_faces is None:
+            st = self.structure
+            air = np.zeros(self.n, bool)
+            air[st.air_states()] = True
+            cap = st.capacity
+            w = np.zeros((self.n, len(self._rooms)))
+            for j, r in enumerate(self._rooms):
+                g = np.where(~air & (np.arange(self.n) != r), self.A[r] * cap[r], 0.0)
+                g = np.clip(g, 0.0, None)
+                if g.sum() > 0:
+                    w[:, j] = -g / g.sum() / cap
+            self._rh_faces = w
+        return self._rh_faces
 
     def _check_inputs(self, x0, u, v, f_ig):
         u = np.atleast_2d(np.asarray(u, dtype=float))

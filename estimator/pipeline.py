@@ -34,8 +34,14 @@ from zonecast.estimator.artifact import (
     write_model_file,
 )
 from zonecast.estimator.dataset import ModelData, model_data
-from zonecast.estimator.forecast import Forecast, fixed_profile, track_week, whole_weeks
-from zonecast.estimator.gains import WeeklyProfile
+from zonecast.estimator.forecast import (
+    Forecast,
+    fixed_profile,
+    track_week,
+    whole_weeks,
+    zone_floor_area,
+)
+from zonecast.estimator.gains import ReheatLeak, WeeklyProfile, fit_reheat_leak
 from zonecast.estimator.identify import IdentificationResult, excitation_saturdays, identify
 from zonecast.estimator.idf import Building, read_building
 from zonecast.estimator.inputs_forecast import DayCalendar
@@ -55,7 +61,7 @@ from zonecast.estimator.site import Site, load_site
 from zonecast.estimator.streaming import offline_forecast_variants, offline_forecasts
 from zonecast.estimator.telemetry import Telemetry, load_telemetry
 
-__all__ = ["Pipeline", "PipelineError"]
+__all__ = ["REHEAT_LEAK", "REHEAT_LEAK_MODES", "Pipeline", "PipelineError", "check_reheat_leak"]
 
 Progress = Callable[[str], None]
 
@@ -66,6 +72,23 @@ class PipelineError(ValueError):
 
 def _quiet(_: str) -> None:
     return None
+
+
+#: how the jobs (``zonecast identify``, ``reproduce``) treat the measured reheat heat after
+#: the identification: ``"none"``, as measured; ``"added"``, :meth:`Pipeline.fit_reheat_leak`
+#: before the weekly profile, the air's extra heat added; ``"from_faces"``, the same with the
+#: extra heat drawn from the room's faces (the reheat's total heat as measured)
+REHEAT_LEAK_MODES = ("none", "added", "from_faces")
+#: the default since 2026-12-06 (forty-third session), chosen on the family's training members
+REHEAT_LEAK = "from_faces"
+
+
+def check_reheat_leak(mode: str) -> str:
+    """``mode`` if it is one of :data:`REHEAT_LEAK_MODES`, else a :class:`PipelineError`."""
+    if mode not in REHEAT_LEAK_MODES:
+        raise PipelineError(f"reheat_leak={mode!r}: use "
+                            f"{' or '.join(repr(v) for v in REHEAT_LEAK_MODES)}")
+    return mode
 
 
 #: weekend daytime rise of an unoccupied office's internal gains [W/m2]: ASHRAE 90.1's
@@ -238,6 +261,13 @@ class Pipeline:
         #: internal gains [W/m2] per row the last :meth:`identify`'s x(0) filter knew
         #: (``x0_profile_days``), else None
         self.x0_gains: np.ndarray | None = None
+        #: per box, the factor on its measured reheat heat in every use after the
+        #: identification (:meth:`fit_reheat_leak`; None: 1, the heat as measured)
+        self.reheat_scale: np.ndarray | None = None
+        #: the last :meth:`fit_reheat_leak`
+        self.reheat_leak: ReheatLeak | None = None
+        #: the air's extra reheat heat is drawn from the room's faces (BilinearModel)
+        self.reheat_from_faces = False
         self._bundle: ModelBundle | None = None
 
     # --- construction ------------------------------------------------------------------
@@ -262,6 +292,9 @@ class Pipeline:
         pipe.params = bundle.model.params
         pipe.profile = bundle.profile
         pipe.noise = bundle.noise
+        if not np.all(bundle.model.reheat_scale == 1.0):
+            pipe.reheat_scale = bundle.model.reheat_scale.copy()
+            pipe.reheat_from_faces = bundle.model.reheat_from_faces
         pipe._bundle = bundle
         return pipe
 
@@ -314,7 +347,8 @@ class Pipeline:
             params = self.params
         if params is not None and not isinstance(params, ParameterSet):
             params = ParameterSet(list(structure.zones), params)
-        return BilinearModel(structure, params)
+        return BilinearModel(structure, params, reheat_scale=self.reheat_scale,
+                             reheat_from_faces=self.reheat_from_faces)
 
     # --- data --------------------------------------------------------------------------
     def telemetry(self, path: str | os.PathLike) -> Telemetry:
@@ -466,6 +500,8 @@ class Pipeline:
             priors = building_priors(start, self._building_or_none(),
                                      convective="idf" if films == "idf" else convective,
                                      positive=positive_priors)
+        # the identification sees the reheat as measured (fit_reheat_leak comes after it)
+        self.reheat_scale, self.reheat_leak, self.reheat_from_faces = None, None, False
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
                        seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,
                        window=window, agree_rtol=agree_rtol, x0_offset_sd=x0_offset_sd,
@@ -566,6 +602,56 @@ class Pipeline:
             return None
         return np.nan_to_num(self.weekly_profile(data, weeks=quiet)(data.times))
 
+    def fit_reheat_leak(self, data: ModelData, *, progress: Progress = _quiet,
+                        weeks: Sequence[int] | None = None,
+                        from_faces: bool = False) -> ReheatLeak | None:
+        """Scale each zone's measured reheat heat by 1 + k, k the share of it that the
+        per-step gains estimate of regular operation carries
+        (:func:`~zonecast.estimator.gains.fit_reheat_leak`: the gains of every whole week
+        of ``data``, or of the weeks of index ``weeks``, their excitation rows left out,
+        tracked with the identified parameters and the heat as measured; the
+        weekly profile and the reheat term fitted together on the local time-of-week axis).
+        Sets :attr:`reheat_scale` for every later use (gains, profile, forecasts, model
+        file); Table 2 keeps the identification's model. ``from_faces``: the air's extra
+        heat k c_p u r is drawn from the room's inside faces by their film conductances
+        (the reheat's total heat stays the measured one), else it is added. None (nothing
+        changed) without such a week or without measured reheat."""
+        self.reheat_scale, self.reheat_leak = None, None
+        self.reheat_from_faces = False
+        if not np.any(data.reheat):
+            return None
+        every = whole_weeks(data)
+        pick = every if weeks is None else [every[i] for i in weeks]
+        if not pick:
+            return None
+        model = self.model()
+        st = model.structure
+        area = zone_floor_area(model)
+        box_zone = st.state_zones()[np.asarray(st.room_of_box)]
+        site_box = np.array([b in self.site.boxes for b in st.boxes])
+        rows, f = [], []
+        for i, w in enumerate(pick):
+            progress(f"reheat leak: week {i + 1}/{len(pick)}")
+            t = track_week(model, data, w["rows"])
+            rows.append(t.rows)
+            f.append(t.track.f_ig)
+        r = np.concatenate(rows)
+        f = np.concatenate(f)
+        f[data.excitation[r]] = np.nan  # the experiments' forced boxes
+        # c_p u_j r_j [W] per box, with the model's c_p (BilinearModel.reheat_forcing)
+        q_box = -st.capacity[st.room_of_box] * model._bxu * data.u[r] * data.reheat[r]
+        q = np.column_stack([q_box[:, site_box & (box_zone == j)].sum(axis=1)
+                             for j in range(model.n_zones)]) / area
+        leak = fit_reheat_leak(data.times[r], f, q, data.timezone,
+                               step=data.times[1] - data.times[0])
+        self.reheat_leak = leak
+        scale = np.ones(len(st.boxes))
+        scale[site_box] = 1.0 + leak.k[box_zone[site_box]]
+        self.reheat_scale = scale
+        self.reheat_from_faces = bool(from_faces)
+        self._bundle = None
+        return leak
+
     def weekly_profile(self, data: ModelData, *, progress: Progress = _quiet,
                        weeks: Sequence[int] | None = None) -> WeeklyProfile | None:
         """The fixed weekly internal-gains profile (paper Eq:fixed_ig) from every whole
@@ -618,6 +704,20 @@ class Pipeline:
             info["identification"] = self.identification.to_dict()
         if self.profile_weeks:
             info["profile_weeks"] = self.profile_weeks
+        if self.reheat_scale is not None:
+            info["reheat_scale"] = {b: float(v) for b, v in zip(structure.boxes,
+                                                                self.reheat_scale)
+                                    if b in self.site.boxes}
+            info["reheat_from_faces"] = self.reheat_from_faces
+        if self.reheat_leak is not None:
+            leak = self.reheat_leak
+            info["reheat_leak"] = {
+                "method": "within time-of-week bins (Pipeline.fit_reheat_leak)",
+                "rows": leak.rows,
+                "zones": {z: {"k": float(leak.k[j]), "fitted": float(leak.fitted[j]),
+                              "stderr": (float(leak.stderr[j]) if np.isfinite(leak.stderr[j])
+                                         else None)}
+                          for j, z in enumerate(structure.zones)}}
         params = self.params
         return write_model_file(
             path, site_file,

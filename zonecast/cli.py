@@ -16,7 +16,8 @@ import typer
 from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from threadpoolctl import threadpool_limits
 
-from zonecast.estimator.pipeline import weekend_occupancy_warning
+from zonecast.estimator.gains import REHEAT_LEAK_BOUNDS
+from zonecast.estimator.pipeline import REHEAT_LEAK, weekend_occupancy_warning
 from zonecast.estimator.rc.elements import ADMITTANCE_TOLERANCE
 from zonecast.estimator.rc.network import ModelOptions
 from zonecast.estimator.site_draft import draft_site
@@ -286,6 +287,14 @@ OperatingFilms = Annotated[str, typer.Option(
          "0.96 ceilings, the ratios EnergyPlus shows on the testbed family's VAV floors "
          "between their experiments and working hours; measured, not the default); "
          "docs/identification.md \"Operating films\"")]
+ReheatLeakOpt = Annotated[str, typer.Option(
+    "--reheat-leak",
+    help="the measured reheat heat after the identification: 'none' (as measured), "
+         "'added' (on the room air x 1 + k, k the share of it that regular operation's "
+         "gains estimate carries, fitted with the weekly profile within time-of-week bins) "
+         "or 'from_faces' (the same with the air's extra heat drawn from the room's faces, "
+         "the total as measured); docs/identification.md \"The reheat leak fitted from "
+         "operation\"")]
 Films = Annotated[str | None, typer.Option(
     help="priors and starting values of the inside films: 'combined' (the handbook's "
          "convection + radiation films), 'convective' (convection alone, EnergyPlus's Simple "
@@ -428,6 +437,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  films: Films = None,
                  positive_priors: PositivePriors = "log",
                  operating_films: OperatingFilms = "none",
+                 reheat_leak: ReheatLeakOpt = REHEAT_LEAK,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'auto' (the default since 2026-12-04): 'metered' when the site's "
                           "lights and plug-load meters show occupied weekends (their weekend "
@@ -468,6 +478,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  positive_priors=positive_priors,
                                  operating_films=operating_films,
+                                 reheat_leak=reheat_leak,
                                  progress=lambda m: prog.update(task, description=m))
     except (ValueError, FileNotFoundError) as exc:
         _fail(exc)
@@ -499,6 +510,13 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     if used:
         typer.echo(f"weekly internal-gains profile from {len(used)} weeks ({used[0]} ... "
                    f"{used[-1]})")
+    if done.reheat_leak is not None:
+        typer.echo("reheat heat on the room air in operation x 1 + k, k per zone: "
+                   + ", ".join(f"{z} {k:+.3f}" for z, k in done.reheat_leak.items()))
+        pinned = [z for z, k in done.reheat_leak.items() if k in REHEAT_LEAK_BOUNDS]
+        if pinned:
+            typer.secho(f"warning: reheat leak k at a bound {REHEAT_LEAK_BOUNDS} (the data ask "
+                        f"for more): {', '.join(pinned)}", fg=typer.colors.YELLOW)
     typer.echo(f"wrote {done.model_file} and {done.model_file.with_suffix('.npz')}")
 
 
@@ -579,6 +597,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   films: Films = None,
                   positive_priors: PositivePriors = "log",
                   operating_films: OperatingFilms = "none",
+                  reheat_leak: ReheatLeakOpt = REHEAT_LEAK,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'auto' (the default since 2026-12-04: 'metered' when the "
                            "site's meters show occupied weekends, else 'daytime'), 'daytime' "
@@ -611,7 +630,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                  inside_convection=inside_convection,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd, positive_priors=positive_priors,
-                                operating_films=operating_films)
+                                operating_films=operating_films, reheat_leak=reheat_leak)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

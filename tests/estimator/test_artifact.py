@@ -465,3 +465,105 @@ def test_weekly_profile_counts_round_trip_and_bad_counts_say_so(vb, tmp_path):
                                          "counts": bad}, **kw)
         with pytest.raises(ModelFileError, match="weekly_profile.counts must be whole"):
             load_model_file(tmp_path / "bad.json")
+
+
+def test_reheat_leak_scales_the_boxes_reheat_everywhere_after_the_fit(vb, monkeypatch):
+    """Pipeline.fit_reheat_leak: the gains of the weeks tracked with the heat as measured,
+    their excitation rows left out, go to gains.fit_reheat_leak with each zone's reheat
+    heat per floor area; each site box's reheat heat is then scaled by 1 + k of its zone in
+    every model the pipeline makes and in the model file, which reads back the same; a bad
+    factor in a file says what to fix."""
+    import zonecast.estimator.pipeline as pl
+    from zonecast.estimator.forecast import zone_floor_area
+    from zonecast.estimator.gains import ReheatLeak
+    from zonecast.estimator.model import BilinearModel
+
+    pipe = Pipeline.from_model_file(vb / "model.json")
+    data = pipe.data(pipe.telemetry(vb))
+    assert np.any(data.reheat), "the virtual building's boxes must reheat in April"
+    st = pipe.structure()
+    seen = {}
+
+    def spy(times, f_ig, q, timezone, **kw):
+        seen.update(times=times, f=f_ig, q=q, timezone=timezone)
+        k = np.linspace(0.1, 0.3, f_ig.shape[1])
+        return ReheatLeak(k, k, np.full_like(k, 0.01), len(times))
+
+    monkeypatch.setattr(pl, "fit_reheat_leak", spy)
+    leak = pipe.fit_reheat_leak(data)
+    assert seen["timezone"] == data.timezone and seen["f"].shape == seen["q"].shape
+    assert seen["f"].shape[1] == len(st.zones)
+    assert np.all(np.isnan(seen["f"][data.excitation[np.searchsorted(data.times,
+                                                                     seen["times"])]]))
+    zone_of_box = st.state_zones()[np.asarray(st.room_of_box)]
+    rows = np.searchsorted(data.times, seen["times"])
+    heat = st.options.cp_air * data.u[rows] * data.reheat[rows]  # [W] per box
+    area = zone_floor_area(pipe.model())
+    for j in range(len(st.zones)):
+        mine = [i for i, b in enumerate(st.boxes) if b in pipe.site.boxes and zone_of_box[i] == j]
+        np.testing.assert_allclose(seen["q"][:, j], heat[:, mine].sum(axis=1) / area[j],
+                                   rtol=1e-9, atol=1e-12)
+    assert np.nanmax(seen["q"]) > 1.0  # W/m2: the boxes reheat
+    for i, b in enumerate(st.boxes):
+        want = 1.0 + leak.k[zone_of_box[i]] if b in pipe.site.boxes else 1.0
+        assert pipe.reheat_scale[i] == pytest.approx(want)
+    model = pipe.model()
+    np.testing.assert_array_equal(model.reheat_scale, pipe.reheat_scale)
+    np.testing.assert_array_equal(model.with_params({"gamma_IW": 5.0}).reheat_scale,
+                                  pipe.reheat_scale)
+    plain = BilinearModel(st, model.params)
+    u, r = np.full(len(st.boxes), 0.2), np.full(len(st.boxes), 10.0)
+    np.testing.assert_allclose(model.reheat_forcing(u, r),
+                               plain.reheat_forcing(u * pipe.reheat_scale, r))
+    # drawn from the faces instead: the air gets the same, the total heat is the measured one
+    faces = BilinearModel(st, model.params, reheat_scale=pipe.reheat_scale,
+                          reheat_from_faces=True)
+    air = st.air_states()
+    np.testing.assert_allclose(faces.reheat_forcing(u, r)[air], model.reheat_forcing(u, r)[air])
+    measured = st.capacity @ plain.reheat_forcing(u, r)
+    assert st.capacity @ faces.reheat_forcing(u, r) == pytest.approx(measured, rel=1e-9)
+    assert st.capacity @ model.reheat_forcing(u, r) > 1.05 * measured  # "added": more heat
+    assert np.all(faces.reheat_forcing(u, r)[np.setdiff1d(np.arange(st.n), air)] <= 0)
+    # the model file keeps it; the service's bundle and a new pipeline read it back
+    path = pipe.write_model_file(vb / "model-reheat-leak.json")
+    doc = json.loads(path.read_text())
+    assert set(doc["reheat_scale"]) == set(pipe.site.boxes)
+    assert doc["reheat_leak"]["zones"][next(iter(st.zones))]["k"] == pytest.approx(leak.k[0])
+    again = Pipeline.from_model_file(path)
+    np.testing.assert_allclose(again.model().reheat_scale, pipe.reheat_scale)
+    np.testing.assert_allclose(load_model_file(path).model.reheat_scale, pipe.reheat_scale)
+    assert doc["reheat_from_faces"] is False
+    doc["reheat_from_faces"] = True
+    path.write_text(json.dumps(doc))
+    assert load_model_file(path).model.reheat_from_faces
+    assert Pipeline.from_model_file(path).model().reheat_from_faces
+    doc["reheat_from_faces"] = "yes"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match="'reheat_from_faces' must be true or false"):
+        load_model_file(path)
+    doc["reheat_from_faces"] = False
+    doc["reheat_scale"][next(iter(pipe.site.boxes))] = -1.0
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match=r"reheat_scale\[.*\] must be a number in \[0, 10\)"):
+        load_model_file(path)
+    doc["reheat_scale"] = {"no-such-box": 1.2}
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match="reheat_scale names boxes the model does not have"):
+        load_model_file(path)
+    with pytest.raises(ValueError, match="reheat_scale must be finite and >= 0"):
+        BilinearModel(st, model.params, reheat_scale=-1.0)
+    # a new identification sees the reheat as measured again
+    import types
+
+    seen_scale = []
+
+    def fake(m, *args, **kwargs):
+        seen_scale.append(m.reheat_scale.copy())
+        return types.SimpleNamespace(model=m, weekend_gains=None, weekend_metered_ratio=None,
+                                     operating_films=None, to_dict=dict)
+
+    monkeypatch.setattr(pl, "identify", fake)
+    pipe.identify(data, train=["2015-04-18"], validation=[])
+    assert np.all(seen_scale[0] == 1.0) and pipe.reheat_scale is None
+    with pytest.raises(PipelineError, match="reheat_leak='always': use 'none' or 'added' or 'from_faces'"):
+        pl.check_reheat_leak("always")

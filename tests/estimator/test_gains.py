@@ -365,3 +365,50 @@ def test_filter_innovations_feed_eq_ig_unbiased_only_if_the_filter_tracks_the_ai
     for z in range(2):
         slope = np.polyfit(f_true[ok, z], est[ok, z], 1)[0]
         assert slope_range[0] < slope < slope_range[1]
+
+
+def _leak_data(k: float, weeks: int = 6, seed: int = 0, repeat_q: bool = False):
+    """Weeks of 15-min rows: f = a weekly profile + k q + noise, q a reheat heat that follows
+    a slow random 'weather' (or repeats every week with ``repeat_q``)."""
+    rng = np.random.default_rng(seed)
+    times = pd.date_range("2015-01-05", periods=weeks * 672, freq="15min", tz="America/Chicago")
+    b = np.arange(len(times)) % 672
+    profile = np.where(((b % 96) >= 32) & ((b % 96) < 72) & (b < 480), 6.0, 0.5)
+    if repeat_q:
+        q = 2.0 + np.sin(2 * np.pi * b / 96)
+    else:
+        weather = np.convolve(rng.normal(size=len(times)), np.ones(48) / 48, mode="same")
+        q = np.clip(3.0 + 8.0 * weather - 1.5 * profile / 6.0, 0.0, None)
+    f = profile + k * q + rng.normal(0.0, 0.3, len(times))
+    return times, f, q
+
+
+def test_fit_reheat_leak_separates_the_reheat_from_the_weekly_profile():
+    """Within time-of-week bins the profile cancels: k is recovered where the reheat
+    varies from week to week, 0 (and said so by its standard error) where it does not
+    leak, where it repeats every week (no within-bin variation) and outside the bounds."""
+    t, f1, q1 = _leak_data(0.25, seed=1)
+    _, f0, q0 = _leak_data(0.0, seed=2)
+    leak = G.fit_reheat_leak(t, np.c_[f1, f0], np.c_[q1, q0], "America/Chicago")
+    assert leak.k[0] == pytest.approx(0.25, abs=0.02)
+    assert abs(leak.fitted[0] - 0.25) < 4 * leak.stderr[0]
+    assert leak.k[1] == 0.0 and abs(leak.fitted[1]) < 3 * leak.stderr[1]
+    assert leak.rows == len(t)
+    # the same reheat every week: the profile explains it, nothing is fitted
+    _, fr, qr = _leak_data(0.25, seed=3, repeat_q=True)
+    rep = G.fit_reheat_leak(t, fr[:, None], qr[:, None], "America/Chicago")
+    assert rep.k[0] == 0.0 and not np.isfinite(rep.stderr[0])
+    # clipped to the bounds; NaN rows skipped
+    f_big = f1 + 2.0 * q1
+    f_big[:100] = np.nan
+    big = G.fit_reheat_leak(t, f_big[:, None], q1[:, None], "America/Chicago", bounds=(-0.5, 1.0))
+    assert big.fitted[0] == pytest.approx(2.25, abs=0.05) and big.k[0] == 1.0
+    assert big.rows == len(t) - 100
+
+
+def test_fit_reheat_leak_errors_say_what_to_fix():
+    t, f, q = _leak_data(0.1, weeks=2)
+    with pytest.raises(G.GainsInputError, match=r"must both have shape \(N, p\)"):
+        G.fit_reheat_leak(t, f[:, None], np.c_[q, q], "America/Chicago")
+    with pytest.raises(G.GainsInputError, match="one time per row"):
+        G.fit_reheat_leak(t[:-1], f[:, None], q[:, None], "America/Chicago")

@@ -15,7 +15,7 @@ from zonecast.estimator.forecast import Forecast
 from zonecast.estimator.identify import IdentificationResult
 from zonecast.estimator.idf import Building
 from zonecast.estimator.model import BilinearModel, write_model_summary
-from zonecast.estimator.pipeline import Pipeline
+from zonecast.estimator.pipeline import REHEAT_LEAK, Pipeline, check_reheat_leak
 from zonecast.estimator.rc.network import ModelOptions
 from zonecast.estimator.rc.parameters import ParameterSet
 from zonecast.estimator.site import Site, parse_step
@@ -68,6 +68,8 @@ class IdentifyOutcome:
     profile_weeks: list[str] = field(default_factory=list)
     #: the site maps lights and plug-load meters (``points.power``)
     metered: bool = False
+    #: zone -> k of :meth:`Pipeline.fit_reheat_leak` (None: not fitted)
+    reheat_leak: dict[str, float] | None = None
 
 
 def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None = None,
@@ -88,7 +90,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   x0_offset_sd: float | None = None,
                   day_scale_sd: float | None = None,
                   positive_priors: str = "log",
-                  operating_films: str = "none") -> IdentifyOutcome:
+                  operating_films: str = "none",
+                  reheat_leak: str = REHEAT_LEAK) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
@@ -98,7 +101,9 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``,
     ``positive_priors``, ``operating_films``: as
-    :meth:`~zonecast.estimator.pipeline.Pipeline.identify`."""
+    :meth:`~zonecast.estimator.pipeline.Pipeline.identify`; ``reheat_leak``
+    ``"added"`` or ``"from_faces"``: :meth:`~zonecast.estimator.pipeline.Pipeline.fit_reheat_leak`
+    on the profile's weeks before the profile; ``"none"``: the reheat heat as measured."""
     pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar,
                                                          infiltration=infiltration,
                                                          ground=ground, shading=shading,
@@ -121,11 +126,17 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                         x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                         day_scale_sd=day_scale_sd, positive_priors=positive_priors,
                         operating_films=operating_films)
+    check_reheat_leak(reheat_leak)
     if profile_weeks:
+        if reheat_leak != "none":
+            pipe.fit_reheat_leak(d, progress=progress,
+                                 from_faces=reheat_leak == "from_faces")
         pipe.weekly_profile(d, progress=lambda m: progress(f"weekly internal-gains profile: {m}"))
     out.parent.mkdir(parents=True, exist_ok=True)
     path = pipe.write_model_file(out, extra={"profile_weeks": pipe.profile_weeks})
-    return IdentifyOutcome(res, path, pipe.profile_weeks, bool(pipe.site.points.power))
+    leak = None if pipe.reheat_leak is None else dict(zip(pipe.site.zones,
+                                                          map(float, pipe.reheat_leak.k)))
+    return IdentifyOutcome(res, path, pipe.profile_weeks, bool(pipe.site.points.power), leak)
 
 
 def forecast_at(model: Path, data: Path, at: str, horizon: str = "24h"

@@ -24,12 +24,15 @@ from zonecast.estimator.constants import HORIZON
 from zonecast.estimator.dataset import ModelData
 from zonecast.estimator.evaluate import horizon_rms, rms_by_zone
 from zonecast.estimator.forecast import issue_rows, week_split
+from zonecast.estimator.gains import REHEAT_LEAK_BOUNDS
 from zonecast.estimator.identify import weekend_simulations
 from zonecast.estimator.pipeline import (
     METERED_OCCUPIED_RATIO,
+    REHEAT_LEAK,
     WEEKEND_DAY_GAIN,
     WEEKEND_DAY_HOURS,
     Pipeline,
+    check_reheat_leak,
     weekend_daytime_shape,
     weekend_occupancy_warning,
 )
@@ -133,6 +136,20 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                      "natural, and on the testbed family's VAV floors the experiments hold the "
                      "faces further from the air than operation does; docs/identification.md "
                      "\"Operating films\"). Table 1 and Table 2 are the identified films.")
+    leak = ident.get("reheat_leak")
+    if leak:
+        lines.append("Reheat heat in regular operation (internal gains, Table 3, the model "
+                     "file): the measured heat × 1 + k, k per zone "
+                     + ", ".join(f"{z} {v['k']:+.3f}"
+                                 + (f" (**at its bound**; fitted {v['fitted']:+.3f})"
+                                    if v["k"] != v["fitted"] and v["k"] != 0.0 else "")
+                                 for z, v in leak.items())
+                     + " (`--reheat-leak added|from_faces`: the share of the reheat that the "
+                     "training weeks' gains estimate carried, fitted with the weekly profile "
+                     "within time-of-week bins; 0 where not significant, bounds "
+                     f"{REHEAT_LEAK_BOUNDS[0]} and {REHEAT_LEAK_BOUNDS[1]}; "
+                     "docs/identification.md \"The reheat leak fitted from operation\"). "
+                     "Table 2 is the identified model's.")
     spans = (results.identification or {}).get("spans") or []
     mode = (results.identification or {}).get("weekend_gains")
     lines += ["", "## Table 2: identification RMS [°C] (weekend data, "
@@ -473,7 +490,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         solar_enclosure: str = ModelOptions.solar_enclosure, adiabatic: str = ModelOptions.adiabatic,
         layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
         inside_convection: str = ModelOptions.inside_convection,
-        positive_priors: str = "log", operating_films: str = "none") -> Results:
+        positive_priors: str = "log", operating_films: str = "none",
+        reheat_leak: str = REHEAT_LEAK) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
@@ -485,6 +503,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
     ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``, ``internal_mass``, ``inside_convection``:
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
+    ``reheat_leak``: as ``zonecast identify`` (:meth:`Pipeline.fit_reheat_leak` on the
+    training weeks of the gains split);
     ``films``, ``positive_priors``, ``operating_films``: as :meth:`Pipeline.identify`
     (the forecasts and gains use the pipeline's operating parameters, Table 2 and Fig. 1
     the identified ones);
@@ -531,6 +551,10 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     ident_air = pipe.with_options(replace(pipe.options, window_solar="air")).identify(
         data, n_starts=1, seed=seed, priors=priors, sigma_e=sigma_e,
         window=window, positive_priors=positive_priors) if sensitivity else None
+    leak = None
+    if check_reheat_leak(reheat_leak) != "none":
+        leak = pipe.fit_reheat_leak(data, weeks=week_split(data, seed)["train"],
+                                    progress=progress, from_faces=reheat_leak == "from_faces")
     fitted = pipe.model()  # the films of regular operation (Pipeline.identify)
     truth = None
     if (campaign / "truth.csv").is_file():
@@ -568,7 +592,13 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                               for n, v, u, s, bd in zip(ident.param_names, ident.params,
                                                         ident.units, ident.stderr, ident.bounds)},
                   identification={**ident.to_dict(), "weekend_gains_asked": weekend_gains,
-                                  "site_meters": bool(site.points.power)},
+                                  "site_meters": bool(site.points.power),
+                                  "reheat_leak": None if leak is None else {
+                                      z: {"k": float(leak.k[j]),
+                                          "fitted": float(leak.fitted[j]),
+                                          "stderr": (float(leak.stderr[j])
+                                                     if np.isfinite(leak.stderr[j]) else None)}
+                                      for j, z in enumerate(site.zones)}},
                   table2={"training": ident.train_rms, "validation": ident.validation_rms},
                   table2_window_solar_air=None if ident_air is None else
                   {"training": ident_air.train_rms, "validation": ident_air.validation_rms},

@@ -139,7 +139,8 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
     leak = ident.get("reheat_leak")
     if leak:
         lines.append("Reheat heat in regular operation (internal gains, Table 3, the model "
-                     "file): the measured heat × 1 + k, k per zone "
+                     "file): on the room air the measured heat × 1 + k (with `from_faces`, "
+                     "the default, k × the heat taken from the room's faces), k per zone "
                      + ", ".join(f"{z} {v['k']:+.3f}"
                                  + (f" (**at its bound**; fitted {v['fitted']:+.3f})"
                                     if v["k"] != v["fitted"] and v["k"] != 0.0 else "")

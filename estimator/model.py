@@ -538,10 +538,15 @@ class BilinearModel:
             np.add.at(out.T, self._rooms, q.T)
         if self.reheat_from_faces and np.any(self.reheat_scale != 1.0):
             # the air's extra heat (scale - 1) c_p u r [W] taken from the room's faces
-            extra = (-self.structure.capacity[self._rooms] * self._bxu
-                     * (self.reheat_scale - 1.0) * u * np.asarray(reheat, dtype=float))
-            out += extra @ self._reheat_faces().T
+            out += ((self.reheat_scale - 1.0) * self.reheat_heat(u, reheat)
+                    ) @ self._reheat_faces().T
         return out
+
+    def reheat_heat(self, u: np.ndarray, reheat: np.ndarray) -> np.ndarray:
+        """The measured reheat heat c_p u_j r_j of each box [W] (as measured: no
+        :attr:`reheat_scale`), with the model's c_p; same shapes as ``u``."""
+        return (-self.structure.capacity[self._rooms] * self._bxu * np.asarray(u, dtype=float)
+                * np.asarray(reheat, dtype=float))
 
     def _reheat_faces(self) -> np.ndarray:
         """(n, n_boxes): minus each face's share of its box room's film conductance over

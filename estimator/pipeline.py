@@ -638,8 +638,7 @@ class Pipeline:
         r = np.concatenate(rows)
         f = np.concatenate(f)
         f[data.excitation[r]] = np.nan  # the experiments' forced boxes
-        # c_p u_j r_j [W] per box, with the model's c_p (BilinearModel.reheat_forcing)
-        q_box = -st.capacity[st.room_of_box] * model._bxu * data.u[r] * data.reheat[r]
+        q_box = model.reheat_heat(data.u[r], data.reheat[r])  # [W] per box
         q = np.column_stack([q_box[:, site_box & (box_zone == j)].sum(axis=1)
                              for j in range(model.n_zones)]) / area
         leak = fit_reheat_leak(data.times[r], f, q, data.timezone,

@@ -305,6 +305,10 @@ class IdentificationResult:
     #: :attr:`model` keeps the identified films (Table 2's weekends), the pipeline's
     #: parameters carry the operating ones. None: not applied (the films everywhere)
     operating_films: dict[str, float] | None = None
+    #: ``Pipeline.fit_operating_films``'s test: the zones' precision-weighted mean reheat
+    #: leak k at the identified films, its standard error and whether the ratios were
+    #: applied (None: not run)
+    operating_films_test: dict | None = None
 
     def x0_offset(self) -> np.ndarray | None:
         """(n_zones,) :attr:`x0_offsets` [K] in zone order, or None."""
@@ -393,6 +397,11 @@ class IdentificationResult:
             lines.append("inside films in regular operation (gains, forecasts, model file): "
                          + ", ".join(f"{k} x{v:.3f}" for k, v in self.operating_films.items())
                          + " of the identified (the experiments' films)")
+        test = self.operating_films_test
+        if test is not None and not self.operating_films:
+            lines.append(f"inside films in regular operation: the identified ones (the reheat "
+                         f"leak at them, k {test['k_mean']:+.3f} +- {test['stderr']:.3f}, does "
+                         f"not ask for weaker films)")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -414,7 +423,8 @@ class IdentificationResult:
                 "x0_gains": self.x0_gains, "x0_offsets": self.x0_offsets,
                 "weekend_gains": self.weekend_gains,
                 "weekend_metered_ratio": self.weekend_metered_ratio,
-                "operating_films": self.operating_films}
+                "operating_films": self.operating_films,
+                "operating_films_test": self.operating_films_test}
 
 
 class _Problem:

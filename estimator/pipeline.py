@@ -61,7 +61,8 @@ from zonecast.estimator.site import Site, load_site
 from zonecast.estimator.streaming import offline_forecast_variants, offline_forecasts
 from zonecast.estimator.telemetry import Telemetry, load_telemetry
 
-__all__ = ["REHEAT_LEAK", "REHEAT_LEAK_MODES", "Pipeline", "PipelineError", "check_reheat_leak"]
+__all__ = ["OPERATING_FILMS_MODE", "OPERATING_FILMS_OPTIONS", "REHEAT_LEAK", "REHEAT_LEAK_MODES",
+           "Pipeline", "PipelineError", "check_reheat_leak", "identify_operating_films"]
 
 Progress = Callable[[str], None]
 
@@ -81,6 +82,31 @@ def _quiet(_: str) -> None:
 REHEAT_LEAK_MODES = ("none", "added", "from_faces")
 #: the default since 2026-12-06 (forty-third session), chosen on the family's training members
 REHEAT_LEAK = "from_faces"
+
+#: :meth:`Pipeline.fit_operating_films` takes the operating films when the zones' mean
+#: reheat leak at the identified films reaches this many standard errors [-]
+OPERATING_FILMS_MIN_T = 3.0
+#: the jobs' inside films of regular operation: ``"none"`` (the identified films),
+#: ``"natural"`` (:data:`~.priors.OPERATING_FILMS` whenever the algorithm is a
+#: natural-convection one, ``Pipeline.identify(operating_films="natural")``) or ``"auto"``
+#: (those ratios when the building's operation asks for them,
+#: :meth:`Pipeline.fit_operating_films`)
+OPERATING_FILMS_OPTIONS = ("none", "natural", "auto")
+#: the jobs' default since 2026-12-06 (forty-fourth session; chosen on the family's 12
+#: training members, docs/identification.md "Operating films chosen by the building's
+#: operation")
+OPERATING_FILMS_MODE = "auto"
+
+
+def identify_operating_films(mode: str) -> str:
+    """:meth:`Pipeline.identify`'s ``operating_films`` for a jobs' mode of
+    :data:`OPERATING_FILMS_OPTIONS` (``"auto"`` identifies with the films everywhere and
+    decides after, :meth:`Pipeline.fit_operating_films`); a :class:`PipelineError` for any
+    other value."""
+    if mode not in OPERATING_FILMS_OPTIONS:
+        raise PipelineError(f"operating_films={mode!r}: use "
+                            f"{' or '.join(repr(v) for v in OPERATING_FILMS_OPTIONS)}")
+    return "none" if mode == "auto" else mode
 
 
 def check_reheat_leak(mode: str) -> str:
@@ -601,6 +627,55 @@ class Pipeline:
         if not quiet:
             return None
         return np.nan_to_num(self.weekly_profile(data, weeks=quiet)(data.times))
+
+    def fit_operating_films(self, data: ModelData, *, progress: Progress = _quiet,
+                            weeks: Sequence[int] | None = None,
+                            min_t: float = OPERATING_FILMS_MIN_T) -> dict[str, float]:
+        """The inside films of regular operation, chosen by the building's own operation.
+
+        A natural-convection film (TARP, EnergyPlus's default) grows with the face-to-air
+        temperature difference, which the experiments' widened thermostat and forced
+        airflows make larger than regular operation does; an air whose films are too
+        strong hands the boxes' reheat to the faces too fast, and its gains estimate then
+        carries part of the reheat (docs/identification.md "Operating films"). So: the
+        reheat leak k of every zone at the identified films
+        (:meth:`fit_reheat_leak`, measured and not kept); when the zones' precision-weighted
+        mean k exceeds ``min_t`` standard errors, the pipeline's parameters take the films
+        of :data:`~.priors.OPERATING_FILMS` (:func:`~.priors.operating_film_ratios`),
+        else the identified films stay. Call it after :meth:`identify`; a building
+        without a natural-convection algorithm or without measured reheat keeps its
+        films. Returns the factors applied ({} when none); the identification result
+        records them and the test (``operating_films``, ``operating_films_test``)."""
+        if self.identification is None:
+            raise PipelineError("fit_operating_films needs an identified model: call "
+                                "identify() first")
+        factors = operating_film_ratios(self._building_or_none(), "natural")
+        res = self.identification
+        res.operating_films, res.operating_films_test = None, None
+        self.params = res.model.params
+        self._bundle = None
+        if not factors or not np.any(data.reheat):
+            return {}
+        leak = self.fit_reheat_leak(data, weeks=weeks, progress=progress)
+        self.reheat_scale, self.reheat_leak, self.reheat_from_faces = None, None, False
+        self._bundle = None
+        if leak is None:
+            return {}
+        w = np.where(np.isfinite(leak.stderr) & (leak.stderr > 0),
+                     1.0 / np.maximum(leak.stderr, 1e-300) ** 2, 0.0)
+        if w.sum() <= 0:
+            return {}
+        k_mean = float(w @ leak.fitted / w.sum())
+        se = float(1.0 / np.sqrt(w.sum()))
+        applied = k_mean > min_t * se
+        res.operating_films_test = {"k_mean": k_mean, "stderr": se, "min_t": min_t,
+                                    "applied": bool(applied)}
+        if not applied:
+            return {}
+        res.operating_films = dict(factors)
+        self.params = res.model.params.copy(
+            {k: res.model.params[k] * f for k, f in factors.items()})
+        return dict(factors)
 
     def fit_reheat_leak(self, data: ModelData, *, progress: Progress = _quiet,
                         weeks: Sequence[int] | None = None,

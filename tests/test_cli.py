@@ -137,14 +137,9 @@ def test_window_angle_reaches_the_model_options(tmp_path, command):
         assert message in res.output, option
 
 
-@pytest.mark.parametrize("command", ["identify", "reproduce"])
-@pytest.mark.parametrize(("option", "value", "expected", "refused"),
-                         [("--x0-profile-days", "2", 2, "0"),
-                          ("--x0-offset-sd", "0.5", 0.5, "0")])
-def test_x0_options_reach_the_pipeline(tmp_path, monkeypatch, command, option, value,
-                                       expected, refused):
-    """--x0-profile-days and --x0-offset-sd reach Pipeline.identify through both commands
-    (which stop at the identification here); 0 is refused by each option's range."""
+def _stopped_at_identify(tmp_path, monkeypatch, command):
+    """``command``'s arguments on NREL's 5-zone site with Pipeline.identify stopped at its
+    call, and the dict that receives the call's keyword arguments."""
     from zonecast.estimator.pipeline import Pipeline
 
     seen = {}
@@ -164,8 +159,36 @@ def test_x0_options_reach_the_pipeline(tmp_path, monkeypatch, command, option, v
     shutil.copy(nrel / "5ZoneAirCooled.site.yaml", site)
     shutil.copy(nrel / "5ZoneAirCooled.idf", tmp_path / "5ZoneAirCooled.idf")
     (tmp_path / "telemetry.csv").write_text("time\n")
+    return args, seen
+
+
+@pytest.mark.parametrize("command", ["identify", "reproduce"])
+@pytest.mark.parametrize(("option", "value", "expected", "refused"),
+                         [("--x0-profile-days", "2", 2, "0"),
+                          ("--x0-offset-sd", "0.5", 0.5, "0")])
+def test_x0_options_reach_the_pipeline(tmp_path, monkeypatch, command, option, value,
+                                       expected, refused):
+    """--x0-profile-days and --x0-offset-sd reach Pipeline.identify through both commands
+    (which stop at the identification here); 0 is refused by each option's range."""
+    args, seen = _stopped_at_identify(tmp_path, monkeypatch, command)
     res = runner.invoke(app, [*args, option, value])
     assert "stopped after the call" in res.output, res.output
     assert seen[option[2:].replace("-", "_")] == expected
     res = runner.invoke(app, [*args, option, refused])
     assert res.exit_code == 2 and option[2:] in res.output
+
+
+@pytest.mark.parametrize("command", ["identify", "reproduce"])
+def test_operating_films_reach_the_pipeline(tmp_path, monkeypatch, command):
+    """--operating-films through both commands: 'natural' goes to Pipeline.identify, 'auto'
+    identifies with the films everywhere ('none'; Pipeline.fit_operating_films decides
+    after), and an unknown mode fails with a message naming the three."""
+    args, seen = _stopped_at_identify(tmp_path, monkeypatch, command)
+    for value, expected in (("natural", "natural"), ("auto", "none"), ("none", "none")):
+        seen.clear()
+        res = runner.invoke(app, [*args, "--operating-films", value])
+        assert "stopped after the call" in res.output, res.output
+        assert seen["operating_films"] == expected, value
+    res = runner.invoke(app, [*args, "--operating-films", "always"])
+    assert res.exit_code == 2
+    assert "operating_films='always': use 'none' or 'natural' or 'auto'" in res.output

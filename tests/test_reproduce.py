@@ -152,3 +152,23 @@ def test_report_states_the_x0_offsets_when_fitted(tmp_path):
     plain = write_report(results(identification={"x0_offsets": None}), tmp_path, [],
                          ZONES).read_text()
     assert "offset" not in plain
+
+
+def test_report_says_why_the_operating_films_were_or_were_not_taken(tmp_path):
+    """--operating-films auto: the report gives the reheat-leak test that decided, with the
+    factors when it took them and the threshold when it did not."""
+    factors = {"gamma_floor": 1 / 1.30, "gamma_IW": 1 / 1.14, "gamma_ceil": 1 / 1.04}
+    took = write_report(results(identification={
+        "operating_films": factors,
+        "operating_films_test": {"k_mean": 0.18, "stderr": 0.002, "min_t": 3.0,
+                                 "applied": True}}), tmp_path, [], ZONES).read_text()
+    assert "the identified ones × gamma_floor 0.769, gamma_IW 0.877, gamma_ceil 0.962" in took
+    assert "mean reheat leak at the identified films k +0.180 ± 0.002" in took
+    kept = write_report(results(identification={
+        "operating_films": None,
+        "operating_films_test": {"k_mean": -0.108, "stderr": 0.011, "min_t": 3.0,
+                                 "applied": False}}), tmp_path, [], ZONES).read_text()
+    assert "Inside films in regular operation: the identified ones" in kept
+    assert "k -0.108 ± 0.011, below 3 standard errors" in kept
+    plain = write_report(results(identification={}), tmp_path, [], ZONES).read_text()
+    assert "Inside films in regular operation" not in plain

@@ -17,7 +17,11 @@ from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from threadpoolctl import threadpool_limits
 
 from zonecast.estimator.gains import REHEAT_LEAK_BOUNDS
-from zonecast.estimator.pipeline import REHEAT_LEAK, weekend_occupancy_warning
+from zonecast.estimator.pipeline import (
+    OPERATING_FILMS_MODE,
+    REHEAT_LEAK,
+    weekend_occupancy_warning,
+)
 from zonecast.estimator.rc.elements import ADMITTANCE_TOLERANCE
 from zonecast.estimator.rc.network import ModelOptions
 from zonecast.estimator.site_draft import draft_site
@@ -281,11 +285,13 @@ PositivePriors = Annotated[str, typer.Option(
          "is as improbable as one many times its nominal value; 'normal': Gaussian "
          "(docs/identification.md)")]
 OperatingFilms = Annotated[str, typer.Option(
-    help="inside films outside the identification's weekends: 'none' (the default: the "
-         "identified films everywhere) or 'natural' (for a natural-convection inside algorithm "
-         "such as TARP, EnergyPlus's default, the identified films x 0.77 floors, 0.88 walls, "
-         "0.96 ceilings, the ratios EnergyPlus shows on the testbed family's VAV floors "
-         "between their experiments and working hours; measured, not the default); "
+    help="inside films outside the identification's weekends: 'auto' (the default since "
+         "2026-12-06: the 'natural' ratios only when the building's own operation asks for "
+         "weaker films, its zones' mean reheat leak at the identified films above 3 standard "
+         "errors), 'natural' (for a natural-convection inside algorithm such as TARP, "
+         "EnergyPlus's default, the identified films x 0.77 floors, 0.88 walls, 0.96 ceilings, "
+         "the ratios EnergyPlus shows on the testbed family's VAV floors between their "
+         "experiments and working hours) or 'none' (the identified films everywhere); "
          "docs/identification.md \"Operating films\"")]
 ReheatLeakOpt = Annotated[str, typer.Option(
     "--reheat-leak",
@@ -436,7 +442,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  inside_convection: InsideConvection = ModelOptions.inside_convection,
                  films: Films = None,
                  positive_priors: PositivePriors = "log",
-                 operating_films: OperatingFilms = "none",
+                 operating_films: OperatingFilms = OPERATING_FILMS_MODE,
                  reheat_leak: ReheatLeakOpt = REHEAT_LEAK,
                  weekend_gains: Annotated[str, typer.Option(
                      help="'auto' (the default since 2026-12-04): 'metered' when the site's "
@@ -510,6 +516,14 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
     if used:
         typer.echo(f"weekly internal-gains profile from {len(used)} weeks ({used[0]} ... "
                    f"{used[-1]})")
+    test = res.operating_films_test
+    if test is not None:
+        typer.echo("inside films in regular operation: "
+                   + (", ".join(f"{k} x{v:.3f}" for k, v in res.operating_films.items())
+                      + " of the identified" if res.operating_films else "the identified ones")
+                   + f" (the zones' mean reheat leak at the identified films k "
+                   f"{test['k_mean']:+.3f} +- {test['stderr']:.3f}; weaker films above "
+                   f"{test['min_t']:g} standard errors)")
     if done.reheat_leak is not None:
         typer.echo("reheat heat on the room air in operation x 1 + k, k per zone: "
                    + ", ".join(f"{z} {k:+.3f}" for z, k in done.reheat_leak.items()))
@@ -596,7 +610,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   inside_convection: InsideConvection = ModelOptions.inside_convection,
                   films: Films = None,
                   positive_priors: PositivePriors = "log",
-                  operating_films: OperatingFilms = "none",
+                  operating_films: OperatingFilms = OPERATING_FILMS_MODE,
                   reheat_leak: ReheatLeakOpt = REHEAT_LEAK,
                   weekend_gains: Annotated[str, typer.Option(
                       help="'auto' (the default since 2026-12-04: 'metered' when the "

@@ -567,3 +567,76 @@ def test_reheat_leak_scales_the_boxes_reheat_everywhere_after_the_fit(vb, monkey
     assert np.all(seen_scale[0] == 1.0) and pipe.reheat_scale is None
     with pytest.raises(PipelineError, match="reheat_leak='always': use 'none' or 'added' or 'from_faces'"):
         pl.check_reheat_leak("always")
+
+
+def test_operating_films_auto_takes_the_ratios_only_when_operation_asks(vb, monkeypatch):
+    """Pipeline.fit_operating_films: the reheat leak of every zone at the identified films
+    (gains.fit_reheat_leak, measured and not kept) decides; the natural-convection ratios
+    are applied when the zones' precision-weighted mean k exceeds 3 standard errors, the
+    identified films stay otherwise, and nothing is measured for a building without a
+    natural-convection algorithm or without reheat."""
+    import dataclasses
+    import types
+
+    import zonecast.estimator.pipeline as pl
+    from zonecast.estimator.gains import ReheatLeak
+    from zonecast.estimator.priors import OPERATING_FILMS
+
+    pipe = Pipeline.from_model_file(vb / "model.json")
+    data = pipe.data(pipe.telemetry(vb))  # one week tracked per fit (weeks=[0]) for speed
+    with pytest.raises(PipelineError, match=r"call identify\(\) first"):
+        pipe.fit_operating_films(data, weeks=[0])
+    base = pipe.params
+    pipe.identification = types.SimpleNamespace(model=pipe.model(), operating_films=None,
+                                                operating_films_test=None)
+    # a model file's pipeline reads no IDF: the building's algorithm is EnergyPlus's default
+    monkeypatch.setattr(pipe, "_building_or_none",
+                        lambda: types.SimpleNamespace(inside_convection="TARP"))
+    p = len(pipe.site.zones)
+    calls = []
+
+    def leak_of(fitted, se):
+        def spy(times, f_ig, q, timezone, **kw):
+            calls.append(f_ig.shape)
+            return ReheatLeak(np.asarray(fitted, float), np.asarray(fitted, float),
+                              np.asarray(se, float), len(times))
+        return spy
+
+    # every zone's air answers the reheat too weakly: the operating films
+    monkeypatch.setattr(pl, "fit_reheat_leak", leak_of([0.2] * p, [0.02] * p))
+    got = pipe.fit_operating_films(data, weeks=[0])
+    assert got == OPERATING_FILMS and pipe.identification.operating_films == OPERATING_FILMS
+    for name, factor in OPERATING_FILMS.items():
+        assert pipe.params[name] == pytest.approx(base[name] * factor)
+    assert pipe.params["gamma_EW"] == base["gamma_EW"]
+    test = pipe.identification.operating_films_test
+    assert test["applied"] and test["k_mean"] == pytest.approx(0.2)
+    assert test["stderr"] == pytest.approx(0.02 / np.sqrt(p))
+    assert pipe.reheat_scale is None and pipe.reheat_leak is None  # measured, not kept
+    assert pipe.model().params["gamma_floor"] == pytest.approx(base["gamma_floor"] / 1.30)
+    # a precise zone that says the opposite outweighs an imprecise one: the films stay
+    monkeypatch.setattr(pl, "fit_reheat_leak",
+                        leak_of([0.5] + [-0.1] * (p - 1), [1.0] + [0.01] * (p - 1)))
+    assert pipe.fit_operating_films(data, weeks=[0]) == {}
+    assert pipe.params["gamma_floor"] == base["gamma_floor"]
+    assert not pipe.identification.operating_films_test["applied"]
+    assert pipe.identification.operating_films_test["k_mean"] < 0
+    # a mean k within its noise: the films stay
+    monkeypatch.setattr(pl, "fit_reheat_leak", leak_of([0.01] * p, [0.02] * p))
+    assert pipe.fit_operating_films(data, weeks=[0]) == {}
+    assert pipe.identification.operating_films is None
+    # nothing to measure: constant films, or boxes that never reheat
+    n = len(calls)
+    monkeypatch.setattr(pipe, "_building_or_none",
+                        lambda: types.SimpleNamespace(inside_convection="Simple"))
+    assert pipe.fit_operating_films(data, weeks=[0]) == {} and len(calls) == n
+    assert pipe.identification.operating_films_test is None
+    monkeypatch.setattr(pipe, "_building_or_none",
+                        lambda: types.SimpleNamespace(inside_convection="TARP"))
+    monkeypatch.setattr(pl, "fit_reheat_leak", leak_of([0.2] * p, [0.02] * p))
+    dry = dataclasses.replace(data, reheat=np.zeros_like(data.reheat))
+    assert pipe.fit_operating_films(dry, weeks=[0]) == {} and len(calls) == n
+    with pytest.raises(PipelineError, match="operating_films='always': use 'none' or "
+                                            "'natural' or 'auto'"):
+        pl.identify_operating_films("always")
+    assert pl.identify_operating_films("auto") == "none"

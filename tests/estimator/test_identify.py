@@ -148,6 +148,17 @@ def test_results_object_in_the_statsmodels_manner(truth_and_data):
     assert "gamma_IW" in text.split("at a bound")[-1] and "Jacobian rank" in text
     d = pinned.to_dict()
     assert d["at_bounds"] == pinned.at_bounds() and d["jacobian_rank"] == res.rank
+    # the films of regular operation: the factors, or the test that kept the identified ones
+    assert "regular operation" not in text and d["operating_films_test"] is None
+    pinned.operating_films = {"gamma_floor": 1 / 1.30}
+    pinned.operating_films_test = {"k_mean": 0.21, "stderr": 0.03, "min_t": 3.0,
+                                   "applied": True}
+    assert "gamma_floor x0.769 of the identified" in pinned.summary()
+    assert pinned.to_dict()["operating_films_test"]["applied"] is True
+    pinned.operating_films = None
+    pinned.operating_films_test = {"k_mean": -0.05, "stderr": 0.03, "min_t": 3.0,
+                                   "applied": False}
+    assert "the identified ones (the reheat leak at them, k -0.050 +- 0.030" in pinned.summary()
 
 
 def test_map_identification_holds_parameters_to_their_priors(truth_and_data, five_zone):

@@ -15,7 +15,13 @@ from zonecast.estimator.forecast import Forecast
 from zonecast.estimator.identify import IdentificationResult
 from zonecast.estimator.idf import Building
 from zonecast.estimator.model import BilinearModel, write_model_summary
-from zonecast.estimator.pipeline import REHEAT_LEAK, Pipeline, check_reheat_leak
+from zonecast.estimator.pipeline import (
+    OPERATING_FILMS_MODE,
+    REHEAT_LEAK,
+    Pipeline,
+    check_reheat_leak,
+    identify_operating_films,
+)
 from zonecast.estimator.rc.network import ModelOptions
 from zonecast.estimator.rc.parameters import ParameterSet
 from zonecast.estimator.site import Site, parse_step
@@ -90,7 +96,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   x0_offset_sd: float | None = None,
                   day_scale_sd: float | None = None,
                   positive_priors: str = "log",
-                  operating_films: str = "none",
+                  operating_films: str = OPERATING_FILMS_MODE,
                   reheat_leak: str = REHEAT_LEAK) -> IdentifyOutcome:
     """Identify the 13 parameters (paper section 4-A), estimate the weekly internal-gains
     profile (4-B) from every whole week, and write the model file. ``infiltration``,
@@ -100,8 +106,10 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     ``internal_mass``, ``inside_convection``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``,
-    ``positive_priors``, ``operating_films``: as
-    :meth:`~zonecast.estimator.pipeline.Pipeline.identify`; ``reheat_leak``
+    ``positive_priors``: as :meth:`~zonecast.estimator.pipeline.Pipeline.identify`;
+    ``operating_films``: ``"none"`` or ``"natural"`` as ``Pipeline.identify``, ``"auto"`` (the
+    default) :meth:`~zonecast.estimator.pipeline.Pipeline.fit_operating_films` on the
+    profile's weeks before the reheat leak; ``reheat_leak``
     ``"added"`` or ``"from_faces"``: :meth:`~zonecast.estimator.pipeline.Pipeline.fit_reheat_leak`
     on the profile's weeks before the profile; ``"none"``: the reheat heat as measured."""
     pipe = Pipeline.from_site(site, options=ModelOptions(window_solar=window_solar,
@@ -125,9 +133,11 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                         films=films, progress=lambda m: progress(f"identification: {m}"),
                         x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                         day_scale_sd=day_scale_sd, positive_priors=positive_priors,
-                        operating_films=operating_films)
+                        operating_films=identify_operating_films(operating_films))
     check_reheat_leak(reheat_leak)
     if profile_weeks:
+        if operating_films == "auto":
+            pipe.fit_operating_films(d, progress=progress)
         if reheat_leak != "none":
             pipe.fit_reheat_leak(d, progress=progress,
                                  from_faces=reheat_leak == "from_faces")

@@ -28,11 +28,13 @@ from zonecast.estimator.gains import REHEAT_LEAK_BOUNDS
 from zonecast.estimator.identify import weekend_simulations
 from zonecast.estimator.pipeline import (
     METERED_OCCUPIED_RATIO,
+    OPERATING_FILMS_MODE,
     REHEAT_LEAK,
     WEEKEND_DAY_GAIN,
     WEEKEND_DAY_HOURS,
     Pipeline,
     check_reheat_leak,
+    identify_operating_films,
     weekend_daytime_shape,
     weekend_occupancy_warning,
 )
@@ -128,14 +130,23 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                      + ("; ".join(f"{a}/{b} {r:+.2f}" for a, b, r in ident["strongly_correlated"])
                         or "none") + ".")
     operating = ident.get("operating_films")
+    test = ident.get("operating_films_test")
+    why = ("" if not test else
+           f"the zones' mean reheat leak at the identified films k {test['k_mean']:+.3f} ± "
+           f"{test['stderr']:.3f}, ")
     if operating:
         lines.append("Inside films in regular operation (internal gains, Table 3, the model "
                      "file): the identified ones × "
                      + ", ".join(f"{k} {v:.3f}" for k, v in operating.items())
-                     + " (`--operating-films natural`: the building's inside convection is "
+                     + f" (`--operating-films`: {why}the building's inside convection is "
                      "natural, and on the testbed family's VAV floors the experiments hold the "
                      "faces further from the air than operation does; docs/identification.md "
                      "\"Operating films\"). Table 1 and Table 2 are the identified films.")
+    elif test:
+        lines.append("Inside films in regular operation: the identified ones "
+                     f"(`--operating-films auto`: {why}below {test['min_t']:g} standard "
+                     "errors, so operation does not ask for weaker films; "
+                     "docs/identification.md \"Operating films\").")
     leak = ident.get("reheat_leak")
     if leak:
         lines.append("Reheat heat in regular operation (internal gains, Table 3, the model "
@@ -491,7 +502,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         solar_enclosure: str = ModelOptions.solar_enclosure, adiabatic: str = ModelOptions.adiabatic,
         layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
         inside_convection: str = ModelOptions.inside_convection,
-        positive_priors: str = "log", operating_films: str = "none",
+        positive_priors: str = "log", operating_films: str = OPERATING_FILMS_MODE,
         reheat_leak: str = REHEAT_LEAK) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
@@ -506,7 +517,9 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``reheat_leak``: as ``zonecast identify`` (:meth:`Pipeline.fit_reheat_leak` on the
     training weeks of the gains split);
-    ``films``, ``positive_priors``, ``operating_films``: as :meth:`Pipeline.identify`
+    ``films``, ``positive_priors``: as :meth:`Pipeline.identify`; ``operating_films``:
+    one of :data:`~zonecast.estimator.pipeline.OPERATING_FILMS_OPTIONS` (``"auto"``, the
+    default: :meth:`Pipeline.fit_operating_films` on the training weeks of the gains split)
     (the forecasts and gains use the pipeline's operating parameters, Table 2 and Fig. 1
     the identified ones);
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
@@ -545,13 +558,16 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                        or x0_profile_days else None),
                           x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                           day_scale_sd=day_scale_sd, positive_priors=positive_priors,
-                          operating_films=operating_films)
+                          operating_films=identify_operating_films(operating_films))
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
     progress("identification with window solar on the room air (paper's placement)")
     ident_air = pipe.with_options(replace(pipe.options, window_solar="air")).identify(
         data, n_starts=1, seed=seed, priors=priors, sigma_e=sigma_e,
         window=window, positive_priors=positive_priors) if sensitivity else None
+    if operating_films == "auto":
+        pipe.fit_operating_films(data, weeks=week_split(data, seed)["train"],
+                                 progress=progress)
     leak = None
     if check_reheat_leak(reheat_leak) != "none":
         leak = pipe.fit_reheat_leak(data, weeks=week_split(data, seed)["train"],

@@ -294,6 +294,9 @@ class Pipeline:
         self.reheat_leak: ReheatLeak | None = None
         #: the air's extra reheat heat is drawn from the room's faces (BilinearModel)
         self.reheat_from_faces = False
+        #: the last fit_reheat_leak's tracked gains (data, key, (rows, f_IG)), so that a
+        #: fit at the same parameters and weeks does not track them again
+        self._leak_tracks: tuple | None = None
         self._bundle: ModelBundle | None = None
 
     # --- construction ------------------------------------------------------------------
@@ -704,15 +707,21 @@ class Pipeline:
         area = zone_floor_area(model)
         box_zone = st.state_zones()[np.asarray(st.room_of_box)]
         site_box = np.array([b in self.site.boxes for b in st.boxes])
-        rows, f = [], []
-        for i, w in enumerate(pick):
-            progress(f"reheat leak: week {i + 1}/{len(pick)}")
-            t = track_week(model, data, w["rows"])
-            rows.append(t.rows)
-            f.append(t.track.f_ig)
-        r = np.concatenate(rows)
-        f = np.concatenate(f)
-        f[data.excitation[r]] = np.nan  # the experiments' forced boxes
+        key = (self.params.values.tobytes(), None if weeks is None else tuple(weeks))
+        kept = self._leak_tracks
+        if kept is not None and kept[0] is data and kept[1] == key:
+            r, f = kept[2]  # the same weeks with the same model (fit_operating_films kept them)
+        else:
+            rows, fs = [], []
+            for i, w in enumerate(pick):
+                progress(f"reheat leak: week {i + 1}/{len(pick)}")
+                t = track_week(model, data, w["rows"])
+                rows.append(t.rows)
+                fs.append(t.track.f_ig)
+            r = np.concatenate(rows)
+            f = np.concatenate(fs)
+            f[data.excitation[r]] = np.nan  # the experiments' forced boxes
+            self._leak_tracks = (data, key, (r, f))
         q_box = model.reheat_heat(data.u[r], data.reheat[r])  # [W] per box
         q = np.column_stack([q_box[:, site_box & (box_zone == j)].sum(axis=1)
                              for j in range(model.n_zones)]) / area

@@ -625,6 +625,17 @@ def test_operating_films_auto_takes_the_ratios_only_when_operation_asks(vb, monk
     monkeypatch.setattr(pl, "fit_reheat_leak", leak_of([0.01] * p, [0.02] * p))
     assert pipe.fit_operating_films(data, weeks=[0]) == {}
     assert pipe.identification.operating_films is None
+    # the reheat leak that follows at the same films and weeks reuses the tracked gains
+    tracked = []
+    real_track = pl.track_week
+    monkeypatch.setattr(pl, "track_week", lambda *a, **k: tracked.append(1) or real_track(*a, **k))
+    n = len(calls)
+    assert pipe.fit_reheat_leak(data, weeks=[0]) is not None
+    assert not tracked and len(calls) == n + 1
+    pipe.params = base.copy({"gamma_IW": base["gamma_IW"] * 0.5})  # other films: tracked again
+    pipe.fit_reheat_leak(data, weeks=[0])
+    assert len(tracked) == 1
+    pipe.params = base
     # nothing to measure: constant films, or boxes that never reheat
     n = len(calls)
     monkeypatch.setattr(pipe, "_building_or_none",

@@ -16,7 +16,11 @@ and per month, over the nights (21-06 h local, no sun):
 * the share of that loss that reaches the inside face by convection from the room air
   (the rest arrives as long-wave from the room's other faces);
 * the inside convection coefficient and the total outside coefficient (convection +
-  long-wave to air, ground and sky) EnergyPlus used;
+  long-wave to air, ground and sky) EnergyPlus used, over the dry rows (while it rains
+  EnergyPlus wets the face and sets its convection to 1000 W/(m2 K));
+
+per exterior face over all the run's dry rows, the outside convection and long-wave
+coefficients and the share of wet rows;
 
 and, for every face of the rooms (interior walls, floors, ceilings, windows and furniture
 too), the inside convection coefficient over all the run's rows (mean, 10th and 90th
@@ -64,6 +68,11 @@ NIGHT = (21, 6)  # local hours [21, 24) and [0, 6)
 #: the handbook's combined films [W/(m2 K)] (the priors' means of gamma_IW, gamma_ceil, gamma_EW)
 HANDBOOK_INSIDE = {"Wall": 8.3, "Roof": 9.3}
 HANDBOOK_OUTSIDE = 25.0
+#: EnergyPlus sets a face's outside convection coefficient to 1000 W/(m2 K) while it rains
+#: (the face is wet; Engineering Reference, "Exterior/External Conduction"): such rows are
+#: left out of the outside films' means and counted apart, or a few rainy hours would
+#: dominate them
+WET_FACE = 999.0
 
 
 def add_outputs(idf: str) -> str:
@@ -102,10 +111,11 @@ def summarise(wide: pd.DataFrame, faces: pd.DataFrame, rated: dict[str, float]) 
         t_room = wide[f"{zone}|Zone Mean Air Temperature"].to_numpy()
         t_out = wide["ENVIRONMENT|Site Outdoor Air Drybulb Temperature"].to_numpy()
         h_out = sum(get(v).to_numpy() for v in FACE_VARIABLES[6:])
+        dry = get(FACE_VARIABLES[6]).to_numpy() < WET_FACE
         h_in = get("Surface Inside Face Convection Heat Transfer Coefficient").to_numpy()
         for m in np.unique(months):
             sel = night & (months == m) & (t_room - t_out > 5.0)
-            if sel.sum() < 8:
+            if sel.sum() < 8 or not (sel & dry).any():
                 continue
             dt = float(np.mean(t_room[sel] - t_out[sel]))
             q = float(np.mean(loss[sel]))
@@ -116,7 +126,27 @@ def summarise(wide: pd.DataFrame, faces: pd.DataFrame, rated: dict[str, float]) 
                         "convective_share": float(np.mean(conv.to_numpy()[sel]) / area / q)
                         if q else float("nan"),
                         "h_inside_convection": float(np.mean(h_in[sel])),
-                        "h_outside_total": float(np.mean(h_out[sel]))})
+                        "h_outside_total": float(np.mean(h_out[sel & dry])),
+                        "wet_rows": int((sel & ~dry).sum())})
+    return out
+
+
+def outside_films(wide: pd.DataFrame, faces: pd.DataFrame) -> list[dict]:
+    """Every exterior face's outside coefficients [W/(m2 K)] over all the run's dry rows:
+    convection and long-wave (to the air, the ground and the sky), and the share of wet
+    rows (rain, convection set to 1000) left out."""
+    out = []
+    for face in faces.itertuples():
+        conv = wide.get(f"{face.SurfaceName.upper()}|{FACE_VARIABLES[6]}")
+        if conv is None:
+            continue
+        c = conv.to_numpy(float)
+        dry = c < WET_FACE
+        rad = sum(wide[f"{face.SurfaceName.upper()}|{v}"].to_numpy(float)
+                  for v in FACE_VARIABLES[7:])
+        out.append({"face": face.SurfaceName, "class": face.ClassName,
+                    "convection": float(np.mean(c[dry])), "long_wave": float(np.mean(rad[dry])),
+                    "wet_share": float(1.0 - dry.mean())})
     return out
 
 
@@ -187,6 +217,7 @@ def main(argv=None) -> None:
     wide = read_series(work / "eplusout.sql", keys)
     rows = summarise(wide, faces, rated)
     convection = inside_convection(wide, inner)
+    films = outside_films(wide, faces)
     print(f"machine: {platform.machine()}; EnergyPlus {t_ep:.0f} s; {len(faces)} faces")
     print(f"{'face':30s} {'month':>5s} {'dT':>5s} {'loss':>6s} {'U_eff':>6s} {'U_rat':>6s} "
           f"{'conv':>5s} {'h_in':>5s} {'h_out':>6s}")
@@ -196,6 +227,11 @@ def main(argv=None) -> None:
               f"{r['loss_W_m2']:6.1f} {r['U_effective']:6.2f} {u_r:6.2f} "
               f"{r['convective_share']:5.2f} {r['h_inside_convection']:5.2f} "
               f"{r['h_outside_total']:6.1f}")
+    print(f"\noutside coefficients [W/(m2 K)] of the exterior faces, all dry rows\n"
+          f"{'face':30s} {'class':8s} {'conv':>5s} {'lw':>5s} {'total':>6s} {'wet':>6s}")
+    for r in films:
+        print(f"{r['face']:30s} {r['class']:8s} {r['convection']:5.2f} {r['long_wave']:5.2f} "
+              f"{r['convection'] + r['long_wave']:6.2f} {r['wet_share']:6.2%}")
     print(f"\ninside convection coefficient [W/(m2 K)] of every face, all rows\n"
           f"{'face':30s} {'class':14s} {'area':>7s} {'mean':>5s} {'p10':>5s} {'p90':>5s}")
     for r in convection:
@@ -211,7 +247,8 @@ def main(argv=None) -> None:
         args.out.write_text(json.dumps({"campaign": str(camp.name), "rooms": sorted(rooms),
                                         "machine": platform.machine(),
                                         "seconds": time.perf_counter() - t0, "rows": rows,
-                                        "inside_convection": convection},
+                                        "inside_convection": convection,
+                                        "outside_films": films},
                                        indent=1))
     if args.keep is None:
         shutil.rmtree(work, ignore_errors=True)

@@ -451,6 +451,11 @@ class Layer:
     solar_absorptance : float
         Of the layer's outer face [-] (the field of Material and Material:NoMass;
         EnergyPlus's default 0.7 where absent, and for air gaps).
+    roughness : str
+        Of the layer's outer face (``VeryRough`` ... ``VerySmooth``; the outside
+        convection correlations' roughness, :mod:`~zonecast.estimator.outside_films`).
+    thermal_absorptance : float
+        Long-wave emissivity of the layer's outer face [-] (EnergyPlus's default 0.9).
     """
 
     name: str
@@ -461,6 +466,8 @@ class Layer:
     specific_heat: float
     resistance: float
     solar_absorptance: float = DEFAULT_SOLAR_ABSORPTANCE
+    roughness: str = "MediumRough"
+    thermal_absorptance: float = 0.9
 
     @property
     def heat_capacity(self) -> float:
@@ -771,6 +778,15 @@ class Building:
     #: Site:GroundTemperature:FCfactorMethod temperatures, or without that object at the
     #: weather file's 0.5 m ground temperatures (:func:`fc_ground_temperature`)
     ground_temperature_of: dict[str, tuple[float, ...]] = field(default_factory=dict)
+    #: the file's outside convection algorithm (SurfaceConvectionAlgorithm:Outside; DOE-2,
+    #: EnergyPlus's default, without one)
+    outside_convection: str = "DOE-2"
+    #: the ``Building`` object's terrain (the wind profile, :func:`local_wind`)
+    terrain: str = "Suburbs"
+    #: the weather file the building is simulated with, where one is known (the site's
+    #: ``weather_file``, else the EPW shipped with EnergyPlus nearest to the input's
+    #: Site:Location, :func:`weather_source`); None otherwise
+    weather_file: Path | None = None
 
     def ground_temperature_at(self, surface: str) -> tuple[float, ...]:
         """Monthly temperature [degC] under the ground-contact surface ``surface``."""
@@ -978,16 +994,24 @@ _UPSIDE_DOWN = 1.0
 _MIRRORED_TYPE = {"Wall": "Wall", "Floor": "Ceiling", "Ceiling": "Floor", "Roof": "Floor"}
 
 
+def _outer_face(f: Mapping[str, Any]) -> tuple[str, float]:
+    """A material's outer-face roughness and thermal absorptance (EnergyPlus's defaults
+    MediumRough, 0.9 where absent)."""
+    return (str(f.get("roughness") or "MediumRough"), _num(f.get("thermal_absorptance"), 0.9))
+
+
 def _materials(data: Mapping[str, Any], unsupported: list[Unsupported]) -> dict[str, Any]:
     mats: dict[str, Any] = {}
     for name, f in data.get("Material", {}).items():
         d, k = float(f["thickness"]), float(f["conductivity"])
         mats[name] = Layer(name, "mass", d, k, float(f["density"]), float(f["specific_heat"]), d / k,
-                           _num(f.get("solar_absorptance"), DEFAULT_SOLAR_ABSORPTANCE))
+                           _num(f.get("solar_absorptance"), DEFAULT_SOLAR_ABSORPTANCE),
+                           *_outer_face(f))
     for name, f in data.get("Material:NoMass", {}).items():
         r = float(f["thermal_resistance"])
         mats[name] = Layer(name, "nomass", 0.0, math.nan, 0.0, 0.0, r,
-                           _num(f.get("solar_absorptance"), DEFAULT_SOLAR_ABSORPTANCE))
+                           _num(f.get("solar_absorptance"), DEFAULT_SOLAR_ABSORPTANCE),
+                           *_outer_face(f))
     for name, f in data.get("Material:AirGap", {}).items():
         r = float(f["thermal_resistance"])
         mats[name] = Layer(name, "airgap", 0.0, math.nan, 0.0, 0.0, r)
@@ -1349,8 +1373,12 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
     gains = _internal_gains(data, zkey, zones, notes)
     algo = [str(f.get("algorithm", "TARP"))
             for f in data.get("SurfaceConvectionAlgorithm:Inside", {}).values()]
+    outside = [str(f.get("algorithm", "DOE-2"))
+               for f in data.get("SurfaceConvectionAlgorithm:Outside", {}).values()]
+    terrain = str(next(iter(data.get("Building", {"": {}}).values())).get("terrain", "Suburbs"))
     return Building(
         inside_convection=algo[0] if algo else "TARP",
+        outside_convection=outside[0] if outside else "DOE-2", terrain=terrain,
         ground_temperature_of=ground_of,
         name=bname, version=version_text, north_axis=north, zones=zones, surfaces=surfaces,
         windows=windows, constructions=constructions, internal_masses=masses,
@@ -1785,7 +1813,10 @@ def read_building(
         The EPW the building is simulated with (the site's ``weather_file``): its 0.5 m
         ground temperatures are what EnergyPlus puts under F- and C-factor surfaces when
         the input has no Site:GroundTemperature:FCfactorMethod
-        (:func:`fc_ground_temperature`).
+        (:func:`fc_ground_temperature`), and its wind is what the outside films of
+        ``ModelOptions(roof_exterior="climate")`` follow. Without it, the EPW shipped with
+        EnergyPlus nearest to the input's Site:Location (:func:`weather_source`) is
+        :attr:`Building.weather_file`.
 
     Returns
     -------
@@ -1794,6 +1825,13 @@ def read_building(
     data, notes = load_epjson(path, energyplus_dir)
     data = _with_fc_layers(data, notes, energyplus_dir, weather_file)
     building = building_from_epjson(data, notes)
+    try:
+        install = find_energyplus(energyplus_dir)
+    except EnergyPlusNotFoundError:
+        install = None
+    found = weather_source(data, weather_file, install)
+    if found is not None:
+        building.weather_file = found[0]
     layered = sorted({w.construction for w in building.windows.values() if w.u_value is None})
     if layered:
         _rate_layered_glazing(building, data, layered, energyplus_dir)
@@ -2006,23 +2044,12 @@ def nearest_weather_file(folder: str | os.PathLike, latitude: float, longitude: 
     return path, dist
 
 
-def fc_ground_temperature(data: Mapping[str, Any], weather_file: str | os.PathLike | None,
-                          install: EnergyPlusInstall | None,
-                          notes: list[str]) -> tuple[float, ...] | None:
-    """Monthly temperatures [degC] under F- and C-factor surfaces, as EnergyPlus takes them.
-
-    EnergyPlus holds the outer face of a ``GroundFCfactorMethod`` surface at the
-    Site:GroundTemperature:FCfactorMethod temperatures, and without that object at the
-    weather file's ground temperatures at 0.5 m (EnergyPlus Input Output Reference,
-    "Site:GroundTemperature:FCfactorMethod"); *not* at Site:GroundTemperature:BuildingSurface,
-    which the DOE prototypes set near room temperature. In that order: the input's object,
-    the site's weather file, the weather file shipped with EnergyPlus nearest to the input's
-    Site:Location (within :data:`FC_WEATHER_RADIUS`, said in the notes), else None.
-    """
-    objs = list(data.get("Site:GroundTemperature:FCfactorMethod", {}).values())
-    if objs:
-        notes.append("F/C-factor surfaces: ground at Site:GroundTemperature:FCfactorMethod")
-        return tuple(_num(objs[0].get(f"{m}_ground_temperature"), 13.0) for m in _MONTHS)
+def weather_source(data: Mapping[str, Any], weather_file: str | os.PathLike | None,
+                   install: EnergyPlusInstall | None) -> tuple[Path, str] | None:
+    """The weather file a building is simulated with and how it was found: the site's
+    ``weather_file`` (which must exist), else the EPW shipped with EnergyPlus nearest to
+    the input's Site:Location within :data:`FC_WEATHER_RADIUS`; None when neither is
+    known."""
     source = Path(weather_file) if weather_file is not None else None
     if source is not None and not source.is_file():
         raise FileNotFoundError(f"weather file {source} (the site's weather_file) does not "
@@ -2040,8 +2067,30 @@ def fc_ground_temperature(data: Mapping[str, Any], weather_file: str | os.PathLi
                 how = (f"the weather file shipped with EnergyPlus nearest to the input's "
                        f"Site:Location ({source.name}; give the site's weather_file to use "
                        "another)")
-    if source is None:
+    return None if source is None else (source, how)
+
+
+def fc_ground_temperature(data: Mapping[str, Any], weather_file: str | os.PathLike | None,
+                          install: EnergyPlusInstall | None,
+                          notes: list[str]) -> tuple[float, ...] | None:
+    """Monthly temperatures [degC] under F- and C-factor surfaces, as EnergyPlus takes them.
+
+    EnergyPlus holds the outer face of a ``GroundFCfactorMethod`` surface at the
+    Site:GroundTemperature:FCfactorMethod temperatures, and without that object at the
+    weather file's ground temperatures at 0.5 m (EnergyPlus Input Output Reference,
+    "Site:GroundTemperature:FCfactorMethod"); *not* at Site:GroundTemperature:BuildingSurface,
+    which the DOE prototypes set near room temperature. In that order: the input's object,
+    the site's weather file, the weather file shipped with EnergyPlus nearest to the input's
+    Site:Location (within :data:`FC_WEATHER_RADIUS`, said in the notes), else None.
+    """
+    objs = list(data.get("Site:GroundTemperature:FCfactorMethod", {}).values())
+    if objs:
+        notes.append("F/C-factor surfaces: ground at Site:GroundTemperature:FCfactorMethod")
+        return tuple(_num(objs[0].get(f"{m}_ground_temperature"), 13.0) for m in _MONTHS)
+    found = weather_source(data, weather_file, install)
+    if found is None:
         return None
+    source, how = found
     depths = epw_ground_temperatures(source)
     if not depths:
         notes.append(f"F/C-factor surfaces: {source.name} has no ground temperatures")

@@ -315,7 +315,9 @@ RoofExterior = Annotated[str, typer.Option(
     help="'absorptance' (the default since 2026-12-04): roofs' outer faces take the IDF's "
          "solar absorptance of their outer material and the fitted gamma_EW; 'fitted': the "
          "walls' fitted gamma_EW and gamma_absorp (the paper); 'idf': a known film "
-         "(25 W/m2K) as well (docs/model.md \"Roofs' own exterior\")")]
+         "(25 W/m2K) as well; 'climate': the film of the site's wind climate, from the "
+         "weather file and the IDF's outside convection correlation (docs/model.md "
+         "\"Roofs' own exterior\")")]
 EnvelopeRadiation = Annotated[str, typer.Option(
     help="'none' (the default): each opaque envelope face exchanges with its room's air "
          "through its fitted film alone (the paper); 'room': also the long-wave heat it "

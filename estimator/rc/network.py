@@ -322,15 +322,19 @@ class ModelOptions:
         which EnergyPlus makes one solar and radiant enclosure (with
         ``internal_gains="idf"`` the gains' radiant share too); a building without air
         boundaries is unchanged (docs/model.md "Air boundaries").
-    roof_exterior : {"fitted", "idf", "absorptance"}
+    roof_exterior : {"fitted", "idf", "absorptance", "climate"}
         The outer faces of roofs (surfaces of type Roof open to the outdoors): with
         the IDF's solar absorptance of the roof's outer material (EnergyPlus's 0.7 where
         it gives none) and the fitted γ_EW (``"absorptance"``, the default since
         2026-12-04, chosen on the family's training members), with the walls' fitted γ_EW
         and γ_absorp (``"fitted"``: the paper's one exterior balance; what model files
         without the option were built with), or with a known film as well (``"idf"``:
-        :data:`ROOF_FILM`, the handbook's combined film and γ_EW's prior). No parameter is
-        added; the walls keep γ_EW and γ_absorp (docs/model.md "Roofs' own exterior").
+        :data:`ROOF_FILM`, the handbook's combined film and γ_EW's prior), or with the film
+        of the site's wind climate (``"climate"``: each roof's mean film over the hours of
+        the building's weather file by the input's outside convection correlation,
+        :func:`~zonecast.estimator.outside_films.climate_films`; measured, not adopted). No
+        parameter is added; the walls keep γ_EW and γ_absorp (docs/model.md "Roofs' own
+        exterior").
     internal_gains : {"air", "idf"}
         Where a room's internal heat a_floor (c_IG + f_IG) goes (paper eq:q_ig): all on the
         room air (the paper), or split as the IDF's People, Lights and equipment objects
@@ -378,8 +382,9 @@ class ModelOptions:
         if self.envelope_radiation != "none" and self.interior_radiation == "star":
             raise ModelDefinitionError("envelope_radiation='room' approximates the star of "
                                        "interior_radiation='star'; choose one of them")
-        if self.roof_exterior not in ("fitted", "idf", "absorptance"):
-            raise ModelDefinitionError("roof_exterior must be 'fitted', 'idf' or 'absorptance'")
+        if self.roof_exterior not in ("fitted", "idf", "absorptance", "climate"):
+            raise ModelDefinitionError("roof_exterior must be 'fitted', 'idf', 'absorptance' "
+                                       "or 'climate'")
         if self.window_angle not in ("none", "glass"):
             raise ModelDefinitionError("window_angle must be 'none' or 'glass'")
         if self.internal_gains not in ("air", "idf"):
@@ -964,6 +969,19 @@ def build_structure(
     asm = _Assembler()
     notes: list[str] = []
     rotation = facade_rotation(building) if opts.facades == "building" else 0.0
+    climate: dict[str, float] = {}
+    if opts.roof_exterior == "climate":
+        from ..outside_films import climate_films
+
+        roofs = [n for n, f in building.surfaces.items()
+                 if f.boundary == "Outdoors" and f.surface_type == "Roof"]
+        try:
+            climate = climate_films(building, roofs)
+        except ValueError as err:
+            raise ModelDefinitionError(f"roof_exterior='climate': {err}") from None
+        if climate:
+            notes.append("roofs' outside films of the site's wind climate: " + ", ".join(
+                f"{n} {h:.1f}" for n, h in climate.items()) + " W/(m2 K)")
     if rotation:
         notes.append(f"facades rotated {rotation:+.1f} deg from E/S/W/N: the solar columns are "
                      "the irradiances on the building's own facades")
@@ -1061,9 +1079,11 @@ def build_structure(
             roof = s.surface_type == "Roof"
             if roof and opts.roof_exterior == "idf":  # the roof's own film, known
                 asm.to_temperature(nodes[0], 0, ROOF_FILM * s.area, -1)
+            elif roof and opts.roof_exterior == "climate":  # of the site's wind
+                asm.to_temperature(nodes[0], 0, climate[name] * s.area, -1)
             else:
                 asm.to_temperature(nodes[0], 0, s.area, EW)  # paper eq:q_bh, convection
-            known = roof and opts.roof_exterior in ("idf", "absorptance")
+            known = roof and opts.roof_exterior in ("idf", "absorptance", "climate")
             absorp = outer_absorptance(cons) if known else 1.0  # else gamma_absorp's
             for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
                 asm.source(nodes[0], DISTURBANCES.index(col), w * absorp * s.area,

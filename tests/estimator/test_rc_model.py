@@ -883,8 +883,49 @@ def test_roofs_keep_their_own_known_exterior_with_roof_exterior_idf(five_zone):
                                                                             rel=1e-9)
     np.testing.assert_allclose(heat("absorptance", 10.0, 0.3)[:, ta], heat("fitted", 10.0, 0.3)[:, ta])
     with pytest.raises(ModelDefinitionError,
-                       match="roof_exterior must be 'fitted', 'idf' or 'absorptance'"):
+                       match="roof_exterior must be 'fitted', 'idf', 'absorptance' or 'climate'"):
         ModelOptions(roof_exterior="known")
+
+
+def test_roofs_take_the_film_of_the_sites_wind_with_roof_exterior_climate(five_zone,
+                                                                        monkeypatch):
+    """``roof_exterior="climate"``: each roof's known film is what
+    ``outside_films.climate_films`` gives it (asked for the roofs alone), in place of
+    ROOF_FILM; absorptance and walls as with "idf". Without a weather file the model says
+    which field to give."""
+    import dataclasses
+
+    from zonecast.estimator import outside_films
+    from zonecast.estimator.rc.network import ROOF_FILM
+
+    roofs = [n for n, s in five_zone.surfaces.items()
+             if s.boundary == "Outdoors" and s.surface_type == "Roof"]
+    roof_area = sum(five_zone.surfaces[n].area for n in roofs)
+    ta = DISTURBANCES.index("Ta")
+    asked = []
+
+    def fake(building, surfaces=None, weather_file=None):
+        asked.append(list(surfaces))
+        return {n: 7.0 for n in surfaces}
+
+    def outdoor_heat(mode, building=five_zone):
+        opts = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
+                            return_air="none", roof_exterior=mode)
+        m = build_model(building, FIVE_ZONES, FIVE_BOXES, options=opts)
+        m = m.with_params({"gamma_EW": 10.0, "gamma_absorp": 0.3})
+        return (m.Bv * m.structure.capacity[:, None])[:, ta].sum()
+
+    idf = outdoor_heat("idf")
+    real = outside_films.climate_films(five_zone, roofs)
+    assert outdoor_heat("climate") - idf == pytest.approx(
+        sum((real[n] - ROOF_FILM) * five_zone.surfaces[n].area for n in roofs), rel=1e-9)
+    monkeypatch.setattr(outside_films, "climate_films", fake)
+    assert outdoor_heat("climate") - idf == pytest.approx((7.0 - ROOF_FILM) * roof_area,
+                                                          rel=1e-9)
+    assert asked == [roofs]
+    monkeypatch.undo()
+    with pytest.raises(ModelDefinitionError, match="give the site's weather_file"):
+        outdoor_heat("climate", dataclasses.replace(five_zone, weather_file=None))
 
 
 def test_envelope_faces_draw_long_wave_heat_from_their_rooms(five_zone):

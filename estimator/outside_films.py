@@ -1,0 +1,217 @@
+"""Outside films of exterior faces from the site's wind climate.
+
+An exterior face loses heat to the outdoors by convection, which grows with the wind at
+the face, and by long-wave radiation. EnergyPlus computes the convection hour by hour with
+the correlation its input names (``SurfaceConvectionAlgorithm:Outside``) from the weather
+file's wind, reduced to the face's height on the building's terrain. The functions here
+evaluate the same correlations on every hour of the building's weather file and return the
+climate's mean film of each face [W/(m2 K)]: what ``ModelOptions(roof_exterior="climate")``
+takes as the roofs' known film (docs/model.md "Roofs' own exterior"; measured against
+EnergyPlus's own dry-hour films in docs/benchmarks.md "Outside films from the site's
+wind").
+
+Written here because no maintained Python library evaluates EnergyPlus's exterior
+convection correlations; the equations are those of the EnergyPlus Engineering Reference,
+"Outside Surface Heat Balance: Exterior Convection" (DOE-2, MoWiTT, SimpleCombined).
+
+Pure functions first (one correlation each), then :func:`epw_wind` and
+:func:`climate_films`, which apply them to a :class:`~zonecast.estimator.idf.Building`.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .idf import Building, local_wind
+
+__all__ = [
+    "NATURAL_DELTA_T",
+    "ROUGHNESS_MULTIPLIER",
+    "SIMPLE_COMBINED",
+    "climate_films",
+    "doe2_convection",
+    "epw_wind",
+    "long_wave_film",
+    "mowitt_convection",
+    "natural_convection",
+    "simple_combined_film",
+    "windward",
+]
+
+#: roughness multiplier R_f of the DOE-2 correlation by the outer face's roughness [-]
+#: (EnergyPlus Engineering Reference, "DOE-2 Model", after Walton 1981)
+ROUGHNESS_MULTIPLIER = {"veryrough": 2.17, "rough": 1.67, "mediumrough": 1.52,
+                        "mediumsmooth": 1.13, "smooth": 1.11, "verysmooth": 1.00}
+#: coefficients (D [W/(m2 K)], E [J/(m3 K)], F [J s/(m4 K)]) of EnergyPlus's
+#: ``SimpleCombined`` film h = D + E V + F V^2, convection and long-wave together, by
+#: roughness (Engineering Reference, "Simple Combined", from the ASHRAE Handbook)
+SIMPLE_COMBINED = {"veryrough": (11.58, 5.894, 0.0), "rough": (12.49, 4.065, 0.028),
+                   "mediumrough": (10.79, 4.192, 0.0), "mediumsmooth": (8.23, 4.0, -0.057),
+                   "smooth": (10.22, 3.1, 0.0), "verysmooth": (8.23, 3.33, -0.036)}
+#: face-to-air temperature difference [K] at which the natural-convection part is taken:
+#: the correlations grow as |dT|^(1/3), so 2-10 K give 0.8-1.3x the 5 K value, and the
+#: forced part dominates at the wind of most hours
+NATURAL_DELTA_T = 5.0
+#: a face is windward when the wind comes from within this angle [deg] of its outward
+#: normal (EnergyPlus); roofs and faces tilted less than 45 degrees are windward always
+WINDWARD_ANGLE = 100.0
+#: forced-convection constants (a [W/(m2 K (m/s)^b)], b [-]) of the MoWiTT and DOE-2
+#: correlations, windward and leeward
+_FORCED = {True: (3.26, 0.89), False: (3.55, 0.617)}
+_SIGMA = 5.670374419e-8
+
+
+def _roughness(roughness: str) -> str:
+    key = str(roughness).replace(" ", "").lower()
+    if key not in ROUGHNESS_MULTIPLIER:
+        raise ValueError(f"roughness {roughness!r} is not one of EnergyPlus's "
+                         "VeryRough, Rough, MediumRough, MediumSmooth, Smooth, VerySmooth")
+    return key
+
+
+def natural_convection(tilt, delta_t: float = NATURAL_DELTA_T) -> np.ndarray:
+    """Walton's natural convection coefficient [W/(m2 K)] of a face tilted ``tilt`` [deg]
+    (0 facing up) at a face-to-air difference ``delta_t`` [K]: 1.31 |dT|^(1/3) on a vertical
+    face; on a tilted one the mean of the unstable (heat flowing up, 9.482 |dT|^(1/3) /
+    (7.238 - |cos tilt|)) and the stable (1.810 |dT|^(1/3) / (1.382 + |cos tilt|)) cases, as
+    a face of the outdoors is warmer than the air by day and colder at night."""
+    c = np.abs(np.cos(np.radians(np.asarray(tilt, dtype=float))))
+    cube = abs(delta_t) ** (1.0 / 3.0)
+    tilted = 0.5 * (9.482 * cube / (7.238 - c) + 1.810 * cube / (1.382 + c))
+    return np.where(c < 1e-6, 1.31 * cube, tilted)
+
+
+def windward(wind_direction, azimuth: float, tilt: float) -> np.ndarray:
+    """True where the wind from ``wind_direction`` [deg, from north, clockwise] strikes a
+    face of outward azimuth ``azimuth`` [deg] (within :data:`WINDWARD_ANGLE`); always for
+    a face tilted less than 45 degrees (roofs)."""
+    d = np.asarray(wind_direction, dtype=float)
+    if tilt < 45.0:
+        return np.ones_like(d, dtype=bool)
+    off = np.abs((d - azimuth + 180.0) % 360.0 - 180.0)
+    return off <= WINDWARD_ANGLE
+
+
+def doe2_convection(v_local, roughness: str, tilt: float, is_windward=True,
+                    delta_t: float = NATURAL_DELTA_T) -> np.ndarray:
+    """EnergyPlus's DOE-2 outside convection coefficient [W/(m2 K)]:
+    h = h_n + R_f (sqrt(h_n^2 + (a V^b)^2) - h_n), with h_n Walton's natural convection
+    (:func:`natural_convection`), R_f the roughness multiplier
+    (:data:`ROUGHNESS_MULTIPLIER`) and (a, b) the windward or leeward MoWiTT constants, for
+    the wind ``v_local`` [m/s] at the face."""
+    v = np.maximum(np.asarray(v_local, dtype=float), 0.0)
+    hn = natural_convection(tilt, delta_t)
+    ww = np.broadcast_to(np.asarray(is_windward, dtype=bool), v.shape)
+    forced = np.where(ww, _FORCED[True][0] * v ** _FORCED[True][1],
+                      _FORCED[False][0] * v ** _FORCED[False][1])
+    glass = np.sqrt(hn ** 2 + forced ** 2)
+    return hn + ROUGHNESS_MULTIPLIER[_roughness(roughness)] * (glass - hn)
+
+
+def mowitt_convection(v_local, tilt: float, is_windward=True,
+                      delta_t: float = NATURAL_DELTA_T) -> np.ndarray:
+    """EnergyPlus's MoWiTT outside convection coefficient [W/(m2 K)]: the DOE-2 form for a
+    smooth (glass) face, sqrt(h_n^2 + (a V^b)^2), with Walton's natural part."""
+    v = np.maximum(np.asarray(v_local, dtype=float), 0.0)
+    hn = natural_convection(tilt, delta_t)
+    ww = np.broadcast_to(np.asarray(is_windward, dtype=bool), v.shape)
+    forced = np.where(ww, _FORCED[True][0] * v ** _FORCED[True][1],
+                      _FORCED[False][0] * v ** _FORCED[False][1])
+    return np.sqrt(hn ** 2 + forced ** 2)
+
+
+def simple_combined_film(v_local, roughness: str) -> np.ndarray:
+    """EnergyPlus's ``SimpleCombined`` outside film [W/(m2 K)], convection and long-wave
+    together: D + E V + F V^2 for the wind ``v_local`` [m/s] at the face
+    (:data:`SIMPLE_COMBINED`)."""
+    v = np.maximum(np.asarray(v_local, dtype=float), 0.0)
+    d, e, f = SIMPLE_COMBINED[_roughness(roughness)]
+    return d + e * v + f * v ** 2
+
+
+def long_wave_film(mean_air_temperature: float, emissivity: float = 0.9) -> float:
+    """Linearised long-wave coefficient [W/(m2 K)] of an exterior face to its surroundings,
+    4 eps sigma T^3 at the climate's mean air temperature [degC]."""
+    t = mean_air_temperature + 273.15
+    return float(4.0 * emissivity * _SIGMA * t ** 3)
+
+
+def epw_wind(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Hourly wind speed [m/s], wind direction [deg] and dry-bulb temperature [degC] of an
+    EPW weather file (fields 22, 21 and 7 of its data rows)."""
+    speed, direction, air = [], [], []
+    with open(path, encoding="latin-1") as fh:
+        for i, line in enumerate(fh):
+            if i < 8:
+                continue
+            f = line.split(",")
+            if len(f) < 22:
+                continue
+            air.append(float(f[6]))
+            direction.append(float(f[20]))
+            speed.append(float(f[21]))
+    if not speed:
+        raise ValueError(f"{path} has no EPW data rows: give an EPW weather file")
+    # EPW missing-value codes: 999 for speed and direction, 99.9 for the temperature
+    s, d, t = (np.asarray(x, dtype=float) for x in (speed, direction, air))
+    ok = (s < 999) & (d < 999) & (t < 99.9)
+    return s[ok], d[ok], t[ok]
+
+
+def _height(vertices: np.ndarray) -> float:
+    return float(np.mean(np.asarray(vertices, dtype=float)[:, 2]))
+
+
+def climate_films(building: Building, surfaces=None,
+                  weather_file: str | os.PathLike | None = None) -> dict[str, float]:
+    """The climate's mean outside film [W/(m2 K)] of each exterior face of ``building``
+    (``surfaces``: their names; default every opaque surface open to the outdoors).
+
+    Every hour of the weather file (``weather_file``, default
+    :attr:`~zonecast.estimator.idf.Building.weather_file`) gives the wind at the face's
+    mean height on the building's terrain (:func:`~zonecast.estimator.idf.local_wind`) and
+    the building's outside correlation (:attr:`Building.outside_convection`) the film:
+    ``SimpleCombined`` as it is (it holds the long-wave part); ``DOE-2`` (EnergyPlus's
+    default; also taken for ``TARP`` and ``AdaptiveConvectionAlgorithm``, said in the
+    notes) and ``MoWiTT`` plus :func:`long_wave_film` with the outer layer's emissivity. The
+    mean over the hours is the film. EnergyPlus's wet hours (rain, when it sets the
+    convection to 1000 W/(m2 K)) are not in it.
+
+    Raises
+    ------
+    ValueError
+        Without a weather file, with what to give.
+    """
+    source = weather_file if weather_file is not None else building.weather_file
+    if source is None:
+        raise ValueError("the outside films follow the site's wind, and no weather file is "
+                         "known: give the site's weather_file (the EPW the building is "
+                         "simulated with)")
+    speed, direction, air = epw_wind(source)
+    algo = str(building.outside_convection).replace("-", "").lower()
+    if algo in ("tarp", "adaptiveconvectionalgorithm"):
+        note = (f"outside films: {building.outside_convection}'s correlations are taken as "
+                "DOE-2's (EnergyPlus's default)")
+        if note not in building.notes:
+            building.notes.append(note)
+    names = surfaces if surfaces is not None else [
+        n for n, s in building.surfaces.items() if s.boundary == "Outdoors"]
+    films = {}
+    for name in names:
+        s = building.surfaces[name]
+        layers = building.constructions[s.construction].layers
+        rough = layers[0].roughness if layers else "MediumRough"
+        emissivity = layers[0].thermal_absorptance if layers else 0.9
+        v = speed * local_wind(1.0, _height(s.vertices), building.terrain)
+        if algo == "simplecombined":
+            h = simple_combined_film(v, rough)
+        else:
+            ww = windward(direction, s.azimuth, s.tilt)
+            h = (mowitt_convection(v, s.tilt, ww) if algo == "mowitt"
+                 else doe2_convection(v, rough, s.tilt, ww))
+            h = h + long_wave_film(float(np.mean(air)), emissivity)
+        films[name] = float(np.mean(h))
+    return films
+

@@ -994,6 +994,11 @@ _UPSIDE_DOWN = 1.0
 _MIRRORED_TYPE = {"Wall": "Wall", "Floor": "Ceiling", "Ceiling": "Floor", "Roof": "Floor"}
 
 
+def _terrain(data: Mapping[str, Any]) -> str:
+    """The ``Building`` object's terrain (EnergyPlus's default Suburbs)."""
+    return str(next(iter(data.get("Building", {"": {}}).values())).get("terrain", "Suburbs"))
+
+
 def _outer_face(f: Mapping[str, Any]) -> tuple[str, float]:
     """A material's outer-face roughness and thermal absorptance (EnergyPlus's defaults
     MediumRough, 0.9 where absent)."""
@@ -1375,7 +1380,7 @@ def building_from_epjson(data: Mapping[str, Any], notes: list[str] | None = None
             for f in data.get("SurfaceConvectionAlgorithm:Inside", {}).values()]
     outside = [str(f.get("algorithm", "DOE-2"))
                for f in data.get("SurfaceConvectionAlgorithm:Outside", {}).values()]
-    terrain = str(next(iter(data.get("Building", {"": {}}).values())).get("terrain", "Suburbs"))
+    terrain = _terrain(data)
     return Building(
         inside_convection=algo[0] if algo else "TARP",
         outside_convection=outside[0] if outside else "DOE-2", terrain=terrain,
@@ -1675,7 +1680,7 @@ def _infiltration(data: Mapping[str, Any], zkey: Mapping[str, str], zones: Mappi
     constants = {k.lower(): _num(f.get("hourly_value"), 1.0)
                  for k, f in data.get("Schedule:Constant", {}).items()}
     compact = {k.lower(): (k, f) for k, f in data.get("Schedule:Compact", {}).items()}
-    terrain = str(next(iter(data.get("Building", {"": {}}).values())).get("terrain", "Suburbs"))
+    terrain = _terrain(data)
     out: dict[str, Infiltration] = {}
     for name, f in data.get("ZoneInfiltration:DesignFlowRate", {}).items():
         zname = str(f.get("zone_or_zonelist_or_space_or_spacelist_name")

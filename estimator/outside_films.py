@@ -23,8 +23,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
-
-from .idf import Building, local_wind
+from zonecast.estimator.idf import Building, local_wind
 
 __all__ = [
     "NATURAL_DELTA_T",

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from zonecast.estimator import outside_films
 from zonecast.estimator.idf import DEFAULT_SOLAR_ABSORPTANCE, Building, Construction, Surface
 from zonecast.estimator.rc.elements import (
     ADMITTANCE_TOLERANCE,
@@ -971,12 +972,10 @@ def build_structure(
     rotation = facade_rotation(building) if opts.facades == "building" else 0.0
     climate: dict[str, float] = {}
     if opts.roof_exterior == "climate":
-        from ..outside_films import climate_films
-
         roofs = [n for n, f in building.surfaces.items()
                  if f.boundary == "Outdoors" and f.surface_type == "Roof"]
         try:
-            climate = climate_films(building, roofs)
+            climate = outside_films.climate_films(building, roofs)
         except ValueError as err:
             raise ModelDefinitionError(f"roof_exterior='climate': {err}") from None
         if climate:

@@ -23,6 +23,7 @@ from zonecast.estimator.solar import (
     FACADE_AZIMUTHS,
     SKY_DEPRESSION_ISO,
     clear_sky_temperature,
+    cloudy_sky_temperature,
     facade_columns,
     sun_geometry,
 )
@@ -152,13 +153,16 @@ def _parsed(sched: Mapping) -> CompactSchedule:
 
 
 def scheduled_rise(scheduled: Mapping[str, Mapping], times, site: Site, ta: np.ndarray,
-                   ts: np.ndarray) -> np.ndarray:
+                   ts: np.ndarray, cloud: np.ndarray | None = None) -> np.ndarray:
     """(N, len(scheduled)) supply temperature of each scheduled input over the supply air
     T_s [K] (the discharge-air rise the model adds to T_s): the outdoor air T_a for an
     infiltration (``"supply": "Ta"``), the month's ground temperature in the site's local
     time for a ground contact (``"supply": "ground"``), the clear-sky temperature of the
     outdoor air for a face's long-wave exchange with the sky (``"supply": "sky"``,
-    :func:`~zonecast.estimator.solar.clear_sky_temperature`), or the outdoor air less
+    :func:`~zonecast.estimator.solar.clear_sky_temperature`), the sky's temperature under
+    the measured ``cloud`` cover [-] (``"sky": "cloud"``,
+    :func:`~zonecast.estimator.solar.cloudy_sky_temperature`; a row without a reading is
+    taken as clear), or the outdoor air less
     :data:`~zonecast.estimator.solar.SKY_DEPRESSION_ISO` (``"sky": "iso"``)."""
     ta, ts = np.asarray(ta, float), np.asarray(ts, float)
     out = np.empty((len(ts), len(scheduled)))
@@ -174,6 +178,9 @@ def scheduled_rise(scheduled: Mapping[str, Mapping], times, site: Site, ta: np.n
             out[:, j] = np.asarray(spec["monthly"], float)[month] - ts
         elif spec["supply"] == "sky" and spec.get("sky", "clear") == "iso":
             out[:, j] = ta - SKY_DEPRESSION_ISO - ts
+        elif spec["supply"] == "sky" and spec.get("sky") == "cloud":
+            c = np.full(len(ts), np.nan) if cloud is None else np.asarray(cloud, float)
+            out[:, j] = cloudy_sky_temperature(ta, c) - ts
         elif spec["supply"] == "sky":
             out[:, j] = clear_sky_temperature(ta) - ts
         else:
@@ -183,14 +190,15 @@ def scheduled_rise(scheduled: Mapping[str, Mapping], times, site: Site, ta: np.n
 
 
 def with_scheduled(scheduled: Mapping[str, Mapping], times, site: Site, u: np.ndarray,
-                   v: np.ndarray, rise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                   v: np.ndarray, rise: np.ndarray, cloud: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """u and the discharge-air rise with the scheduled inputs' columns appended: their
     airflows (:func:`scheduled_inputs`) and their supply over the supply air
-    (:func:`scheduled_rise`)."""
+    (:func:`scheduled_rise`; ``cloud`` the cloud cover [-] of the rows, None: none)."""
     if not scheduled:
         return u, rise
     flows = scheduled_inputs(scheduled, times, site)
-    sup = scheduled_rise(scheduled, times, site, v[:, 0], v[:, 1])
+    sup = scheduled_rise(scheduled, times, site, v[:, 0], v[:, 1], cloud)
     return np.hstack([u, flows]), np.hstack([rise, sup])
 
 
@@ -235,7 +243,7 @@ def model_data(tel: Telemetry, room_volume: Mapping[str, float] | None = None, *
     rise = tel.discharge_rise()
     rise[(u == 0) & ~np.isfinite(rise)] = 0.0  # a shut box delivers no heat
     scheduled = scheduled or {}
-    u, rise = with_scheduled(scheduled, tel.times, site, u, v, rise)
+    u, rise = with_scheduled(scheduled, tel.times, site, u, v, rise, w.cloud.to_numpy())
     return ModelData(tel.times, u, v, tel.zone_temperature(zone_weights(site, room_volume)),
                      list(site.zones), list(site.boxes) + list(scheduled), list(tel.segments),
                      exc, site.timezone, rise, tel.power())

@@ -55,7 +55,12 @@ from zonecast.estimator.priors import (
     convective_films,
     operating_film_ratios,
 )
-from zonecast.estimator.rc.network import ModelOptions, RCStructure, build_structure
+from zonecast.estimator.rc.network import (
+    ModelDefinitionError,
+    ModelOptions,
+    RCStructure,
+    build_structure,
+)
 from zonecast.estimator.rc.parameters import ParameterSet
 from zonecast.estimator.site import Site, load_site
 from zonecast.estimator.streaming import offline_forecast_variants, offline_forecasts
@@ -353,6 +358,12 @@ class Pipeline:
     def structure(self) -> RCStructure:
         """The parameter-free RC structure (paper section 3; cached)."""
         if self._structure is None:
+            if self.options.sky == "cloud" and self.site.points.cloud_cover is None:
+                raise ModelDefinitionError(
+                    "sky='cloud' takes the sky's temperature from the site's cloud cover, "
+                    "and the site maps no points.cloud_cover: add the point (a weather "
+                    "station's or weather service's opaque cloud cover) or choose sky "
+                    "'clear' or 'none'")
             building = self.building()
             self._structure = build_structure(
                 building, self.site.zones, {b: box.room for b, box in self.site.boxes.items()},

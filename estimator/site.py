@@ -74,6 +74,13 @@ class PowerPoint(_QuantityPoint):
     unit: str = "W"
 
 
+class CloudCoverPoint(_QuantityPoint):
+    """The share of the sky covered by opaque cloud: a fraction (``1``), ``%``, ``okta``
+    or ``tenths``."""
+    quantity: ClassVar[str] = "cloud_cover"
+    unit: str = "1"
+
+
 class Box(_Strict):
     """A VAV box: the room (EnergyPlus zone) it serves, its airflow point and, optionally,
     its discharge-air temperature point (the air leaving the box, after any reheat coil).
@@ -137,12 +144,23 @@ class Points(_Strict):
     meters are summed. Electric power in a room ends as heat in it, so where the site has
     them the identification takes the weekends' metered rise as the shape of their
     internal gains (docs/identification.md "Metered weekend gains").
+
+    ``cloud_cover`` (optional): the opaque cloud cover of the sky over the site (a weather
+    station's or a weather service's reading, e.g. METAR oktas or Open-Meteo's
+    ``cloud_cover`` in %): with it the model's long-wave exchange with the sky uses a
+    cloudy sky's temperature (``ModelOptions.sky``, docs/model.md "Sky").
     """
     zone_temperature: dict[str, list[ZoneSensor]]
     supply_air_temperature: TemperaturePoint
     outdoor_air_temperature: TemperaturePoint
     solar: Solar
     power: dict[str, list[PowerPoint]] = Field(default_factory=dict)
+    cloud_cover: CloudCoverPoint | None = None
+
+    @field_validator("cloud_cover", mode="before")
+    @classmethod
+    def _cloud(cls, v):
+        return None if v is None else _point(v, "1")
 
     @field_validator("power", mode="before")
     @classmethod
@@ -356,6 +374,8 @@ class Site(_Strict):
         pts += [b.discharge_temperature for b in self.boxes.values()
                 if b.discharge_temperature is not None]
         pts += [m for ms in p.power.values() for m in ms]
+        if p.cloud_cover is not None:
+            pts.append(p.cloud_cover)
         return pts
 
     def point_units(self) -> dict[str, str]:

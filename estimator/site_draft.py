@@ -8,9 +8,9 @@ which air terminals (VAV boxes), which terminals have a reheat coil (their disch
 temperature is worth measuring), where the building stands, and the thermostats' set point
 schedules. :func:`draft_site` reads those and returns a valid site description whose
 telemetry point names follow one convention (``T_<zone>``, ``<box>_flow``, ``<box>_DAT``,
-``AHU_SAT``, ``OAT``, ``GHI``, ``DNI``, ``DHI``; the testbed's, :func:`point_names`), which
-the user then renames to the BMS's columns, with notes on everything that was guessed or
-left out.
+``AHU_SAT``, ``OAT``, ``GHI``, ``DNI``, ``DHI``, ``CLOUD``; the testbed's,
+:func:`point_names`), which the user then renames to the BMS's columns, with notes on
+everything that was guessed or left out.
 
 How the file is traced (EnergyPlus Input Output Reference, "Zone Equipment"):
 ``ZoneHVAC:EquipmentConnections`` -> ``ZoneHVAC:EquipmentList`` ->
@@ -176,9 +176,9 @@ def safe_name(name: str) -> str:
 
 def point_names(zones: list[str], boxes: list[str]) -> dict:
     """Telemetry column names of the convention: ``T_<zone>``, ``<box>_flow``,
-    ``<box>_DAT``, ``AHU_SAT``, ``OAT``, ``GHI``, ``DNI``, ``DHI`` (characters other than
-    letters, digits, ``_``, ``.`` and ``-`` become ``_``)."""
-    used: set[str] = {"AHU_SAT", "OAT", "GHI", "DNI", "DHI"}
+    ``<box>_DAT``, ``AHU_SAT``, ``OAT``, ``GHI``, ``DNI``, ``DHI``, ``CLOUD`` (characters
+    other than letters, digits, ``_``, ``.`` and ``-`` become ``_``)."""
+    used: set[str] = {"AHU_SAT", "OAT", "GHI", "DNI", "DHI", "CLOUD"}
 
     def unique(name: str) -> str:  # "A 1" and "A_1" must not share a column
         out, i = name, 2
@@ -190,7 +190,8 @@ def point_names(zones: list[str], boxes: list[str]) -> dict:
     return {"temp": {z: unique(f"T_{safe_name(z)}") for z in zones},
             "flow": {b: unique(f"{safe_name(b)}_flow") for b in boxes},
             "discharge": {b: unique(f"{safe_name(b)}_DAT") for b in boxes},
-            "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI"}
+            "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI",
+            "cloud": "CLOUD"}
 
 
 def local_timezone(data: Mapping, utc_offset: float, timezone: str | None = None) -> str:
@@ -438,8 +439,13 @@ def draft_site(idf: str | os.PathLike, *, out: str | os.PathLike | None = None,
             "outdoor_air_temperature": {"point": names["oat"], "unit": "degC"},
             "solar": {"global_horizontal": {"point": names["ghi"], "unit": "W/m2"},
                       "direct_normal": {"point": names["dni"], "unit": "W/m2"},
-                      "diffuse_horizontal": {"point": names["dhi"], "unit": "W/m2"}}},
+                      "diffuse_horizontal": {"point": names["dhi"], "unit": "W/m2"}},
+            "cloud_cover": {"point": names["cloud"], "unit": "%"}},
     }
+    notes.append("cloud_cover: CLOUD is the sky's opaque cloud cover in % (a weather "
+                 "service's, e.g. Open-Meteo's cloud_cover, or a station's in okta or "
+                 "tenths); the model's sky uses it with --sky cloud; delete the line if the "
+                 "site has no such reading")
     loops = epjson_objects(data, "AirLoopHVAC")
     if len(loops) > 1:
         notes.append(f"{len(loops)} air loops ({', '.join(loops)}): `supply_air_temperature` is "

@@ -48,6 +48,8 @@ __all__ = [
     "SolarGeometryCache",
     "SolarInputError",
     "clear_sky_temperature",
+    "cloud_of_sky_temperature",
+    "cloudy_sky_temperature",
     "facade_irradiance",
     "plane_of_array_irradiance",
     "sun_geometry",
@@ -229,6 +231,37 @@ def clear_sky_temperature(ta):
     """
     tk = np.asarray(ta, dtype=float) + 273.15
     return np.sqrt(np.sqrt(9.365e-6 * tk * tk)) * tk - 273.15
+
+
+def cloudy_sky_temperature(ta, cloud):
+    """Sky temperature [degC] under a cloud cover: Crawford and Duchon's emissivity
+    eps = c + (1 - c) eps_clear (J. Appl. Meteorol. 38, 1999: cloud radiates as a black
+    body at the air temperature) with Swinbank's clear-sky eps_clear
+    (:func:`clear_sky_temperature`), and T_sky = eps^(1/4) T_a. An overcast sky is at the
+    air temperature; a clear one as :func:`clear_sky_temperature`.
+
+    Parameters
+    ----------
+    ta : array_like
+        Outdoor air temperature [degC]; NaN gives NaN.
+    cloud : array_like
+        Opaque cloud cover c [-], clipped to [0, 1]; NaN (no reading) is taken as a clear
+        sky, the sky of :func:`clear_sky_temperature`.
+    """
+    tk = np.asarray(ta, dtype=float) + 273.15
+    c = np.clip(np.nan_to_num(np.asarray(cloud, dtype=float), nan=0.0), 0.0, 1.0)
+    eps = c + (1.0 - c) * 9.365e-6 * tk * tk
+    return np.sqrt(np.sqrt(eps)) * tk - 273.15
+
+
+def cloud_of_sky_temperature(ta, t_sky):
+    """The cloud cover c [-] whose :func:`cloudy_sky_temperature` at air ``ta`` [degC] is
+    ``t_sky`` [degC] (its inverse, clipped to [0, 1]; NaN where either is NaN)."""
+    tk = np.asarray(ta, dtype=float) + 273.15
+    clear = 9.365e-6 * tk * tk
+    eps = ((np.asarray(t_sky, dtype=float) + 273.15) / tk) ** 4
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.clip((eps - clear) / (1.0 - clear), 0.0, 1.0)
 
 
 def _check_options(albedo: float, sky_model: str) -> None:

@@ -122,7 +122,12 @@ from zonecast.estimator.kalman import (
 )
 from zonecast.estimator.rc.network import SOLAR_COLUMNS
 from zonecast.estimator.shading import sun_vectors
-from zonecast.estimator.solar import SKY_MODELS, SolarGeometryCache, facade_columns
+from zonecast.estimator.solar import (
+    SKY_MODELS,
+    SolarGeometryCache,
+    cloud_of_sky_temperature,
+    facade_columns,
+)
 from zonecast.estimator.telemetry import Telemetry, load_telemetry, segments_of
 from zonecast.estimator.units import to_si
 from zonecast.estimator.weather_forecast import (
@@ -1305,8 +1310,19 @@ class OnlineEstimator:
             idx = pd.DatetimeIndex(times, tz="UTC")
             ins[:, nb - k:nb] = scheduled_inputs(sched, idx, self.bundle.site)
             ins[:, self._nin - k:] = scheduled_rise(sched, idx, self.bundle.site, wx[:, 0],
-                                                    ins[:, nb + 1])
+                                                    ins[:, nb + 1], self._held_cloud(pers[0], k))
         return ins
+
+    def _held_cloud(self, current: np.ndarray, k: int) -> float:
+        """The cloud cover [-] of the current row's sky (``sky="cloud"``, read back from
+        its held sky input: the cover stays as it is over the forecast's horizon); NaN
+        (a clear sky) without such an input."""
+        nb = self.bundle.model.n_boxes
+        for j, spec in enumerate(self.bundle.model.structure.scheduled.values()):
+            if spec["supply"] == "sky" and spec.get("sky") == "cloud":
+                t_sky = current[self._nin - k + j] + current[nb + 1]
+                return float(cloud_of_sky_temperature(current[nb], t_sky))
+        return float("nan")
 
     def _bins(self, times_ns: np.ndarray) -> np.ndarray:
         """Time-of-week bin of the profile for UTC grid times (ns since the epoch)."""
@@ -1529,6 +1545,7 @@ class RowConverter:
         self._sun = np.array([col[pts.solar.global_horizontal.point],
                               col[pts.solar.direct_normal.point],
                               col[pts.solar.diffuse_horizontal.point]])
+        self._cloud = None if pts.cloud_cover is None else col[pts.cloud_cover.point]
         weights = zone_weights(site, bundle.room_volume)
         self._zones = []
         for zone in site.zones:
@@ -1611,7 +1628,8 @@ class RowConverter:
         if self._scheduled:
             u, reheat = with_scheduled(self._scheduled,
                                        pd.DatetimeIndex(np.asarray(times_ns, dtype=np.int64),
-                                                        tz="UTC"), self._site, u, v, reheat)
+                                                        tz="UTC"), self._site, u, v, reheat,
+                                       None if self._cloud is None else si[:, self._cloud])
         return u, v, self._zone_means(si), reheat
 
     def _zone_means(self, si: np.ndarray) -> np.ndarray:

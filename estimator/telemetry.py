@@ -172,13 +172,17 @@ class Telemetry:
         return out
 
     def weather(self) -> pd.DataFrame:
-        """Outdoor air [degC], supply air [degC] and GHI, DNI, DHI [W/m2]."""
+        """Outdoor air [degC], supply air [degC], GHI, DNI, DHI [W/m2] and the cloud cover
+        ``cloud`` [-] (NaN throughout for a site without a ``cloud_cover`` point)."""
         p = self.site.points
         cols = {"Ta": p.outdoor_air_temperature.point, "Ts": p.supply_air_temperature.point,
                 "ghi": p.solar.global_horizontal.point, "dni": p.solar.direct_normal.point,
                 "dhi": p.solar.diffuse_horizontal.point}
-        return pd.DataFrame({k: self.frame[v].to_numpy() for k, v in cols.items()},
-                            index=self.frame.index)
+        out = pd.DataFrame({k: self.frame[v].to_numpy() for k, v in cols.items()},
+                           index=self.frame.index)
+        cloud = p.cloud_cover
+        out["cloud"] = np.nan if cloud is None else self.frame[cloud.point].to_numpy()
+        return out
 
     def zone_sensors(self, zone: str) -> np.ndarray:
         """Readings (N, n_sensors) [degC] of a model zone's temperature sensors."""

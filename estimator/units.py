@@ -1,4 +1,5 @@
-"""Units accepted in a site's point map and their conversion to SI (degC, kg/s, W/m2, W)."""
+"""Units accepted in a site's point map and their conversion to SI (degC, kg/s, W/m2, W, and
+the cloud cover as a fraction 1)."""
 
 from __future__ import annotations
 
@@ -20,13 +21,21 @@ _CONVERSIONS = {
     "kW/m2": ("irradiance", lambda a: a * 1e3),
     "W": ("power", lambda a: a),
     "kW": ("power", lambda a: a * 1e3),
+    # the share of the sky covered by (opaque) cloud, as weather services and stations give
+    # it: a fraction, a percentage, eighths (oktas, METAR) or tenths (EPW weather files)
+    "1": ("cloud_cover", lambda a: a),
+    "%": ("cloud_cover", lambda a: a / 100.0),
+    "okta": ("cloud_cover", lambda a: a / 8.0),
+    "tenths": ("cloud_cover", lambda a: a / 10.0),
 }
 
-SI_UNIT = {"temperature": "degC", "airflow": "kg/s", "irradiance": "W/m2", "power": "W"}
+SI_UNIT = {"temperature": "degC", "airflow": "kg/s", "irradiance": "W/m2", "power": "W",
+           "cloud_cover": "1"}
 
 
 def units_for(quantity: str) -> list[str]:
-    """Units accepted for a quantity (temperature, airflow, irradiance, power)."""
+    """Units accepted for a quantity (temperature, airflow, irradiance, power,
+    cloud_cover)."""
     return [u for u, (q, _) in _CONVERSIONS.items() if q == quantity]
 
 

@@ -43,7 +43,7 @@ def catalogue_for_site(site: Site) -> Catalogue:
     if the site lists experiments, one year before the first as the earliest plausible
     reading time (else the ingest default, 1970)."""
     kinds = {"temperature": "temperature", "airflow": "airflow", "irradiance": "irradiance",
-             "power": "power"}
+             "power": "power", "cloud_cover": "cloud_cover"}
     starts = [e.start for e in getattr(site, "experiments", None) or ()]
     earliest = min(starts) - PLAUSIBLE_BEFORE if starts else None
     out = Catalogue(earliest=earliest, step=getattr(site, "step", None))

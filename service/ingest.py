@@ -120,6 +120,7 @@ class PointKind(str, Enum):
     AIRFLOW = "airflow"
     IRRADIANCE = "irradiance"
     POWER = "power"
+    CLOUD_COVER = "cloud_cover"
     OTHER = "other"
 
 
@@ -130,6 +131,7 @@ DEFAULT_RANGES: dict[PointKind, tuple[float, float]] = {
     PointKind.AIRFLOW: (0.0, 100.0),
     PointKind.IRRADIANCE: (0.0, 1500.0),
     PointKind.POWER: (0.0, 1e8),
+    PointKind.CLOUD_COVER: (0.0, 1.0),
     PointKind.OTHER: (-1e12, 1e12),
 }
 _DEFAULT_UNITS = {
@@ -137,6 +139,7 @@ _DEFAULT_UNITS = {
     PointKind.AIRFLOW: "kg/s",
     PointKind.IRRADIANCE: "W/m2",
     PointKind.POWER: "W",
+    PointKind.CLOUD_COVER: "1",
     PointKind.OTHER: "",
 }
 
@@ -148,7 +151,8 @@ class PointSpec:
     Parameters
     ----------
     kind : PointKind or str
-        ``temperature``, ``airflow``, ``irradiance``, ``power`` or ``other``.
+        ``temperature``, ``airflow``, ``irradiance``, ``power``, ``cloud_cover`` or
+        ``other``.
     unit : str, optional
         Unit of the values on the wire (documentation only; no conversion
         happens at ingest). Defaults to the kind's SI unit.

@@ -76,6 +76,7 @@ from zonecast.testbed.run import (
     _read_sql,
     align_rows,
     energyplus_dir,
+    epw_cloud_cover,
     fast_csv,
     run_energyplus,
     run_periods,
@@ -538,8 +539,9 @@ def find_weather(data: dict, weather: str | Path | None = None) -> Path:
 
 
 def point_names(layout: Layout) -> dict:
-    """Telemetry columns: ``T_<zone>``, ``<terminal>_flow``, AHU_SAT, OAT, GHI, DNI, DHI (the
-    convention of ``zonecast site draft``)."""
+    """Telemetry columns: ``T_<zone>``, ``<terminal>_flow``, AHU_SAT, OAT, GHI, DNI, DHI,
+    CLOUD (the weather file's opaque sky cover in %; the convention of ``zonecast site
+    draft``)."""
     return draft_point_names(layout.zones, [t.name for t in layout.terminals])
 
 
@@ -770,6 +772,7 @@ def run_foreign(idf: str | Path, out: str | Path, weeks: list[dt.date] | None = 
              .tz_convert("UTC")) for w in weeks]
     effects = Effects()
     tel, tru = to_records(layout, wide, timesteps_per_hour(patched), keep, std, seed, effects)
+    tel[point_names(layout)["cloud"]] = epw_cloud_cover(wfile, tel.index, std)
     experiments = []
     for d in days:
         day = [b for b in blocks if b.start.date() == d]
@@ -797,7 +800,8 @@ def run_foreign(idf: str | Path, out: str | Path, weeks: list[dt.date] | None = 
             "supply_air_temperature": {"point": names["sat"], "unit": "degC"},
             "outdoor_air_temperature": {"point": names["oat"], "unit": "degC"},
             "solar": {"global_horizontal": names["ghi"], "direct_normal": names["dni"],
-                      "diffuse_horizontal": names["dhi"]}},
+                      "diffuse_horizontal": names["dhi"]},
+            "cloud_cover": {"point": names["cloud"], "unit": "%"}},
         "experiments": [{"start": s, "end": e} for s, e in experiments],
         "thermostat": thermostat, "weather_file": WEATHER_FILE})
     progress("writing files")

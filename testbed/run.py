@@ -278,7 +278,8 @@ def point_names(cfg: BuildingConfig) -> dict:
             "flow": {b: f"{b}_flow" for b in boxes},
             "discharge": {b: f"{b}_DAT" for b in boxes},
             "power": {z: f"P_{z}" for z in cfg.zones},
-            "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI"}
+            "sat": "AHU_SAT", "oat": "OAT", "ghi": "GHI", "dni": "DNI", "dhi": "DHI",
+            "cloud": "CLOUD"}
 
 
 def make_site(cfg: BuildingConfig, experiments: list[tuple[dt.datetime, dt.datetime]],
@@ -302,6 +303,7 @@ def make_site(cfg: BuildingConfig, experiments: list[tuple[dt.datetime, dt.datet
             "outdoor_air_temperature": {"point": names["oat"], "unit": "degC"},
             "solar": {"global_horizontal": names["ghi"], "direct_normal": names["dni"],
                       "diffuse_horizontal": names["dhi"]},
+            "cloud_cover": {"point": names["cloud"], "unit": "%"},
             "power": power},
         "experiments": [{"start": s, "end": e} for s, e in experiments],
         "thermostat": {"heating_occupied": cfg.hvac.heating.occupied,
@@ -361,6 +363,37 @@ def weather_columns(iv: pd.DataFrame) -> dict[str, np.ndarray]:
     alt = _col(iv, "Environment", "Site Solar Altitude Angle")
     return {"oat": oat, "ghi": dhi + dni * np.clip(np.sin(np.radians(alt)), 0, None),
             "dni": dni, "dhi": dhi}
+
+
+def epw_cloud_cover(epw: Path, index: pd.DatetimeIndex, std: dt.timezone) -> np.ndarray:
+    """The weather file's opaque sky cover as a weather service would give it on the
+    telemetry grid [%]: the EPW's hourly field 24 (tenths; the hour ending at its time
+    stamp, local standard time), linearly interpolated between the hours as EnergyPlus
+    interpolates its weather, at the middle of each row's interval [t, t + 15 min);
+    February 29 takes February 28's hours."""
+    hours = {}
+    with open(epw, encoding="latin-1") as fh:
+        for i, line in enumerate(fh):
+            f = line.split(",")
+            if i < 8 or len(f) < 24:
+                continue
+            hours[(int(f[1]), int(f[2]), int(f[3]))] = float(f[23])
+    if not hours:
+        raise EnergyPlusError(f"{epw} has no EPW data rows")
+    # hour-of-year knots (1 = the hour ending 01:00 on 1 January) of a non-leap year
+    start = dt.date(2015, 1, 1)
+    knots = np.array([((dt.date(2015, m, d) - start).days * 24 + h)
+                      for (m, d, h) in hours], float)
+    vals = np.array(list(hours.values()))
+    ok = vals <= 10  # 99: missing
+    order = np.argsort(knots[ok])
+    knots, vals = knots[ok][order], vals[ok][order]
+    mid = (index + STEP / 2).tz_convert(std).tz_localize(None)
+    day = np.array([(dt.date(2015, t.month, min(t.day, 28) if t.month == 2 else t.day)
+                     - start).days for t in mid], float)
+    tau = day * 24 + mid.hour.to_numpy() + mid.minute.to_numpy() / 60.0 \
+        + mid.second.to_numpy() / 3600.0
+    return 10.0 * np.interp(tau, knots, vals, period=8760.0)
 
 
 def to_records(cfg: BuildingConfig, wide: pd.DataFrame, keep: list[tuple[pd.Timestamp, pd.Timestamp]],
@@ -504,6 +537,8 @@ def run_weeks(weeks: list[dt.date], out: Path, seed: int = 0, effects: Effects |
              pd.Timestamp(dt.datetime.combine(w + dt.timedelta(days=7), dt.time(0)), tz=tz)
              .tz_convert("UTC")) for w in weeks]
     tel, tru = to_records(cfg, wide, keep, effects, seed)
+    tel[point_names(cfg)["cloud"]] = epw_cloud_cover(
+        energyplus_dir() / "WeatherData" / cfg.weather, tel.index, standard_offset(cfg))
     experiments = []
     for d in exc_days:
         day_blocks = [b for b in blocks if b.start.date() == d]

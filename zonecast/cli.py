@@ -254,7 +254,8 @@ RoofSolar = Annotated[str, typer.Option(
          "four facade irradiances (before 2026-11-25); or 'none'")]
 Sky = Annotated[str, typer.Option(
     help="long-wave exchange of exterior faces with the sky: 'none' (the default, the "
-         "paper), 'clear' (a clear sky, Swinbank) or 'iso' (the air less ISO 13790's 11 K; "
+         "paper), 'clear' (a clear sky, Swinbank), 'iso' (the air less ISO 13790's 11 K) or "
+         "'cloud' (a sky under the site's measured cloud cover, points.cloud_cover; "
          "docs/model.md \"Sky\")")]
 InteriorRadiation = Annotated[str, typer.Option(
     help="long-wave exchange between a room's inside faces: 'star' (the default since "

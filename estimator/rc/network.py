@@ -239,7 +239,7 @@ class ModelOptions:
         (:attr:`RCStructure.return_of_box`; docs/model.md "Return plenum"), or the plenum
         exchanges heat by conduction only (the paper; model files written before the option
         existed read as this).
-    sky : {"none", "clear", "iso"}
+    sky : {"none", "clear", "iso", "cloud"}
         Long-wave exchange of opaque exterior faces with the sky, which is colder than the
         air: none (the paper; its exterior film gamma_EW exchanges with the air only), or
         each face's sky share F_sky beta = ((1 + cos tilt) / 2)^1.5 (EnergyPlus's, 1 for a
@@ -248,7 +248,10 @@ class ModelOptions:
         temperature of the outdoor air (``"clear"``,
         :func:`~zonecast.estimator.solar.clear_sky_temperature`), or the air temperature
         less the average sky temperature difference of ISO 52016-1 / ISO 13790,
-        :data:`~zonecast.estimator.solar.SKY_DEPRESSION_ISO` (``"iso"``).
+        :data:`~zonecast.estimator.solar.SKY_DEPRESSION_ISO` (``"iso"``), or the
+        temperature of a sky under the site's measured cloud cover (``"cloud"``, which
+        needs the site's ``points.cloud_cover``;
+        :func:`~zonecast.estimator.solar.cloudy_sky_temperature`; docs/model.md "Sky").
     interior_radiation : {"star", "none"}
         Long-wave exchange between the inside faces of a room (``"star"``, the default since
         2026-12-05 with ``adiabatic="mirror"``, chosen on the family's training members;
@@ -392,8 +395,8 @@ class ModelOptions:
             raise ModelDefinitionError("internal_gains must be 'air' or 'idf'")
         if self.interior_radiation not in ("none", "star"):
             raise ModelDefinitionError("interior_radiation must be 'none' or 'star'")
-        if self.sky not in ("none", "clear", "iso"):
-            raise ModelDefinitionError("sky must be 'none', 'clear' or 'iso'")
+        if self.sky not in ("none", "clear", "iso", "cloud"):
+            raise ModelDefinitionError("sky must be 'none', 'clear', 'iso' or 'cloud'")
         if self.return_air not in ("idf", "none"):
             raise ModelDefinitionError("return_air must be 'idf' or 'none'")
         if self.shading not in ("idf", "none"):

@@ -1014,7 +1014,8 @@ def test_sky_exchange_is_a_scheduled_input_at_each_exterior_face(five_zone):
     assert {b: sp["flow"] for b, sp in m_iso.structure.scheduled.items()} == \
         {b: sp["flow"] for b, sp in sky.items()}
     assert {sp["sky"] for sp in m_iso.structure.scheduled.values()} == {"iso"}
-    with pytest.raises(ModelDefinitionError, match="sky must be 'none', 'clear' or 'iso'"):
+    with pytest.raises(ModelDefinitionError,
+                       match="sky must be 'none', 'clear', 'iso' or 'cloud'"):
         ModelOptions(sky="cloudy")
 
 

@@ -580,3 +580,19 @@ def test_replay_exits_non_zero_when_the_broker_refuses_a_message(vb, monkeypatch
     assert out.exit_code == 2
     assert "refused by the broker: Not authorized" in out.output
     assert "2 messages were acknowledged" in out.output
+
+
+def test_a_cloud_cover_outside_its_range_in_the_points_unit_is_absurd(bundle):
+    """The virtual building maps its cloud cover in %: the catalogue's plausible range is
+    0-100 %, and a reading of 130 is refused as absurd while 80 is stored."""
+    from zonecast.service.context import catalogue_for_site
+
+    cat = catalogue_for_site(bundle.site)
+    spec = cat["CLOUD"]
+    assert spec.kind.value == "cloud_cover" and spec.unit == "%"
+    assert (spec.low, spec.high) == pytest.approx((0.0, 100.0))
+    msg = validate_message("zonecast/office6/telemetry", json.dumps({
+        "time": "2015-04-11T17:00:00Z", "readings": {"CLOUD": 130.0, "OAT": 12.0}}),
+        {"office6": cat}, now=NOW)
+    assert [r.point for r in msg.readings] == ["OAT"]
+    assert [(r.point, r.reason) for r in msg.rejected] == [("CLOUD", Reason.ABSURD_VALUE)]

@@ -56,4 +56,4 @@ def test_a_file_without_rows_is_refused(tmp_path):
     with pytest.raises(EnergyPlusError, match="no EPW data rows"):
         epw_cloud_cover(tmp_path / "empty.epw", pd.date_range("2015-01-01", periods=2,
                                                                freq="15min", tz="UTC"),
-                        dt.timezone.utc)
+                        dt.UTC)

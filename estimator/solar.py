@@ -217,6 +217,11 @@ class SolarGeometryCache:
 SKY_DEPRESSION_ISO = 11.0
 
 
+def _swinbank_emissivity(tk: np.ndarray) -> np.ndarray:
+    """Swinbank's clear-sky emissivity 9.365e-6 T_a^2 [-] of air at ``tk`` [K]."""
+    return 9.365e-6 * tk * tk
+
+
 def clear_sky_temperature(ta):
     """Clear-sky temperature [degC] for outdoor air at ``ta`` [degC]: Swinbank's sky
     emissivity eps = 9.365e-6 T_a^2 (T_a in K; Q. J. R. Meteorol. Soc. 89, 1963), the one
@@ -230,7 +235,7 @@ def clear_sky_temperature(ta):
         Outdoor air temperature [degC]; NaN gives NaN.
     """
     tk = np.asarray(ta, dtype=float) + 273.15
-    return np.sqrt(np.sqrt(9.365e-6 * tk * tk)) * tk - 273.15
+    return np.sqrt(np.sqrt(_swinbank_emissivity(tk))) * tk - 273.15
 
 
 def cloudy_sky_temperature(ta, cloud):
@@ -250,7 +255,7 @@ def cloudy_sky_temperature(ta, cloud):
     """
     tk = np.asarray(ta, dtype=float) + 273.15
     c = np.clip(np.nan_to_num(np.asarray(cloud, dtype=float), nan=0.0), 0.0, 1.0)
-    eps = c + (1.0 - c) * 9.365e-6 * tk * tk
+    eps = c + (1.0 - c) * _swinbank_emissivity(tk)
     return np.sqrt(np.sqrt(eps)) * tk - 273.15
 
 
@@ -258,7 +263,7 @@ def cloud_of_sky_temperature(ta, t_sky):
     """The cloud cover c [-] whose :func:`cloudy_sky_temperature` at air ``ta`` [degC] is
     ``t_sky`` [degC] (its inverse, clipped to [0, 1]; NaN where either is NaN)."""
     tk = np.asarray(ta, dtype=float) + 273.15
-    clear = 9.365e-6 * tk * tk
+    clear = _swinbank_emissivity(tk)
     eps = ((np.asarray(t_sky, dtype=float) + 273.15) / tk) ** 4
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.clip((eps - clear) / (1.0 - clear), 0.0, 1.0)

@@ -141,7 +141,8 @@ OCCUPIED_WEEKEND_SCALE = 1.0
 def weekend_occupancy_warning(gain_scale: Mapping | None,
                               threshold: float = OCCUPIED_WEEKEND_SCALE,
                               day_scale: Mapping | None = None,
-                              metered: bool = False) -> str | None:
+                              metered: bool = False,
+                              metered_ratio: float | None = None) -> str | None:
     """A warning when a ``daytime`` fit's scales (``result.gain_scale``: zone -> {"value",
     ...}) say people work at weekends (some zone's scale above ``threshold``), else None.
     With per-day deviations (``result.gain_day_scale``: "zone,date" -> {"value", ...}) a
@@ -149,7 +150,15 @@ def weekend_occupancy_warning(gain_scale: Mapping | None,
     people in, the weekends' unknown gains cost Table 2 and the forecasts about 0.1 K
     (docs/benchmarks.md), and weekends without people are the better data. ``metered``:
     the site has lights and plug-load meters, and the warning names the option that uses
-    them."""
+    them.
+
+    ``metered_ratio``: the meters' weekend daytime rise over the working days'
+    (:func:`weekend_metered_ratio`). Below :data:`METERED_OCCUPIED_RATIO` the meters show
+    empty weekends, so a scale above ``threshold`` is daytime heat the model lacks in
+    those zones, not people (on the seed-9 family's f9-17, whose weekends are empty, zone
+    S fitted 2.4 where `zonecast diagnose` finds the south windows' sun under-counted;
+    docs/identification.md "Weekend daytime gains"): the warning says so and does not
+    send the user to the meters' option, which would add nothing."""
     best = {z: v["value"] for z, v in (gain_scale or {}).items()}
     for key, d in (day_scale or {}).items():
         z = key.rsplit(",", 1)[0]
@@ -159,6 +168,15 @@ def weekend_occupancy_warning(gain_scale: Mapping | None,
     if not high:
         return None
     zones = ", ".join(f"{z} {s:.1f}" for z, s in high.items())
+    if metered_ratio is not None and metered_ratio < METERED_OCCUPIED_RATIO:
+        return (f"zones {zones} fitted a weekend daytime rise of more than {threshold:g} x an "
+                f"empty office's ({WEEKEND_DAY_GAIN} W/m2), but the site's meters show empty "
+                f"weekends (their weekend daytime rise is {metered_ratio:.2f} of the working "
+                f"days', below {METERED_OCCUPIED_RATIO:g}): the rise stands for daytime heat "
+                "the model lacks in those zones, not for people, and the validation weekend "
+                "and the forecasts pay for it where that heat differs (another season's sun); "
+                "`zonecast diagnose` ranks which unmodelled effect it is "
+                "(docs/identification.md \"Weekend daytime gains\")")
     return (f"the weekends look occupied: zones {zones} fitted a weekend daytime rise of more "
             f"than {threshold:g} x an empty office's ({WEEKEND_DAY_GAIN} W/m2). The "
             "identification assumes weekends without people (paper section 2-B); with people in, "

@@ -512,7 +512,8 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                    "of the working days' (the weekends are occupied): their rise is known gains "
                    "in the fit (--weekend-gains metered)")
     occupied = (weekend_occupancy_warning(res.gain_scale, day_scale=res.gain_day_scale,
-                                          metered=done.metered)
+                                          metered=done.metered,
+                                          metered_ratio=res.weekend_metered_ratio)
                 if res.weekend_gains == "daytime" else None)
     if occupied:
         typer.secho(f"warning: {occupied}", fg=typer.colors.YELLOW)
@@ -655,7 +656,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
     ident = res.identification or {}
     occupied = (weekend_occupancy_warning(ident.get("gain_scale"),
                                           day_scale=ident.get("gain_day_scale"),
-                                          metered=bool(ident.get("site_meters")))
+                                          metered=bool(ident.get("site_meters")),
+                                          metered_ratio=ident.get("weekend_metered_ratio"))
                 if ident.get("weekend_gains") == "daytime" else None)
     if occupied:
         typer.secho(f"warning: {occupied}", fg=typer.colors.YELLOW)

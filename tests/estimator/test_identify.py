@@ -667,6 +667,29 @@ def test_weekend_occupancy_warning_names_the_zones_above_an_empty_office():
     assert "meters: --weekend-gains metered" in weekend_occupancy_warning(scales, metered=True)
 
 
+def test_the_warning_believes_meters_that_show_empty_weekends():
+    """Where the site's meters show empty weekends (their weekend rise below the auto
+    threshold), a large fitted rise is heat the model lacks, not people: the warning says
+    so, names the meters' ratio and `zonecast diagnose`, and does not offer the meters'
+    option; at or above the threshold, or without meters, it is the occupancy warning."""
+    from zonecast.estimator.pipeline import METERED_OCCUPIED_RATIO, weekend_occupancy_warning
+
+    scales = {"N": {"value": 0.1, "se": 0.1}, "S": {"value": 2.41, "se": 0.2}}
+    msg = weekend_occupancy_warning(scales, metered=True, metered_ratio=0.12)
+    assert msg.startswith("zones S 2.4 fitted a weekend daytime rise")
+    assert "meters show empty weekends" in msg and "0.12 of the working days'" in msg
+    assert "not for people" in msg and "zonecast diagnose" in msg
+    assert "look occupied" not in msg and "--weekend-gains metered" not in msg
+    assert weekend_occupancy_warning({"S": {"value": 0.9, "se": 0.2}},
+                                     metered_ratio=0.12) is None
+    busy = weekend_occupancy_warning(scales, metered=True,
+                                     metered_ratio=METERED_OCCUPIED_RATIO)
+    assert busy.startswith("the weekends look occupied: zones S 2.4")
+    assert "--weekend-gains metered" in busy
+    assert weekend_occupancy_warning(scales, metered_ratio=None).startswith(
+        "the weekends look occupied")
+
+
 def test_the_warning_counts_a_weekend_days_own_scale():
     """With per-day deviations a zone's busiest day counts: a base scale of 0.8 with a
     Saturday 0.6 above it is a weekend with people."""

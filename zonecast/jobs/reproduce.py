@@ -201,7 +201,8 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                    + _scales(scale) + "."), ""]
         occupied = weekend_occupancy_warning(
             scale, day_scale=(results.identification or {}).get("gain_day_scale"),
-            metered=bool((results.identification or {}).get("site_meters")))
+            metered=bool((results.identification or {}).get("site_meters")),
+            metered_ratio=(results.identification or {}).get("weekend_metered_ratio"))
         if occupied:
             lines += [f"**Warning:** {occupied}.", ""]
     elif mode == "metered":

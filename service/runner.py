@@ -303,6 +303,7 @@ class Runner:
             closable = (complete or (support is not None and support >= t + STEP + self._grace)
                         or (idle and now >= t + STEP + self._grace))
             if not closable:
+                self._chunk_done(done)
                 return done, False
             self.next_time = t + STEP
             self.gaps.observe(t, present)
@@ -313,7 +314,16 @@ class Runner:
             elif present is not None:
                 self.unseen &= ~present
             t += STEP
+        self._chunk_done(done)
         return done, end <= last
+
+    def _chunk_done(self, done: int) -> None:
+        """Checkpoint once at the end of a chunk of closed rows (at most a day of them; live,
+        one row). A crash inside a chunk loses those rows' progress only: the restarted
+        runner recomputes them from the stored readings and reaches the same state."""
+        if done:
+            with self.lock:
+                self._checkpoint()
 
     def _process(self, t: pd.Timestamp, row: np.ndarray) -> None:
         """One row: ``row`` holds the readings of the estimator's points
@@ -332,7 +342,6 @@ class Runner:
             if issue:
                 self._set_forecast(self.est.forecast())
                 self.history.append(self.forecast)
-            self._checkpoint()
         self.latencies.append(_time.perf_counter() - t0)
         if self.publish is not None:
             try:

@@ -5,12 +5,21 @@ need real data."""
 from __future__ import annotations
 
 import copy
+import os
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from threadpoolctl import threadpool_limits
+
+# One BLAS thread per test process unless OPENBLAS_NUM_THREADS says otherwise, as every
+# `zonecast` command does (zonecast/cli.py): `make test` runs a worker per core, and each
+# worker's OpenBLAS threads then only contend with the other worker's (docs/benchmarks.md,
+# "The test suite's time")
+if "OPENBLAS_NUM_THREADS" not in os.environ:
+    threadpool_limits(1, user_api="blas")
 
 
 def pytest_collection_modifyitems(session, config, items):
@@ -109,3 +118,24 @@ def telemetry(vb):
     import pandas as pd
 
     return pd.read_csv(vb / "telemetry.csv", dtype={"time": str})
+
+
+@pytest.fixture(scope="session")
+def paper_campaign(tmp_path_factory, worker_id):
+    """The default campaign (``run_campaign(seed=0)``: office6, 11 weeks, real EnergyPlus,
+    ~25 s) made once for every pytest-xdist worker of the run (a file lock in the run's
+    shared temporary folder); read-only for the tests that use it."""
+    import fcntl
+
+    from zonecast.testbed.run import run_campaign
+
+    root = tmp_path_factory.getbasetemp()
+    if worker_id != "master":  # the workers' folders share the run's folder
+        root = root.parent
+    out = root / "paper-campaign-seed0"
+    with open(root / "paper-campaign-seed0.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # the other workers wait for the first
+        if not (out / ".complete").is_file():
+            run_campaign(out, seed=0)
+            (out / ".complete").touch()
+    return out

@@ -99,8 +99,9 @@ def test_report_names_parameters_at_a_bound_and_identifiability(tmp_path):
 
 
 @pytest.mark.timeout(600)
-def test_reproduce_end_to_end_without_the_service_check(tmp_path):
-    """The whole job on the default campaign (real EnergyPlus, 11 weeks) with
+def test_reproduce_end_to_end_without_the_service_check(tmp_path, paper_campaign):
+    """The whole job on the default campaign (real EnergyPlus, 11 weeks; the run's shared
+    ``run_campaign(seed=0)``, which the job would run itself without ``campaign``) with
     ``service=False``: Tables 2 and 3 without the service rows, the report saying so, a
     model file the service can load, and office6's Table 2 within its must (0.208 / 0.203;
     about 75 s)."""
@@ -108,7 +109,8 @@ def test_reproduce_end_to_end_without_the_service_check(tmp_path):
 
     from zonecast.jobs import reproduce
 
-    res = reproduce.run(tmp_path / "report", seed=0, sensitivity=False, service=False)
+    res = reproduce.run(tmp_path / "report", campaign=paper_campaign, seed=0,
+                        sensitivity=False, service=False)
     assert not [k for k in res.table3 if k.startswith("service")]
     assert {"fixed", "dayahead", "online_paper"} <= set(res.table3)
     assert "service_check" not in res.timings_s

@@ -13,7 +13,7 @@ from zonecast.estimator.site import load_site
 from zonecast.estimator.telemetry import load_telemetry
 from zonecast.testbed.config import load_config
 from zonecast.testbed.effects import Effects, parse_switches
-from zonecast.testbed.run import STEP, run_campaign, run_weeks, to_records
+from zonecast.testbed.run import STEP, run_weeks, to_records
 
 pytestmark = pytest.mark.energyplus
 
@@ -190,12 +190,12 @@ def test_same_seed_same_telemetry_other_seed_differs(base, tmp_path):
     assert not other.telemetry.equals(base.telemetry)
 
 
-def test_campaign_is_the_papers_data_set(tmp_path):
-    res = run_campaign(tmp_path / "c", seed=0)
+def test_campaign_is_the_papers_data_set(paper_campaign):
+    # run_campaign(out, seed=0), made once for the run by the fixture (tests/conftest.py)
     for name in ("telemetry.csv", "site.yaml", "truth.csv", "building.idf"):
-        assert (res.out / name).is_file()
-    site = load_site(res.out / "site.yaml")
-    tel = load_telemetry(res.out / "telemetry.csv", site)
+        assert (paper_campaign / name).is_file()
+    site = load_site(paper_campaign / "site.yaml")
+    tel = load_telemetry(paper_campaign / "telemetry.csv", site)
     assert len(tel.segments) == 11 and len(tel.frame) == 11 * 7 * 96
     local = tel.local_times()
     starts = [local[a] for a, _ in tel.segments]

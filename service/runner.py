@@ -305,14 +305,18 @@ class Runner:
             if not closable:
                 self._chunk_done(done)
                 return done, False
-            self.next_time = t + STEP
-            self.gaps.observe(t, present)
-            if present is not None and present[self._est].any():
-                self.unseen &= ~present
-                self._process(t, row[self._est])
-                done += 1
-            elif present is not None:
-                self.unseen &= ~present
+            # under the lock: a checkpoint taken meanwhile by another thread (a new weather
+            # forecast) sees the next row and the state of the rows before it, never the
+            # next row advanced past a row not yet in the state
+            with self.lock:
+                self.next_time = t + STEP
+                self.gaps.observe(t, present)
+                if present is not None and present[self._est].any():
+                    self.unseen &= ~present
+                    self._process(t, row[self._est])
+                    done += 1
+                elif present is not None:
+                    self.unseen &= ~present
             t += STEP
         self._chunk_done(done)
         return done, end <= last

@@ -104,7 +104,7 @@ def test_reproduce_end_to_end_without_the_service_check(tmp_path, paper_campaign
     ``run_campaign(seed=0)``, which the job would run itself without ``campaign``) with
     ``service=False``: Tables 2 and 3 without the service rows, the report saying so, a
     model file the service can load, and office6's Table 2 within its must (0.208 / 0.203;
-    about 75 s)."""
+    160-210 s on a 2-core machine beside the rest of the suite, 2026-12-07)."""
     from zonecast.estimator.artifact import load_model_file
 
     from zonecast.jobs import reproduce

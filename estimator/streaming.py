@@ -409,6 +409,14 @@ def _solve_square(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.linalg.lstsq(a, b, rcond=None)[0]
 
 
+#: settings of :class:`OnlineEstimator` that :meth:`~OnlineEstimator._init_input_forecasts`
+#: gives their defaults and that a loaded checkpoint must not reset (they are the owner's,
+#: e.g. the runner's ``thermostat_forecast``, not state)
+_SETTINGS_KEPT_ON_LOAD = ("profile_learn", "weather_max_age", "weather_obs_tau_h",
+                          "hold_setpoints", "reheat_control", "cooling_control",
+                          "deadband_control")
+
+
 class OnlineEstimator:
     """Streaming state, internal gains and forecasts of one building.
 
@@ -1465,8 +1473,12 @@ class OnlineEstimator:
             self._level = arr["gains_level"]
         if meta["started"]:
             self._x = arr["x"]
-        # the input learners (absent from checkpoints before them: they start afresh)
+        # the input learners (absent from checkpoints before them: they start afresh); the
+        # owner's settings of them (e.g. the service's thermostat_forecast) stay as set
+        kept = {name: getattr(self, name) for name in _SETTINGS_KEPT_ON_LOAD}
         self._init_input_forecasts()
+        for name, value in kept.items():
+            setattr(self, name, value)
         self.inputs_fc.load_state_arrays(arr)
         self.weather_fb.load_state_arrays(arr)
         self.airflow_floor.load_state_arrays(arr)

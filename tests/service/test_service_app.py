@@ -179,6 +179,60 @@ def test_runner_waits_for_late_points_then_closes_by_watermark_or_idle(bundle, t
     store.close()
 
 
+def test_a_backlog_is_checkpointed_per_chunk_and_resumes_to_the_same_state(bundle, telemetry,
+                                                                           tmp_path):
+    """130 stored rows are closed in two chunks (a day, then the rest), each followed by one
+    checkpoint (not one per row); a runner resumed from the first chunk's checkpoint, as
+    after a crash inside the second chunk, recomputes the second chunk from the stored
+    readings to the same state and forecast, bit for bit, with the runner's settings (the
+    thermostat model off) kept. Live, one row: one checkpoint."""
+    from zonecast.service.context import catalogue_for_site
+    from zonecast.service.ingest import validate_message
+    from zonecast.service.runner import Runner, read_checkpoint
+    from zonecast.service.settings import RunnerSettings
+    from zonecast.service.storage import open_storage
+
+    store = open_storage(f"sqlite:///{tmp_path / 'r.db'}")
+    cats = {bundle.building: catalogue_for_site(bundle.site)}
+
+    def put(row):
+        msg = validate_message(f"zonecast/{bundle.building}/telemetry",
+                               json.dumps(body_of(row)), cats)
+        store.put_readings(bundle.building, msg.readings)
+
+    saved = []
+    save = store.save_checkpoint
+
+    def counting_save(building, time, state, sync=True):
+        saved.append((time, state))
+        return save(building, time, state, sync=sync)
+
+    store.save_checkpoint = counting_save
+    for i in range(130):
+        put(telemetry.iloc[i])
+    # the thermostat model off: about checkpoints, and a third of the CPU
+    settings = RunnerSettings(grace=300, idle_timeout=1800, forecast_every=4,
+                              thermostat_forecast=False)
+    clock = FakeClock("2015-04-20T00:00:00Z")
+    first = Runner(bundle, store, settings, clock=clock)
+    assert first.poll() == 130
+    t = [pd.Timestamp(x).tz_convert("UTC") for x in telemetry["time"].iloc[:131]]
+    assert [pd.Timestamp(c[0]) for c in saved] == [t[95], t[129]]
+    assert read_checkpoint(saved[0][1])[0]["next_time"] == t[96].isoformat()
+    # a crash inside the second chunk: the store still holds the first chunk's checkpoint
+    save(bundle.building, saved[0][0], saved[0][1], sync=True)
+    again = Runner(bundle, store, settings, clock=clock)
+    assert again.next_time == t[96]
+    assert again.poll() == 34
+    assert np.array_equal(again.est.x, first.est.x)
+    # the runner's setting survives the checkpoint's load (it was reset to the default)
+    assert again.est.reheat_control is False
+    assert_same_forecast(again.est.forecast(), first.est.forecast(), tol=0)
+    saved.clear()
+    put(telemetry.iloc[130])  # live: one row, one checkpoint
+    assert again.poll() == 1 and [pd.Timestamp(c[0]) for c in saved] == [t[130]]
+
+
 def test_meter_readings_ahead_of_the_temperatures_do_not_close_rows(bundle, telemetry,
                                                                      tmp_path):
     """The lights and plug-load meters may come from another system, ahead of the BMS's
@@ -246,6 +300,31 @@ def test_checkpoint_round_trip_is_exact(bundle, telemetry):
     assert_same_forecast(a.forecast(), b.forecast(), tol=0)
     with pytest.raises(ValueError, match="not after"):
         a.advance(tt[3], u[3], v[3], y[3])
+
+
+def test_loading_a_checkpoint_keeps_the_owners_settings(bundle, telemetry):
+    """The forecasting settings an owner sets (the runner's thermostat_forecast, ...) are
+    not state: loading a checkpoint keeps them (it reset them to the defaults)."""
+    from zonecast.estimator.streaming import (
+        _SETTINGS_KEPT_ON_LOAD,
+        OnlineEstimator,
+        rows_from_frame,
+    )
+
+    tt, u, v, y = rows_from_frame(bundle, telemetry_si(bundle, telemetry.iloc[:4]))
+    a = OnlineEstimator(bundle)
+    for k in range(4):
+        a.advance(tt[k], u[k], v[k], y[k])
+    b = OnlineEstimator(bundle)
+    mine = {}
+    for name in _SETTINGS_KEPT_ON_LOAD:
+        value = getattr(b, name)
+        mine[name] = (not value if isinstance(value, bool)
+                      else value * 2 if value else pd.Timedelta(hours=1))
+        setattr(b, name, mine[name])
+    b.load_bytes(a.to_bytes())
+    assert {name: getattr(b, name) for name in mine} == mine
+    assert np.array_equal(b.x, a.x)
 
 
 def test_step_report_innovation_is_the_one_the_filter_scored(bundle, telemetry):

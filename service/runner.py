@@ -308,15 +308,18 @@ class Runner:
             # under the lock: a checkpoint taken meanwhile by another thread (a new weather
             # forecast) sees the next row and the state of the rows before it, never the
             # next row advanced past a row not yet in the state
+            issue = None
             with self.lock:
                 self.next_time = t + STEP
                 self.gaps.observe(t, present)
                 if present is not None and present[self._est].any():
                     self.unseen &= ~present
-                    self._process(t, row[self._est])
+                    issue = self._process(t, row[self._est])
                     done += 1
                 elif present is not None:
                     self.unseen &= ~present
+            if issue is not None:
+                self._publish_row(issue)  # outside the lock, as the API reads under it
             t += STEP
         self._chunk_done(done)
         return done, end <= last
@@ -329,9 +332,10 @@ class Runner:
             with self.lock:
                 self._checkpoint()
 
-    def _process(self, t: pd.Timestamp, row: np.ndarray) -> None:
+    def _process(self, t: pd.Timestamp, row: np.ndarray) -> bool:
         """One row: ``row`` holds the readings of the estimator's points
-        (``convert.points``) at ``t`` in their wire units (NaN = none)."""
+        (``convert.points``) at ``t`` in their wire units (NaN = none). Returns whether a
+        forecast was issued (for :meth:`_publish_row`)."""
         t0 = _time.perf_counter()
         u, v, y, rh = self.convert.convert_rows(np.array([t.value], dtype=np.int64),
                                                 row[None, :])
@@ -347,6 +351,10 @@ class Runner:
                 self._set_forecast(self.est.forecast())
                 self.history.append(self.forecast)
         self.latencies.append(_time.perf_counter() - t0)
+        return issue
+
+    def _publish_row(self, issue: bool) -> None:
+        """Publish the state after a processed row, and the forecast if one was issued."""
         if self.publish is not None:
             try:
                 self.publish("state", self)

@@ -163,8 +163,9 @@ def _read_json(path: Path) -> tuple[dict, bytes]:
     return doc, raw
 
 
-def _parameters(doc: dict, zones: list[str], path: Path, notes: list[str]):
-    params = ParameterSet(zones)
+def _parameters(doc: dict, zones: list[str], path: Path, notes: list[str],
+                extra: tuple[str, ...] = ()):
+    params = ParameterSet(zones, extra=extra)
     given = doc.get("parameters") or {}
     if not isinstance(given, dict):
         raise ModelFileError(f"{path}: 'parameters' must be an object name -> value")
@@ -352,12 +353,12 @@ def load_model_file(path: str | Path) -> ModelBundle:
                              f"{site.step}")
     notes: list[str] = []
     zones = list(site.zones)
-    params = _parameters(doc, zones, path, notes)
     profile = _profile(doc, zones, site.timezone, path, notes)
     noise = _noise(doc, path)
     options = _model_options(doc, path, notes)
     if doc.get("structure") is not None:
         structure, volume = _stored_structure(doc, path, site, options)
+        params = _parameters(doc, zones, path, notes, structure.extra_params)
         model = BilinearModel(structure, params,
                               reheat_scale=_reheat_scale(doc, path, structure.boxes),
                               reheat_from_faces=_reheat_from_faces(doc, path))
@@ -368,12 +369,11 @@ def load_model_file(path: str | Path) -> ModelBundle:
         except (ValueError, FileNotFoundError) as exc:
             raise ModelFileError(f"{path}: building {site.idf_path}: {exc}") from None
         model = build_model(building, site.zones,
-                            {b: box.room for b, box in site.boxes.items()}, params,
-                            options=options)
-        scale = _reheat_scale(doc, path, model.structure.boxes)
-        if scale is not None:
-            model = BilinearModel(model.structure, params, reheat_scale=scale,
-                                  reheat_from_faces=_reheat_from_faces(doc, path))
+                            {b: box.room for b, box in site.boxes.items()}, options=options)
+        params = _parameters(doc, zones, path, notes, model.structure.extra_params)
+        model = BilinearModel(model.structure, params,
+                              reheat_scale=_reheat_scale(doc, path, model.structure.boxes),
+                              reheat_from_faces=_reheat_from_faces(doc, path))
         volume = {name: z.volume for name, z in building.zones.items()}
     return ModelBundle(
         building=site.building, site=site, model=model, profile=profile, noise=noise,
@@ -470,6 +470,7 @@ def save_structure(path: str | Path, structure: RCStructure,
             "cp_air": structure.cp_air, "notes": structure.notes, "areas": structure.areas,
             "window_rooms": list(structure.window_area), "n_A_p": len(structure.A_p),
             "n_Bv_p": len(structure.Bv_p), "options": asdict(structure.options),
+            "extra_params": list(structure.extra_params),
             "facade_rotation": structure.facade_rotation,
             "room_volume": {k: float(v) for k, v in room_volume.items()}}
     if structure.scheduled:  # written only when there are any (older files stay the same)
@@ -524,7 +525,8 @@ def load_structure(path: str | Path) -> tuple[RCStructure, dict[str, float]]:
             switched=({"links": z["switched.links"], "area": z["switched.area"],
                        "param": z["switched.param"], "factor": z["switched.factor"],
                        "rooms": list(meta["switched_rooms"])}
-                      if "switched_rooms" in meta else {}))
+                      if "switched_rooms" in meta else {}),
+            extra_params=tuple(meta.get("extra_params", ())))
     return structure, {k: float(v) for k, v in meta["room_volume"].items()}
 
 

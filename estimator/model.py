@@ -142,7 +142,8 @@ class BilinearModel:
         if step <= 0:
             raise ValueError("step must be positive [s]")
         self.structure = structure
-        self.params = params if params is not None else ParameterSet(list(structure.zones))
+        self.params = (params if params is not None
+                       else ParameterSet(list(structure.zones), extra=structure.extra_params))
         if list(self.params.zones) != list(structure.zones):
             raise ValueError(
                 f"parameter zones {list(self.params.zones)} differ from model zones "
@@ -749,7 +750,7 @@ def build_model(
     """
     structure = build_structure(building, zones, boxes, options)
     if params is not None and not isinstance(params, ParameterSet):
-        params = ParameterSet(list(structure.zones), params)
+        params = ParameterSet(list(structure.zones), params, structure.extra_params)
     return BilinearModel(structure, params, **kwargs)
 
 

@@ -54,6 +54,7 @@ from zonecast.estimator.priors import (
     building_priors,
     convective_films,
     operating_film_ratios,
+    roof_film_prior,
 )
 from zonecast.estimator.rc.network import (
     ModelDefinitionError,
@@ -404,7 +405,7 @@ class Pipeline:
         if params is None:
             params = self.params
         if params is not None and not isinstance(params, ParameterSet):
-            params = ParameterSet(list(structure.zones), params)
+            params = ParameterSet(list(structure.zones), params, structure.extra_params)
         return BilinearModel(structure, params, reheat_scale=self.reheat_scale,
                              reheat_from_faces=self.reheat_from_faces)
 
@@ -548,12 +549,15 @@ class Pipeline:
         if not train:
             raise PipelineError("no excitation weekend found: give the training Saturdays "
                                 "(the site's experiments list marks excitation periods)")
-        start = ParameterSet(list(self.site.zones))
+        start = ParameterSet(list(self.site.zones), extra=self.structure().extra_params)
         convective = films in ("convective", "idf")
         table = (convective_films(self._building_or_none()) if films == "idf"
                  else CONVECTIVE_FILMS)
         if convective:  # films as convection alone: start where their priors are
             start = start.copy({k: v[0] for k, v in table.items()})
+        own_roof = "gamma_roof" in start.param_names
+        if own_roof:  # the roofs' own film starts at its prior's mean (the climate's film)
+            start = start.copy({"gamma_roof": roof_film_prior(self._building_or_none())[0]})
         if priors is True:
             priors = building_priors(start, self._building_or_none(),
                                      convective="idf" if films == "idf" else convective,
@@ -565,7 +569,7 @@ class Pipeline:
                        window=window, agree_rtol=agree_rtol, x0_offset_sd=x0_offset_sd,
                        day_scale_sd=(day_scale_sd if weekend_gains in ("daytime", "metered")
                                      else None),
-                       start=start.values if convective else None,
+                       start=start.values if convective or own_roof else None,
                        f_ig=self.weekend_known_gains(data, weekend_gains),
                        gain_shape=self.weekend_shape(data, weekend_gains),
                        shape_prior=self._shape_prior(weekend_gains))

@@ -29,13 +29,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+from zonecast.estimator import outside_films
 from zonecast.estimator.idf import Building
 from zonecast.estimator.rc.network import outer_absorptance
 from zonecast.estimator.rc.parameters import ParameterSet
 
 __all__ = ["CONVECTIVE_FILMS", "OPERATING_FILMS", "TARP_FILMS", "Prior", "building_priors",
            "convective_films", "operating_film_ratios",
-           "prior_jacobian", "prior_residuals"]
+           "prior_jacobian", "prior_residuals", "roof_film_prior"]
 
 
 @dataclass(frozen=True)
@@ -167,7 +168,30 @@ _C_IG = (5.0, 10.0, "idle equipment and lighting 2-10 W/m2, weak")
 
 #: parameters that are positive coefficients (films, glazing U) [W/(m2 K)]: their uncertainty
 #: is relative, so ``building_priors(positive="log")`` puts their priors on ln(theta)
-POSITIVE = ("gamma_EW", "gamma_IW", "gamma_floor", "gamma_ceil", "U_win")
+POSITIVE = ("gamma_EW", "gamma_IW", "gamma_floor", "gamma_ceil", "U_win", "gamma_roof")
+
+
+def roof_film_prior(building: Building | None) -> tuple[float, float, str]:
+    """(mean, sd, source) of the roofs' own outside film gamma_roof [W/(m2 K)]
+    (``ModelOptions.roof_exterior="own"``): the area-weighted climate film of the
+    building's roofs open to the outdoors (:func:`~zonecast.estimator.outside_films.climate_films`:
+    the mean over the weather file's hours of the outside correlation the building names,
+    with the wind at each roof's height), with gamma_EW's handbook relative spread
+    (12 / 25); without a weather file or roofs, gamma_EW's handbook prior."""
+    mean, sd, source = _HANDBOOK["gamma_EW"]
+    if building is None:
+        return mean, sd, source + " (no building: the handbook's)"
+    roofs = {n: s.area for n, s in building.surfaces.items()
+             if s.boundary == "Outdoors" and s.surface_type == "Roof" and s.area > 0}
+    if not roofs:
+        return mean, sd, source + " (no roof open to the outdoors)"
+    try:
+        films = outside_films.climate_films(building, list(roofs))
+    except (ValueError, OSError) as err:
+        return mean, sd, f"{source} (no climate film: {err})"
+    h = _area_mean([(films[n], a) for n, a in roofs.items()])
+    return h, h * sd / mean, (f"roofs' climate film, {building.outside_convection} over the "
+                              "weather file's hours, with γ_EW's relative spread")
 #: ways to hold the positive coefficients: Gaussian on theta, or on ln(theta)
 POSITIVE_PRIORS = ("normal", "log")
 
@@ -209,6 +233,8 @@ def building_priors(params: ParameterSet, building: Building | None = None, *,
     out = {}
     for name, (mean, sd, source) in _HANDBOOK.items():
         out[name] = Prior(mean, sd, source)
+    if "gamma_roof" in params.param_names:
+        out["gamma_roof"] = Prior(*roof_film_prior(building))
     if convective == "idf":
         out.update({name: Prior(*v) for name, v in convective_films(building).items()})
     elif convective:

@@ -105,6 +105,9 @@ RHO_AIR = 1.2
 
 # parameter indices of the seven matrix parameters (same order as rc.parameters.PHYSICAL)
 EW, IW, FLOOR, CEIL, ABSORP, WINSOL, UWIN = range(7)
+#: index of the roofs' own outside film (``ModelOptions.roof_exterior="own"``), the first
+#: extra matrix parameter (rc.parameters.EXTRA["gamma_roof"])
+ROOF = 7
 #: inside convection of horizontal faces when a room's air is warmer than them (its boxes
 #: reheat), relative to the fitted films (``ModelOptions.inside_convection="regime"``): the
 #: fitted γ_floor and γ_ceil are those of the usual regime, faces warmer than the air (the
@@ -117,6 +120,8 @@ REGIME_CEILING = 2.0
 #: a box's discharge air this far above the supply air [K] marks its room's air warmer
 #: than its faces (``ModelOptions.inside_convection="regime"``)
 REGIME_RISE = 1.0
+#: ways to model a roof's outer face (``ModelOptions.roof_exterior``)
+ROOF_EXTERIORS = ("fitted", "idf", "absorptance", "climate", "own")
 #: outside film of a roof with ``ModelOptions.roof_exterior == "idf"`` [W/(m2 K)]: the
 #: handbook's combined film, γ_EW's start and prior mean (parameters.PHYSICAL)
 ROOF_FILM = 25.0
@@ -326,7 +331,7 @@ class ModelOptions:
         which EnergyPlus makes one solar and radiant enclosure (with
         ``internal_gains="idf"`` the gains' radiant share too); a building without air
         boundaries is unchanged (docs/model.md "Air boundaries").
-    roof_exterior : {"fitted", "idf", "absorptance", "climate"}
+    roof_exterior : {"fitted", "idf", "absorptance", "climate", "own"}
         The outer faces of roofs (surfaces of type Roof open to the outdoors): with
         the IDF's solar absorptance of the roof's outer material (EnergyPlus's 0.7 where
         it gives none) and the fitted γ_EW (``"absorptance"``, the default since
@@ -336,9 +341,12 @@ class ModelOptions:
         :data:`ROOF_FILM`, the handbook's combined film and γ_EW's prior), or with the film
         of the site's wind climate (``"climate"``: each roof's mean film over the hours of
         the building's weather file by the input's outside convection correlation,
-        :func:`~zonecast.estimator.outside_films.climate_films`; measured, not adopted). No
-        parameter is added; the walls keep γ_EW and γ_absorp (docs/model.md "Roofs' own
-        exterior").
+        :func:`~zonecast.estimator.outside_films.climate_films`; measured, not adopted), or
+        with a film of their own, fitted: ``"own"`` adds the matrix parameter ``gamma_roof``
+        (:data:`ROOF`; its prior is the roofs' climate film,
+        :func:`~zonecast.estimator.priors.building_priors`) when the building has a roof open
+        to the outdoors. Otherwise no parameter is added; the walls keep γ_EW and γ_absorp
+        (docs/model.md "Roofs' own exterior").
     internal_gains : {"air", "idf"}
         Where a room's internal heat a_floor (c_IG + f_IG) goes (paper eq:q_ig): all on the
         room air (the paper), or split as the IDF's People, Lights and equipment objects
@@ -386,9 +394,9 @@ class ModelOptions:
         if self.envelope_radiation != "none" and self.interior_radiation == "star":
             raise ModelDefinitionError("envelope_radiation='room' approximates the star of "
                                        "interior_radiation='star'; choose one of them")
-        if self.roof_exterior not in ("fitted", "idf", "absorptance", "climate"):
-            raise ModelDefinitionError("roof_exterior must be 'fitted', 'idf', 'absorptance' "
-                                       "or 'climate'")
+        if self.roof_exterior not in ROOF_EXTERIORS:
+            raise ModelDefinitionError("roof_exterior must be one of "
+                                       + ", ".join(map(repr, ROOF_EXTERIORS)))
         if self.window_angle not in ("none", "glass"):
             raise ModelDefinitionError("window_angle must be 'none' or 'glass'")
         if self.internal_gains not in ("air", "idf"):
@@ -580,6 +588,7 @@ class RCStructure:
     return_of_box: np.ndarray | None = None
     window_panes: int = 0
     switched: dict = field(default_factory=dict)
+    extra_params: tuple[str, ...] = ()
 
     @property
     def returns(self) -> tuple[np.ndarray, np.ndarray]:
@@ -661,6 +670,7 @@ class RCStructure:
 
     def A(self, theta: np.ndarray) -> sp.csr_matrix:
         """Continuous A(theta) [1/s]."""
+        self._check_theta(theta)
         out = self.A0.copy()
         for t, piece in zip(theta, self.A_p):
             out = out + t * piece
@@ -668,10 +678,18 @@ class RCStructure:
 
     def Bv(self, theta: np.ndarray) -> sp.csr_matrix:
         """Continuous B_v(theta) [K/s per unit of v]."""
+        self._check_theta(theta)
         out = self.Bv0.copy()
         for t, piece in zip(theta, self.Bv_p):
             out = out + t * piece
         return out.tocsr()
+
+    def _check_theta(self, theta) -> None:
+        if len(theta) != len(self.A_p):
+            names = ["the seven", *self.extra_params]
+            raise ValueError(f"the structure has {len(self.A_p)} matrix parameters "
+                             f"({', '.join(names)}), got {len(theta)}: build the parameters "
+                             "with ParameterSet(zones, extra=structure.extra_params)")
 
     def Bxu_diag(self) -> np.ndarray:
         """-c_p / C_room for each box [1/(s kg/s)] (the one nonzero of B_xu_j)."""
@@ -970,7 +988,9 @@ def build_structure(
                 f"box {b!r} serves {room!r}, which is in no model zone; add the room to a zone"
             )
 
-    asm = _Assembler()
+    own_roof = opts.roof_exterior == "own" and any(
+        f.boundary == "Outdoors" and f.surface_type == "Roof" for f in building.surfaces.values())
+    asm = _Assembler(8 if own_roof else 7)
     notes: list[str] = []
     rotation = facade_rotation(building) if opts.facades == "building" else 0.0
     climate: dict[str, float] = {}
@@ -1083,9 +1103,11 @@ def build_structure(
                 asm.to_temperature(nodes[0], 0, ROOF_FILM * s.area, -1)
             elif roof and opts.roof_exterior == "climate":  # of the site's wind
                 asm.to_temperature(nodes[0], 0, climate[name] * s.area, -1)
+            elif roof and own_roof:  # the roofs' own film, fitted
+                asm.to_temperature(nodes[0], 0, s.area, ROOF)
             else:
                 asm.to_temperature(nodes[0], 0, s.area, EW)  # paper eq:q_bh, convection
-            known = roof and opts.roof_exterior in ("idf", "absorptance", "climate")
+            known = roof and opts.roof_exterior in ("idf", "absorptance", "climate", "own")
             absorp = outer_absorptance(cons) if known else 1.0  # else gamma_absorp's
             for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
                 asm.source(nodes[0], DISTURBANCES.index(col), w * absorp * s.area,
@@ -1317,6 +1339,7 @@ def build_structure(
         window_panes=(1 if u_nominal >= SINGLE_PANE_U else 2)
         if opts.window_angle == "glass" else 0,
         switched=switched,
+        extra_params=("gamma_roof",) if own_roof else (),
     )
 
 

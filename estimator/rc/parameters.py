@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PAPER_TABLE1", "PHYSICAL", "ParameterSet", "ParameterSpec"]
+__all__ = ["EXTRA", "PAPER_TABLE1", "PHYSICAL", "ParameterSet", "ParameterSpec"]
 
 
 @dataclass(frozen=True)
@@ -80,6 +80,18 @@ PHYSICAL: tuple[ParameterSpec, ...] = (
     ),
 )
 
+#: Matrix parameters a structure may add to the seven (``RCStructure.extra_params``), after
+#: them in the vector, by name. ``gamma_roof``: the outside film of the roofs
+#: (``ModelOptions.roof_exterior="own"``), which the paper's one exterior film gamma_EW
+#: shares with the walls; a building without roofs open to the outdoors has no such
+#: parameter.
+EXTRA: dict[str, ParameterSpec] = {
+    "gamma_roof": ParameterSpec(
+        "gamma_roof", "γ_roof", "roof exterior film coefficient", "W/(m2 K)", _GAMMA_MIN, 200.0,
+        25.0, "ASHRAE Fundamentals 2017 ch. 26: outside film 1/R_o = 22.7-34 W/m2K (as γ_EW)",
+    ),
+}
+
 _C_IG = {
     "symbol": "c_IG", "description": "background heat gain", "unit": "W/m2", "lower": -50.0, "upper": 100.0,
     "start": 5.0, "source": "idle office equipment and lighting ~2-10 W/m2 (ASHRAE 90.1 / ch. 18)",
@@ -95,7 +107,8 @@ PAPER_TABLE1: dict[str, float] = {
 
 
 class ParameterSet:
-    """Parameters of a site: the seven building parameters plus one c_IG per model zone.
+    """Parameters of a site: the seven building parameters, the structure's extra matrix
+    parameters (:data:`EXTRA`, none for the paper's model), then one c_IG per model zone.
 
     Parameters
     ----------
@@ -104,11 +117,20 @@ class ParameterSet:
     values : mapping or sequence, optional
         Values by name or as a vector in :attr:`param_names` order; defaults to
         :attr:`start_params`.
+    extra : sequence of str, optional
+        Names of extra matrix parameters (keys of :data:`EXTRA`), in the structure's order
+        (:attr:`~zonecast.estimator.rc.network.RCStructure.extra_params`).
     """
 
-    def __init__(self, zones: Sequence[str], values: Mapping[str, float] | Sequence[float] | None = None):
+    def __init__(self, zones: Sequence[str], values: Mapping[str, float] | Sequence[float] | None = None,
+                 extra: Sequence[str] = ()):
         self.zones = tuple(zones)
+        unknown = [e for e in extra if e not in EXTRA]
+        if unknown:
+            raise ValueError(f"unknown extra parameters {unknown}; known: {', '.join(EXTRA)}")
+        self.extra = tuple(extra)
         self.specs: tuple[ParameterSpec, ...] = PHYSICAL + tuple(
+            EXTRA[e] for e in self.extra) + tuple(
             ParameterSpec(f"c_IG[{z}]", **_C_IG) for z in self.zones
         )
         self.values = self.start_params.copy()
@@ -138,7 +160,7 @@ class ParameterSet:
     @property
     def n_physical(self) -> int:
         """Number of parameters that enter the matrices (the c_IG enter the input)."""
-        return len(PHYSICAL)
+        return len(PHYSICAL) + len(self.extra)
 
     # values -------------------------------------------------------------------
     def update(self, values: Mapping[str, float] | Sequence[float]) -> ParameterSet:
@@ -171,7 +193,7 @@ class ParameterSet:
         return self
 
     def copy(self, values: Mapping[str, float] | Sequence[float] | None = None) -> ParameterSet:
-        out = ParameterSet(self.zones, self.values)
+        out = ParameterSet(self.zones, self.values, self.extra)
         if values is not None:
             out.update(values)
         return out
@@ -183,7 +205,7 @@ class ParameterSet:
 
     @property
     def physical(self) -> np.ndarray:
-        """The seven matrix parameters [gamma_EW, ..., U_win]."""
+        """The matrix parameters [gamma_EW, ..., U_win, then the extra ones]."""
         return self.values[: self.n_physical]
 
     @property

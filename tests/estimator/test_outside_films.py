@@ -114,3 +114,27 @@ def test_climate_films_take_doe2_for_tarp_with_a_note(five_zone):
     assert of.climate_films(b, ["TOP-1"]) == of.climate_films(doe2, ["TOP-1"])
     assert any("taken as DOE-2's" in n for n in b.notes) and not doe2.notes
     assert of.climate_films(mowitt, ["TOP-1"])["TOP-1"] < of.climate_films(doe2, ["TOP-1"])["TOP-1"]
+
+
+def test_roof_film_prior_is_the_roofs_climate_film(small_office, five_zone):
+    """gamma_roof's prior (``roof_exterior="own"``): the roofs' area-weighted climate film
+    with gamma_EW's relative spread (12 / 25), log-normal like the other films; the
+    handbook's 25 +- 12 without a weather file, saying why; no gamma_roof prior for a
+    parameter set without the parameter."""
+    from zonecast.estimator.priors import building_priors, roof_film_prior
+    from zonecast.estimator.rc.parameters import ParameterSet
+
+    roofs = {n: s.area for n, s in small_office.surfaces.items()
+             if s.boundary == "Outdoors" and s.surface_type == "Roof"}
+    films = of.climate_films(small_office, list(roofs))
+    want = sum(films[n] * a for n, a in roofs.items()) / sum(roofs.values())
+    mean, sd, source = roof_film_prior(small_office)
+    assert mean == pytest.approx(want, rel=1e-12) and sd == pytest.approx(want * 12 / 25)
+    assert "climate film" in source
+    mean, sd, source = roof_film_prior(dataclasses.replace(five_zone, weather_file=None))
+    assert (mean, sd) == (25.0, 12.0) and "no climate film" in source
+    own = ParameterSet(["a"], extra=("gamma_roof",))
+    pri = building_priors(own, small_office, positive="log")
+    assert pri["gamma_roof"].log and pri["gamma_roof"].mean == pytest.approx(want, rel=1e-12)
+    assert list(pri) == own.param_names
+    assert "gamma_roof" not in building_priors(ParameterSet(["a"]), small_office)

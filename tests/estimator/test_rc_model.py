@@ -883,8 +883,60 @@ def test_roofs_keep_their_own_known_exterior_with_roof_exterior_idf(five_zone):
                                                                             rel=1e-9)
     np.testing.assert_allclose(heat("absorptance", 10.0, 0.3)[:, ta], heat("fitted", 10.0, 0.3)[:, ta])
     with pytest.raises(ModelDefinitionError,
-                       match="roof_exterior must be 'fitted', 'idf', 'absorptance' or 'climate'"):
+                       match="roof_exterior must be one of 'fitted', 'idf', 'absorptance', "
+                             "'climate', 'own'"):
         ModelOptions(roof_exterior="known")
+
+
+def test_roofs_get_their_own_fitted_film_with_roof_exterior_own(five_zone, tmp_path):
+    """``roof_exterior="own"``: the roof's film is an eighth matrix parameter, gamma_roof,
+    and gamma_EW is the walls' alone; absorptance as with "absorptance". The parameter set
+    names it after the seven and before the c_IG; a model file keeps it; a vector of the
+    wrong length is refused; a building without roofs has no such parameter."""
+    import dataclasses
+
+    from zonecast.estimator.artifact import load_structure, save_structure
+    from zonecast.estimator.rc.parameters import ParameterSet
+
+    outdoors = [s for s in five_zone.surfaces.values() if s.boundary == "Outdoors"]
+    roof_area = sum(s.area for s in outdoors if s.surface_type == "Roof")
+    walls = sum(s.area for s in outdoors if s.surface_type != "Roof"
+                and not five_zone.constructions[s.construction].is_window)
+    ta, sol_h = DISTURBANCES.index("Ta"), DISTURBANCES.index("solH")
+    opts = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
+                        return_air="none", roof_exterior="own")
+    m = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, options=opts)
+    assert m.structure.extra_params == ("gamma_roof",) and len(m.structure.A_p) == 8
+    assert m.params.param_names[7] == "gamma_roof" and m.params.n_physical == 8
+    assert m.params.param_names[8:] == [f"c_IG[{z}]" for z in FIVE_ZONES]
+
+    def heat(**values):
+        mm = m.with_params(values)
+        return mm.Bv * mm.structure.capacity[:, None]
+
+    base = heat(gamma_EW=10.0, gamma_roof=10.0)
+    d_ew = heat(gamma_EW=30.0, gamma_roof=10.0)[:, ta].sum() - base[:, ta].sum()
+    d_roof = heat(gamma_EW=10.0, gamma_roof=30.0)[:, ta].sum() - base[:, ta].sum()
+    assert d_ew == pytest.approx(20.0 * walls, rel=1e-9)
+    assert d_roof == pytest.approx(20.0 * roof_area, rel=1e-9)
+    absorp = build_model(five_zone, FIVE_ZONES, FIVE_BOXES,
+                         options=dataclasses.replace(opts, roof_exterior="absorptance"))
+    assert base[:, sol_h].sum() == pytest.approx(
+        (absorp.Bv * absorp.structure.capacity[:, None])[:, sol_h].sum(), rel=1e-12)
+    # with gamma_roof = gamma_EW the matrices are those of "absorptance"
+    same = m.with_params({"gamma_EW": 17.0, "gamma_roof": 17.0})
+    np.testing.assert_allclose(same.A, absorp.with_params({"gamma_EW": 17.0}).A,
+                               rtol=1e-12, atol=1e-18)
+    with pytest.raises(ValueError, match="8 matrix parameters .*gamma_roof"):
+        m.structure.A(np.ones(7))
+    with pytest.raises(ValueError, match="unknown extra parameters"):
+        ParameterSet(list(FIVE_ZONES), extra=("gamma_attic",))
+    path = save_structure(tmp_path / "s.npz", m.structure, {})
+    assert load_structure(path)[0].extra_params == ("gamma_roof",)
+    no_roof = dataclasses.replace(five_zone, surfaces={
+        n: s for n, s in five_zone.surfaces.items() if s.surface_type != "Roof"})
+    flat = build_model(no_roof, FIVE_ZONES, FIVE_BOXES, options=opts)
+    assert flat.structure.extra_params == () and len(flat.params.param_names) == 7 + len(FIVE_ZONES)
 
 
 def test_roofs_take_the_film_of_the_sites_wind_with_roof_exterior_climate(five_zone,

@@ -29,6 +29,7 @@ __all__ = [
     "NATURAL_DELTA_T",
     "ROUGHNESS_MULTIPLIER",
     "SIMPLE_COMBINED",
+    "climate_film_parts",
     "climate_films",
     "doe2_convection",
     "epw_wind",
@@ -165,8 +166,20 @@ def _height(vertices: np.ndarray) -> float:
 
 def climate_films(building: Building, surfaces=None,
                   weather_file: str | os.PathLike | None = None) -> dict[str, float]:
+    """The climate's mean outside film [W/(m2 K)] of each exterior face: convection and
+    long-wave to the air together, the sum of :func:`climate_film_parts`."""
+    return {n: c + r for n, (c, r) in
+            climate_film_parts(building, surfaces, weather_file).items()}
+
+
+def climate_film_parts(building: Building, surfaces=None,
+                       weather_file: str | os.PathLike | None = None
+                       ) -> dict[str, tuple[float, float]]:
     """The climate's mean outside film [W/(m2 K)] of each exterior face of ``building``
-    (``surfaces``: their names; default every opaque surface open to the outdoors).
+    (``surfaces``: their names; default every opaque surface open to the outdoors), as
+    (convection, long-wave): the long-wave part linearised at the weather file's mean air
+    temperature; ``(combined, 0.0)`` for ``SimpleCombined``, whose one coefficient holds
+    both and whose faces EnergyPlus links to the air alone (no sky exchange).
 
     Every hour of the weather file (``weather_file``, default
     :attr:`~zonecast.estimator.idf.Building.weather_file`) gives the wind at the face's
@@ -205,12 +218,11 @@ def climate_films(building: Building, surfaces=None,
         emissivity = layers[0].thermal_absorptance if layers else 0.9
         v = speed * local_wind(1.0, _height(s.vertices), building.terrain)
         if algo == "simplecombined":
-            h = simple_combined_film(v, rough)
-        else:
-            ww = windward(direction, s.azimuth, s.tilt)
-            h = (mowitt_convection(v, s.tilt, ww) if algo == "mowitt"
-                 else doe2_convection(v, rough, s.tilt, ww))
-            h = h + long_wave_film(float(np.mean(air)), emissivity)
-        films[name] = float(np.mean(h))
+            films[name] = (float(np.mean(simple_combined_film(v, rough))), 0.0)
+            continue
+        ww = windward(direction, s.azimuth, s.tilt)
+        h = (mowitt_convection(v, s.tilt, ww) if algo == "mowitt"
+             else doe2_convection(v, rough, s.tilt, ww))
+        films[name] = (float(np.mean(h)), long_wave_film(float(np.mean(air)), emissivity))
     return films
 

@@ -318,7 +318,9 @@ RoofExterior = Annotated[str, typer.Option(
          "walls' fitted gamma_EW and gamma_absorp (the paper); 'idf': a known film "
          "(25 W/m2K) as well; 'climate': the film of the site's wind climate, from the "
          "weather file and the IDF's outside convection correlation; 'own': a fitted film "
-         "of their own, gamma_roof, whose prior is that climate film (docs/model.md "
+         "of their own, gamma_roof, whose prior is that climate film; 'balance': the "
+         "climate's convection to the air and the long-wave to the sky, as EnergyPlus "
+         "balances a roof's outer face (docs/model.md "
          "\"Roofs' own exterior\")")]
 EnvelopeRadiation = Annotated[str, typer.Option(
     help="'none' (the default): each opaque envelope face exchanges with its room's air "

@@ -121,7 +121,10 @@ REGIME_CEILING = 2.0
 #: than its faces (``ModelOptions.inside_convection="regime"``)
 REGIME_RISE = 1.0
 #: ways to model a roof's outer face (``ModelOptions.roof_exterior``)
-ROOF_EXTERIORS = ("fitted", "idf", "absorptance", "climate", "own")
+ROOF_EXTERIORS = ("fitted", "idf", "absorptance", "climate", "own", "balance")
+#: the sky model of roofs with ``roof_exterior="balance"`` when ``ModelOptions.sky`` is
+#: "none": the cloud cover's sky, clear where the site has no cover reading
+BALANCE_SKY = "cloud"
 #: outside film of a roof with ``ModelOptions.roof_exterior == "idf"`` [W/(m2 K)]: the
 #: handbook's combined film, γ_EW's start and prior mean (parameters.PHYSICAL)
 ROOF_FILM = 25.0
@@ -993,17 +996,23 @@ def build_structure(
     asm = _Assembler(8 if own_roof else 7)
     notes: list[str] = []
     rotation = facade_rotation(building) if opts.facades == "building" else 0.0
-    climate: dict[str, float] = {}
-    if opts.roof_exterior == "climate":
+    climate: dict[str, tuple[float, float]] = {}
+    # the roofs' sky model: the walls' (opts.sky), or with "balance" at least the cloud's
+    roof_sky = (BALANCE_SKY if opts.roof_exterior == "balance" and opts.sky == "none"
+                else opts.sky)
+    if opts.roof_exterior in ("climate", "balance"):
         roofs = [n for n, f in building.surfaces.items()
                  if f.boundary == "Outdoors" and f.surface_type == "Roof"]
         try:
-            climate = outside_films.climate_films(building, roofs)
+            climate = outside_films.climate_film_parts(building, roofs)
         except ValueError as err:
-            raise ModelDefinitionError(f"roof_exterior='climate': {err}") from None
+            raise ModelDefinitionError(f"roof_exterior={opts.roof_exterior!r}: {err}") from None
         if climate:
-            notes.append("roofs' outside films of the site's wind climate: " + ", ".join(
-                f"{n} {h:.1f}" for n, h in climate.items()) + " W/(m2 K)")
+            notes.append("roofs' outside films of the site's wind climate (convection + "
+                         "long-wave): " + ", ".join(f"{n} {c:.1f} + {r:.1f}"
+                                                    for n, (c, r) in climate.items())
+                         + " W/(m2 K)" + ("; the long-wave's sky share to the sky"
+                                          if roof_sky != "none" else ""))
     if rotation:
         notes.append(f"facades rotated {rotation:+.1f} deg from E/S/W/N: the solar columns are "
                      "the irradiances on the building's own facades")
@@ -1101,26 +1110,35 @@ def build_structure(
             roof = s.surface_type == "Roof"
             if roof and opts.roof_exterior == "idf":  # the roof's own film, known
                 asm.to_temperature(nodes[0], 0, ROOF_FILM * s.area, -1)
-            elif roof and opts.roof_exterior == "climate":  # of the site's wind
-                asm.to_temperature(nodes[0], 0, climate[name] * s.area, -1)
+            elif roof and opts.roof_exterior in ("climate", "balance"):  # the site's wind
+                conv, lw = climate[name]
+                # with a sky model, the long-wave's sky share goes to the sky (below)
+                to_air = conv + lw * (1.0 - sky_share(s.tilt) if roof_sky != "none" else 1.0)
+                asm.to_temperature(nodes[0], 0, to_air * s.area, -1)
             elif roof and own_roof:  # the roofs' own film, fitted
                 asm.to_temperature(nodes[0], 0, s.area, ROOF)
             else:
                 asm.to_temperature(nodes[0], 0, s.area, EW)  # paper eq:q_bh, convection
-            known = roof and opts.roof_exterior in ("idf", "absorptance", "climate", "own")
+            known = roof and opts.roof_exterior in ("idf", "absorptance", "climate", "own",
+                                                    "balance")
             absorp = outer_absorptance(cons) if known else 1.0  # else gamma_absorp's
             for col, w in facade_of(s.tilt, s.azimuth, opts.roof_solar, rotation).items():
                 asm.source(nodes[0], DISTURBANCES.index(col), w * absorp * s.area,
                            -1 if known else ABSORP)
             view = sky_share(s.tilt)
-            if opts.sky != "none" and view > 1e-6:
+            h_sky, sky = SKY_RADIATION, opts.sky
+            if roof and opts.roof_exterior in ("climate", "balance"):
+                # the face's own long-wave coefficient; none for SimpleCombined, whose
+                # combined film EnergyPlus links to the air alone
+                h_sky, sky = climate[name][1], roof_sky
+            if sky != "none" and view > 1e-6 and h_sky > 0:
                 # long-wave to the sky: a scheduled input of constant "airflow"
                 # h_sky F A / c_p at the outer face whose supply is the sky temperature
                 box = f"sky:{name}"
                 ground_boxes[box] = (s.zone, nodes[0])
                 box_rooms[box] = s.zone
-                scheduled[box] = {"flow": SKY_RADIATION * view * s.area / opts.cp_air,
-                                  "supply": "sky", "sky": opts.sky}
+                scheduled[box] = {"flow": h_sky * view * s.area / opts.cp_air,
+                                  "supply": "sky", "sky": sky}
             area_ext += s.area
         else:
             nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)

@@ -884,7 +884,7 @@ def test_roofs_keep_their_own_known_exterior_with_roof_exterior_idf(five_zone):
     np.testing.assert_allclose(heat("absorptance", 10.0, 0.3)[:, ta], heat("fitted", 10.0, 0.3)[:, ta])
     with pytest.raises(ModelDefinitionError,
                        match="roof_exterior must be one of 'fitted', 'idf', 'absorptance', "
-                             "'climate', 'own'"):
+                             "'climate', 'own', 'balance'"):
         ModelOptions(roof_exterior="known")
 
 
@@ -958,7 +958,7 @@ def test_roofs_take_the_film_of_the_sites_wind_with_roof_exterior_climate(five_z
 
     def fake(building, surfaces=None, weather_file=None):
         asked.append(list(surfaces))
-        return {n: 7.0 for n in surfaces}
+        return {n: (5.0, 2.0) for n in surfaces}
 
     def outdoor_heat(mode, building=five_zone):
         opts = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
@@ -971,7 +971,7 @@ def test_roofs_take_the_film_of_the_sites_wind_with_roof_exterior_climate(five_z
     real = outside_films.climate_films(five_zone, roofs)
     assert outdoor_heat("climate") - idf == pytest.approx(
         sum((real[n] - ROOF_FILM) * five_zone.surfaces[n].area for n in roofs), rel=1e-9)
-    monkeypatch.setattr(outside_films, "climate_films", fake)
+    monkeypatch.setattr(outside_films, "climate_film_parts", fake)
     assert outdoor_heat("climate") - idf == pytest.approx((7.0 - ROOF_FILM) * roof_area,
                                                           rel=1e-9)
     assert asked == [roofs]

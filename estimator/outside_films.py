@@ -32,11 +32,13 @@ __all__ = [
     "climate_film_parts",
     "climate_films",
     "doe2_convection",
+    "epw_sun",
     "epw_wind",
     "long_wave_film",
     "mowitt_convection",
     "natural_convection",
     "simple_combined_film",
+    "sunlit_film_parts",
     "windward",
 ]
 
@@ -71,15 +73,18 @@ def _roughness(roughness: str) -> str:
     return key
 
 
-def natural_convection(tilt, delta_t: float = NATURAL_DELTA_T) -> np.ndarray:
+def natural_convection(tilt, delta_t=NATURAL_DELTA_T, flow: str = "both") -> np.ndarray:
     """Walton's natural convection coefficient [W/(m2 K)] of a face tilted ``tilt`` [deg]
     (0 facing up) at a face-to-air difference ``delta_t`` [K]: 1.31 |dT|^(1/3) on a vertical
     face; on a tilted one the mean of the unstable (heat flowing up, 9.482 |dT|^(1/3) /
     (7.238 - |cos tilt|)) and the stable (1.810 |dT|^(1/3) / (1.382 + |cos tilt|)) cases, as
-    a face of the outdoors is warmer than the air by day and colder at night."""
+    a face of the outdoors is warmer than the air by day and colder at night; ``flow="up"``:
+    the unstable case alone (a sunlit face warmer than the air). ``delta_t`` may be an
+    array (one value per hour)."""
     c = np.abs(np.cos(np.radians(np.asarray(tilt, dtype=float))))
-    cube = abs(delta_t) ** (1.0 / 3.0)
-    tilted = 0.5 * (9.482 * cube / (7.238 - c) + 1.810 * cube / (1.382 + c))
+    cube = np.abs(np.asarray(delta_t, dtype=float)) ** (1.0 / 3.0)
+    up = 9.482 * cube / (7.238 - c)
+    tilted = up if flow == "up" else 0.5 * (up + 1.810 * cube / (1.382 + c))
     return np.where(c < 1e-6, 1.31 * cube, tilted)
 
 
@@ -95,14 +100,14 @@ def windward(wind_direction, azimuth: float, tilt: float) -> np.ndarray:
 
 
 def doe2_convection(v_local, roughness: str, tilt: float, is_windward=True,
-                    delta_t: float = NATURAL_DELTA_T) -> np.ndarray:
+                    delta_t=NATURAL_DELTA_T, flow: str = "both") -> np.ndarray:
     """EnergyPlus's DOE-2 outside convection coefficient [W/(m2 K)]:
     h = h_n + R_f (sqrt(h_n^2 + (a V^b)^2) - h_n), with h_n Walton's natural convection
     (:func:`natural_convection`), R_f the roughness multiplier
     (:data:`ROUGHNESS_MULTIPLIER`) and (a, b) the windward or leeward MoWiTT constants, for
     the wind ``v_local`` [m/s] at the face."""
     v = np.maximum(np.asarray(v_local, dtype=float), 0.0)
-    hn = natural_convection(tilt, delta_t)
+    hn = natural_convection(tilt, delta_t, flow)
     ww = np.broadcast_to(np.asarray(is_windward, dtype=bool), v.shape)
     forced = np.where(ww, _FORCED[True][0] * v ** _FORCED[True][1],
                       _FORCED[False][0] * v ** _FORCED[False][1])
@@ -111,11 +116,11 @@ def doe2_convection(v_local, roughness: str, tilt: float, is_windward=True,
 
 
 def mowitt_convection(v_local, tilt: float, is_windward=True,
-                      delta_t: float = NATURAL_DELTA_T) -> np.ndarray:
+                      delta_t=NATURAL_DELTA_T, flow: str = "both") -> np.ndarray:
     """EnergyPlus's MoWiTT outside convection coefficient [W/(m2 K)]: the DOE-2 form for a
     smooth (glass) face, sqrt(h_n^2 + (a V^b)^2), with Walton's natural part."""
     v = np.maximum(np.asarray(v_local, dtype=float), 0.0)
-    hn = natural_convection(tilt, delta_t)
+    hn = natural_convection(tilt, delta_t, flow)
     ww = np.broadcast_to(np.asarray(is_windward, dtype=bool), v.shape)
     forced = np.where(ww, _FORCED[True][0] * v ** _FORCED[True][1],
                       _FORCED[False][0] * v ** _FORCED[False][1])
@@ -160,6 +165,65 @@ def epw_wind(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return s[ok], d[ok], t[ok]
 
 
+def epw_sun(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Hourly columns of an EPW weather file for a face's sunlit balance, on the rows where
+    every one is present: ``speed`` [m/s], ``direction`` [deg], ``air`` [degC] (fields 22,
+    21, 7), ``ir`` the horizontal infrared radiation from the sky [W/m2] (field 13) and
+    ``ghi`` the global horizontal irradiance [Wh/m2 over the hour] (field 14)."""
+    cols = {"air": 6, "ir": 12, "ghi": 13, "direction": 20, "speed": 21}
+    missing = {"air": 99.9, "ir": 9999.0, "ghi": 9999.0, "direction": 999.0, "speed": 999.0}
+    rows: dict[str, list[float]] = {k: [] for k in cols}
+    with open(path, encoding="latin-1") as fh:
+        for i, line in enumerate(fh):
+            if i < 8:
+                continue
+            f = line.split(",")
+            if len(f) < 22:
+                continue
+            for k, j in cols.items():
+                rows[k].append(float(f[j]))
+    if not rows["air"]:
+        raise ValueError(f"{path} has no EPW data rows: give an EPW weather file")
+    out = {k: np.asarray(v, dtype=float) for k, v in rows.items()}
+    ok = np.logical_and.reduce([out[k] < missing[k] for k in cols])
+    return {k: v[ok] for k, v in out.items()}
+
+
+def sunlit_film_parts(speed, direction, air, ir, ghi, *, tilt: float, azimuth: float,
+                      roughness: str, emissivity: float, absorptance: float,
+                      algorithm: str = "doe2", height_factor: float = 1.0,
+                      iterations: int = 4) -> tuple[float, float]:
+    """(convection, long-wave) [W/(m2 K)] of a sunlit face, weighted by the sun it absorbs:
+    each hour's films at the face's own temperature, sum_t a I_t h_t / sum_t a I_t.
+
+    The hour's face-to-air difference is the steady sol-air balance of a well insulated
+    face, dT = (a I - h_r (T_a - T_sky)) / (h_c + h_r) (iterated, as the films depend on
+    it), with the global horizontal irradiance I, the sky's temperature from the file's
+    horizontal infrared (T_sky = (IR / sigma)^(1/4)), the natural convection of heat flowing
+    up (:func:`natural_convection`, ``flow="up"``) and the linearised long-wave
+    h_r = 4 eps sigma T_m^3 at the mean of the face's and the sky's temperatures. A sunlit
+    roof runs 15-40 K above the air, so its films are larger than the climate's mean
+    (natural convection grows as dT^(1/3), long-wave as T^3): the film that carries the
+    sun's heat."""
+    w = absorptance * np.maximum(np.asarray(ghi, float), 0.0)
+    if not w.sum() > 0:
+        raise ValueError("the weather file has no sun: give an EPW with irradiance")
+    sun = w > 0
+    v = np.asarray(speed, float)[sun] * height_factor
+    ta = np.asarray(air, float)[sun] + 273.15
+    t_sky = (np.maximum(np.asarray(ir, float)[sun], 1.0) / _SIGMA) ** 0.25
+    ww = windward(np.asarray(direction, float)[sun], azimuth, tilt)
+    w = w[sun]
+    dt = np.full(len(w), NATURAL_DELTA_T)
+    for _ in range(iterations):
+        t_m = 0.5 * (ta + dt + t_sky)
+        h_r = 4.0 * emissivity * _SIGMA * t_m ** 3
+        h_c = (mowitt_convection(v, tilt, ww, dt, "up") if algorithm == "mowitt"
+               else doe2_convection(v, roughness, tilt, ww, dt, "up"))
+        dt = np.maximum((w - h_r * (ta - t_sky)) / (h_c + h_r), 0.0)
+    return float(np.sum(w * h_c) / w.sum()), float(np.sum(w * h_r) / w.sum())
+
+
 def _height(vertices: np.ndarray) -> float:
     return float(np.mean(np.asarray(vertices, dtype=float)[:, 2]))
 
@@ -173,8 +237,8 @@ def climate_films(building: Building, surfaces=None,
 
 
 def climate_film_parts(building: Building, surfaces=None,
-                       weather_file: str | os.PathLike | None = None
-                       ) -> dict[str, tuple[float, float]]:
+                       weather_file: str | os.PathLike | None = None,
+                       weight: str = "hours") -> dict[str, tuple[float, float]]:
     """The climate's mean outside film [W/(m2 K)] of each exterior face of ``building``
     (``surfaces``: their names; default every opaque surface open to the outdoors), as
     (convection, long-wave): the long-wave part linearised at the weather file's mean air
@@ -189,7 +253,8 @@ def climate_film_parts(building: Building, surfaces=None,
     default; also taken for ``TARP`` and ``AdaptiveConvectionAlgorithm``, said in the
     notes) and ``MoWiTT`` plus :func:`long_wave_film` with the outer layer's emissivity. The
     mean over the hours is the film. EnergyPlus's wet hours (rain, when it sets the
-    convection to 1000 W/(m2 K)) are not in it.
+    convection to 1000 W/(m2 K)) are not in it. ``weight="sun"``: the films that carry the
+    sun's heat instead (:func:`sunlit_film_parts`; SimpleCombined as with "hours").
 
     Raises
     ------
@@ -201,7 +266,10 @@ def climate_film_parts(building: Building, surfaces=None,
         raise ValueError("the outside films follow the site's wind, and no weather file is "
                          "known: give the site's weather_file (the EPW the building is "
                          "simulated with)")
+    if weight not in ("hours", "sun"):
+        raise ValueError(f"weight={weight!r}: use 'hours' or 'sun'")
     speed, direction, air = epw_wind(source)
+    sun = epw_sun(source) if weight == "sun" else None
     algo = str(building.outside_convection).replace("-", "").lower()
     if algo in ("tarp", "adaptiveconvectionalgorithm"):
         note = (f"outside films: {building.outside_convection}'s correlations are taken as "
@@ -219,6 +287,14 @@ def climate_film_parts(building: Building, surfaces=None,
         v = speed * local_wind(1.0, _height(s.vertices), building.terrain)
         if algo == "simplecombined":
             films[name] = (float(np.mean(simple_combined_film(v, rough))), 0.0)
+            continue
+        if sun is not None:
+            films[name] = sunlit_film_parts(
+                sun["speed"], sun["direction"], sun["air"], sun["ir"], sun["ghi"],
+                tilt=s.tilt, azimuth=s.azimuth, roughness=rough, emissivity=emissivity,
+                absorptance=layers[0].solar_absorptance if layers else 0.7,
+                algorithm="mowitt" if algo == "mowitt" else "doe2",
+                height_factor=local_wind(1.0, _height(s.vertices), building.terrain))
             continue
         ww = windward(direction, s.azimuth, s.tilt)
         h = (mowitt_convection(v, s.tilt, ww) if algo == "mowitt"

@@ -1004,7 +1004,9 @@ def build_structure(
         roofs = [n for n, f in building.surfaces.items()
                  if f.boundary == "Outdoors" and f.surface_type == "Roof"]
         try:
-            climate = outside_films.climate_film_parts(building, roofs)
+            climate = outside_films.climate_film_parts(
+                building, roofs,
+                weight="sun" if opts.roof_exterior == "balance" else "hours")
         except ValueError as err:
             raise ModelDefinitionError(f"roof_exterior={opts.roof_exterior!r}: {err}") from None
         if climate:

@@ -138,3 +138,32 @@ def test_roof_film_prior_is_the_roofs_climate_film(small_office, five_zone):
     assert pri["gamma_roof"].log and pri["gamma_roof"].mean == pytest.approx(want, rel=1e-12)
     assert list(pri) == own.param_names
     assert "gamma_roof" not in building_priors(ParameterSet(["a"]), small_office)
+
+
+def test_sunlit_films_are_the_sol_air_balance_of_each_sunny_hour():
+    """One sunny hour: the returned films satisfy the balance they were iterated to,
+    dT = (a I - h_r (T_a - T_sky)) / (h_c + h_r) with h_c DOE-2's at dT (heat flowing up)
+    and h_r = 4 eps sigma T_m^3; two hours weigh by the absorbed sun; a darker face runs
+    hotter, so its films are larger; no sun at all is an error."""
+    sigma = 5.670374419e-8
+    t_sky = 263.15
+    ir = sigma * t_sky ** 4
+    args = dict(tilt=0.0, azimuth=0.0, roughness="MediumRough", emissivity=0.9)
+    hc, hr = of.sunlit_film_parts([3.0], [180.0], [20.0], [ir], [800.0], absorptance=0.7,
+                                  iterations=30, **args)
+    dt = (0.7 * 800.0 - hr * (293.15 - t_sky)) / (hc + hr)
+    assert dt > 15.0
+    assert hc == pytest.approx(float(of.doe2_convection(3.0, "MediumRough", 0.0, True, dt,
+                                                        "up")), rel=1e-6)
+    assert hr == pytest.approx(4 * 0.9 * sigma * (0.5 * (293.15 + dt + t_sky)) ** 3, rel=1e-6)
+    dark = of.sunlit_film_parts([3.0], [180.0], [20.0], [ir], [800.0], absorptance=0.95,
+                                iterations=30, **args)
+    assert dark[0] > hc and dark[1] > hr
+    # a night hour (no sun) carries no weight; two sunny hours weigh by a I
+    two = of.sunlit_film_parts([3.0, 3.0, 3.0], [180.0] * 3, [20.0] * 3, [ir] * 3,
+                               [800.0, 0.0, 200.0], absorptance=0.7, iterations=30, **args)
+    low = of.sunlit_film_parts([3.0], [180.0], [20.0], [ir], [200.0], absorptance=0.7,
+                               iterations=30, **args)
+    assert two[0] == pytest.approx((800 * hc + 200 * low[0]) / 1000, rel=1e-9)
+    with pytest.raises(ValueError, match="no sun"):
+        of.sunlit_film_parts([3.0], [180.0], [20.0], [ir], [0.0], absorptance=0.7, **args)

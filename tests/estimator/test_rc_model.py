@@ -956,8 +956,9 @@ def test_roofs_take_the_film_of_the_sites_wind_with_roof_exterior_climate(five_z
     ta = DISTURBANCES.index("Ta")
     asked = []
 
-    def fake(building, surfaces=None, weather_file=None):
+    def fake(building, surfaces=None, weather_file=None, weight="hours"):
         asked.append(list(surfaces))
+        assert weight == "hours"
         return {n: (5.0, 2.0) for n in surfaces}
 
     def outdoor_heat(mode, building=five_zone):
@@ -978,6 +979,53 @@ def test_roofs_take_the_film_of_the_sites_wind_with_roof_exterior_climate(five_z
     monkeypatch.undo()
     with pytest.raises(ModelDefinitionError, match="give the site's weather_file"):
         outdoor_heat("climate", dataclasses.replace(five_zone, weather_file=None))
+
+
+def test_roof_exterior_balance_sends_the_long_wave_to_the_sky(small_office, five_zone):
+    """``roof_exterior="balance"``: a roof's outer face convects to the air with the
+    climate's convection and exchanges long-wave with the sky (a scheduled input at its
+    outer face, the cloud cover's sky when ``sky`` is "none", else the walls' sky model)
+    for its sky share and with the air for the rest; the walls keep gamma_EW and have no
+    sky input. A SimpleCombined roof (the 5-zone's) has no long-wave part of its own:
+    EnergyPlus links it to the air alone, so "balance" is "climate" there."""
+    from zonecast.estimator import outside_films
+    from zonecast.estimator.rc.network import CP_AIR, sky_share
+
+    zones = {z: [z] for z in small_office.zones if z != "Attic"}
+    boxes = {f"PSZ {z}": z for z in zones}
+    roofs = [n for n, f in small_office.surfaces.items()
+             if f.boundary == "Outdoors" and f.surface_type == "Roof"]
+    parts = outside_films.climate_film_parts(small_office, roofs, weight="sun")
+    ta = DISTURBANCES.index("Ta")
+
+    def build(mode, sky="none"):
+        return build_model(small_office, zones, boxes, options=dataclasses.replace(
+            NO_LEAK, roof_exterior=mode, sky=sky)).structure
+
+    st = build("balance")
+    assert sorted(k for k in st.scheduled if k.startswith("sky:")) == sorted(
+        f"sky:{n}" for n in roofs)
+    for n in roofs:
+        f = small_office.surfaces[n]
+        conv, lw = parts[n]
+        assert conv > 0 and lw > 3.0
+        view = sky_share(f.tilt)
+        spec = st.scheduled[f"sky:{n}"]
+        assert spec["sky"] == "cloud" and spec["supply"] == "sky"
+        assert spec["flow"] == pytest.approx(lw * view * f.area / CP_AIR, rel=1e-12)
+        node = next(i for i, lab in enumerate(st.labels) if lab.element == n and lab.layer == 0)
+        assert (st.Bv0[node, ta] * st.capacity[node]
+                == pytest.approx((conv + lw * (1 - view)) * f.area, rel=1e-9))
+    assert build("balance", sky="clear").scheduled[f"sky:{roofs[0]}"]["sky"] == "clear"
+    climate = build("climate")  # no sky model: the whole long-wave to the air, no sky input
+    assert not [k for k in climate.scheduled if k.startswith("sky:")]
+    opts = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
+                        return_air="none")
+    a = build_model(five_zone, FIVE_ZONES, FIVE_BOXES,
+                    options=dataclasses.replace(opts, roof_exterior="balance")).structure
+    b = build_model(five_zone, FIVE_ZONES, FIVE_BOXES,
+                    options=dataclasses.replace(opts, roof_exterior="climate")).structure
+    assert a.scheduled == b.scheduled and (a.Bv0 != b.Bv0).nnz == 0
 
 
 def test_envelope_faces_draw_long_wave_heat_from_their_rooms(five_zone):

@@ -148,7 +148,7 @@ def test_sunlit_films_are_the_sol_air_balance_of_each_sunny_hour():
     sigma = 5.670374419e-8
     t_sky = 263.15
     ir = sigma * t_sky ** 4
-    args = dict(tilt=0.0, azimuth=0.0, roughness="MediumRough", emissivity=0.9)
+    args = {"tilt": 0.0, "azimuth": 0.0, "roughness": "MediumRough", "emissivity": 0.9}
     hc, hr = of.sunlit_film_parts([3.0], [180.0], [20.0], [ir], [800.0], absorptance=0.7,
                                   iterations=30, **args)
     dt = (0.7 * 800.0 - hr * (293.15 - t_sky)) / (hc + hr)

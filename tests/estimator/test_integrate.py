@@ -206,3 +206,15 @@ def test_ladder_keeps_a_scheduled_input_on_its_own_bound():
     assert lad.level(np.r_[u[:-1], 50.0]) == plain.level(np.array([50.0]))
     with pytest.raises(ValueError, match="one bound >= 0"):
         StepperLadder(A, rooms, bxu, 900.0, cap, u_base=0.5, fixed=np.zeros(2))
+
+
+def test_compile_kernels_compiles_every_kernel_with_the_estimators_types():
+    """``make venv`` compiles the kernels once (numba's cache): after compile_kernels every
+    kernel has exactly the one signature the estimator's calls give it."""
+    from zonecast.estimator import integrate
+
+    assert integrate.compile_kernels() == 6
+    for name in integrate._KERNELS:
+        kernel = getattr(integrate, name)
+        if hasattr(kernel, "signatures"):  # numba present (the pure-Python fallback has none)
+            assert len(kernel.signatures) == 1, name

@@ -210,11 +210,13 @@ def test_ladder_keeps_a_scheduled_input_on_its_own_bound():
 
 def test_compile_kernels_compiles_every_kernel_with_the_estimators_types():
     """``make venv`` compiles the kernels once (numba's cache): after compile_kernels every
-    kernel has exactly the one signature the estimator's calls give it."""
+    kernel called from Python has exactly the one signature the estimator's calls give it
+    (``_return_terms`` is called only from inside the others: loaded from the cache, its
+    own dispatcher never compiles)."""
     from zonecast.estimator import integrate
 
     assert integrate.compile_kernels() == 6
-    for name in integrate._KERNELS:
+    for name in integrate._KERNELS[1:]:
         kernel = getattr(integrate, name)
         if hasattr(kernel, "signatures"):  # numba present (the pure-Python fallback has none)
             assert len(kernel.signatures) == 1, name

@@ -130,8 +130,8 @@ def test_window_angle_reaches_the_model_options(tmp_path, command):
     for option, value, message in (
             ("--window-angle", "tinted", "window_angle must be 'none' or 'glass'"),
             ("--roof-exterior", "known",
-             "roof_exterior must be one of 'fitted', 'idf', 'absorptance', 'climate', "
-             "'own', 'balance'"),
+             ("roof_exterior must be one of 'fitted', 'idf', 'absorptance', 'climate', "
+              "'own', 'balance'")),
             ("--envelope-radiation", "star", "envelope_radiation must be 'none' or 'room'"),
             ("--solar-enclosure", "zone", "solar_enclosure must be 'room' or 'air_boundaries'")):
         res = runner.invoke(app, [*args, option, value])

@@ -143,10 +143,17 @@ def long_wave_film(mean_air_temperature: float, emissivity: float = 0.9) -> floa
     return float(4.0 * emissivity * _SIGMA * t ** 3)
 
 
-def epw_wind(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Hourly wind speed [m/s], wind direction [deg] and dry-bulb temperature [degC] of an
-    EPW weather file (fields 22, 21 and 7 of its data rows)."""
-    speed, direction, air = [], [], []
+#: EPW data fields (0-based) and their missing-value codes: dry-bulb [degC], horizontal
+#: infrared from the sky [W/m2], global horizontal irradiance [Wh/m2], wind direction
+#: [deg] and speed [m/s] (EnergyPlus Auxiliary Programs, "Weather Converter")
+_EPW_FIELDS = {"air": (6, 99.9), "ir": (12, 9999.0), "ghi": (13, 9999.0),
+               "direction": (20, 999.0), "speed": (21, 999.0)}
+
+
+def _epw_columns(path: str | os.PathLike, names) -> dict[str, np.ndarray]:
+    """The named :data:`_EPW_FIELDS` of an EPW file's data rows, on the rows where every
+    one of them is present."""
+    rows: dict[str, list[float]] = {k: [] for k in names}
     with open(path, encoding="latin-1") as fh:
         for i, line in enumerate(fh):
             if i < 8:
@@ -154,15 +161,20 @@ def epw_wind(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarra
             f = line.split(",")
             if len(f) < 22:
                 continue
-            air.append(float(f[6]))
-            direction.append(float(f[20]))
-            speed.append(float(f[21]))
-    if not speed:
+            for k in names:
+                rows[k].append(float(f[_EPW_FIELDS[k][0]]))
+    if not rows[names[0]]:
         raise ValueError(f"{path} has no EPW data rows: give an EPW weather file")
-    # EPW missing-value codes: 999 for speed and direction, 99.9 for the temperature
-    s, d, t = (np.asarray(x, dtype=float) for x in (speed, direction, air))
-    ok = (s < 999) & (d < 999) & (t < 99.9)
-    return s[ok], d[ok], t[ok]
+    out = {k: np.asarray(v, dtype=float) for k, v in rows.items()}
+    ok = np.logical_and.reduce([out[k] < _EPW_FIELDS[k][1] for k in names])
+    return {k: v[ok] for k, v in out.items()}
+
+
+def epw_wind(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Hourly wind speed [m/s], wind direction [deg] and dry-bulb temperature [degC] of an
+    EPW weather file (fields 22, 21 and 7 of its data rows)."""
+    c = _epw_columns(path, ("speed", "direction", "air"))
+    return c["speed"], c["direction"], c["air"]
 
 
 def epw_sun(path: str | os.PathLike) -> dict[str, np.ndarray]:
@@ -170,23 +182,7 @@ def epw_sun(path: str | os.PathLike) -> dict[str, np.ndarray]:
     every one is present: ``speed`` [m/s], ``direction`` [deg], ``air`` [degC] (fields 22,
     21, 7), ``ir`` the horizontal infrared radiation from the sky [W/m2] (field 13) and
     ``ghi`` the global horizontal irradiance [Wh/m2 over the hour] (field 14)."""
-    cols = {"air": 6, "ir": 12, "ghi": 13, "direction": 20, "speed": 21}
-    missing = {"air": 99.9, "ir": 9999.0, "ghi": 9999.0, "direction": 999.0, "speed": 999.0}
-    rows: dict[str, list[float]] = {k: [] for k in cols}
-    with open(path, encoding="latin-1") as fh:
-        for i, line in enumerate(fh):
-            if i < 8:
-                continue
-            f = line.split(",")
-            if len(f) < 22:
-                continue
-            for k, j in cols.items():
-                rows[k].append(float(f[j]))
-    if not rows["air"]:
-        raise ValueError(f"{path} has no EPW data rows: give an EPW weather file")
-    out = {k: np.asarray(v, dtype=float) for k, v in rows.items()}
-    ok = np.logical_and.reduce([out[k] < missing[k] for k in cols])
-    return {k: v[ok] for k, v in out.items()}
+    return _epw_columns(path, ("air", "ir", "ghi", "direction", "speed"))
 
 
 def sunlit_film_parts(speed, direction, air, ir, ghi, *, tilt: float, azimuth: float,

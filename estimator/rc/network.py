@@ -334,7 +334,7 @@ class ModelOptions:
         which EnergyPlus makes one solar and radiant enclosure (with
         ``internal_gains="idf"`` the gains' radiant share too); a building without air
         boundaries is unchanged (docs/model.md "Air boundaries").
-    roof_exterior : {"fitted", "idf", "absorptance", "climate", "own"}
+    roof_exterior : {"fitted", "idf", "absorptance", "climate", "own", "balance"}
         The outer faces of roofs (surfaces of type Roof open to the outdoors): with
         the IDF's solar absorptance of the roof's outer material (EnergyPlus's 0.7 where
         it gives none) and the fitted γ_EW (``"absorptance"``, the default since
@@ -348,8 +348,13 @@ class ModelOptions:
         with a film of their own, fitted: ``"own"`` adds the matrix parameter ``gamma_roof``
         (:data:`ROOF`; its prior is the roofs' climate film,
         :func:`~zonecast.estimator.priors.building_priors`) when the building has a roof open
-        to the outdoors. Otherwise no parameter is added; the walls keep γ_EW and γ_absorp
-        (docs/model.md "Roofs' own exterior").
+        to the outdoors; or as EnergyPlus balances a roof's outer face (``"balance"``:
+        known convection to the air and long-wave to the sky for its sky share, the sky of
+        ``sky`` or else :data:`BALANCE_SKY`, both with the films that carry the sun's heat,
+        :func:`~zonecast.estimator.outside_films.sunlit_film_parts`; measured, not
+        adopted). With ``"climate"`` and a ``sky`` model the climate film's long-wave sky
+        share goes to the sky. Only ``"own"`` adds a parameter; the walls keep γ_EW and
+        γ_absorp (docs/model.md "Roofs' own exterior").
     internal_gains : {"air", "idf"}
         Where a room's internal heat a_floor (c_IG + f_IG) goes (paper eq:q_ig): all on the
         room air (the paper), or split as the IDF's People, Lights and equipment objects

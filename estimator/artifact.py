@@ -277,7 +277,7 @@ def _noise(doc: dict, path: Path) -> NoiseSettings:
 _OPTION_KEYS = ("window_solar", "floor_share", "roof_solar", "infiltration", "facades", "ground",
                 "shading", "return_air", "sky", "interior_radiation", "internal_gains",
                 "window_angle", "roof_exterior", "envelope_radiation", "solar_enclosure",
-                "adiabatic", "layers", "internal_mass", "inside_convection")
+                "adiabatic", "layers", "internal_mass", "inside_convection", "roof_inside")
 #: what a model file without an option was built with (options added later)
 _LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal", "ground": "adiabatic",
                     "shading": "none", "return_air": "none", "roof_solar": "mean",
@@ -285,7 +285,8 @@ _LEGACY_DEFAULTS = {"infiltration": "none", "facades": "cardinal", "ground": "ad
                     "window_angle": "none", "roof_exterior": "fitted",
                     "envelope_radiation": "none", "solar_enclosure": "room",
                     "adiabatic": "zero_flux", "layers": "lumped",
-                    "internal_mass": "both_faces", "inside_convection": "constant"}
+                    "internal_mass": "both_faces", "inside_convection": "constant",
+                    "roof_inside": "fitted"}
 #: what a model file without ``model_options`` was built with (files written before the
 #: key existed put window solar on the room air, the paper's placement)
 LEGACY_OPTIONS = {"window_solar": "air"}

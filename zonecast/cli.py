@@ -354,6 +354,11 @@ InsideConvection = Annotated[str, typer.Option(
          "(switched while a room's boxes reheat: floor film x0.5, ceiling film x2, Walton's "
          "stable/unstable ratio, no parameter; offline only, not the service; "
          "docs/model.md \"Inside convection regimes\")")]
+RoofInside = Annotated[str, typer.Option(
+    help="the inside film of roofs: 'fitted' (the default, the paper's ceiling film "
+         "gamma_ceil) or 'known' (natural convection for the IDF's inside algorithm, "
+         "1.1 W/m2K for TARP; with --interior-radiation star; docs/model.md "
+         "\"Roofs' inside film\")")]
 WindowSolar = Annotated[str, typer.Option(
     help="where solar heat through windows goes: 'surfaces' (a quarter on the floors, the rest "
          "on walls, ceilings and furniture by area, as EnergyPlus distributes transmitted "
@@ -446,6 +451,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                  layers: Layers = ModelOptions.layers,
                  internal_mass: InternalMass = ModelOptions.internal_mass,
                  inside_convection: InsideConvection = ModelOptions.inside_convection,
+                 roof_inside: RoofInside = ModelOptions.roof_inside,
                  films: Films = None,
                  positive_priors: PositivePriors = "log",
                  operating_films: OperatingFilms = OPERATING_FILMS_MODE,
@@ -486,6 +492,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  solar_enclosure=solar_enclosure, adiabatic=adiabatic,
                                  layers=layers, internal_mass=internal_mass,
                                  inside_convection=inside_convection,
+                                 roof_inside=roof_inside,
                                  x0_profile_days=x0_profile_days,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  positive_priors=positive_priors,
@@ -615,6 +622,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                   layers: Layers = ModelOptions.layers,
                   internal_mass: InternalMass = ModelOptions.internal_mass,
                   inside_convection: InsideConvection = ModelOptions.inside_convection,
+                  roof_inside: RoofInside = ModelOptions.roof_inside,
                   films: Films = None,
                   positive_priors: PositivePriors = "log",
                   operating_films: OperatingFilms = OPERATING_FILMS_MODE,
@@ -649,6 +657,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 solar_enclosure=solar_enclosure, adiabatic=adiabatic,
                                  layers=layers, internal_mass=internal_mass,
                                  inside_convection=inside_convection,
+                                 roof_inside=roof_inside,
                                 x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd, positive_priors=positive_priors,
                                 operating_films=operating_films, reheat_leak=reheat_leak)

@@ -122,6 +122,8 @@ REGIME_CEILING = 2.0
 REGIME_RISE = 1.0
 #: ways to model a roof's outer face (``ModelOptions.roof_exterior``)
 ROOF_EXTERIORS = ("fitted", "idf", "absorptance", "climate", "own", "balance")
+#: ways to model a roof's inner face (``ModelOptions.roof_inside``)
+ROOF_INSIDES = ("fitted", "known")
 #: the sky model of roofs with ``roof_exterior="balance"`` when ``ModelOptions.sky`` is
 #: "none": the cloud cover's sky, clear where the site has no cover reading
 BALANCE_SKY = "cloud"
@@ -385,8 +387,17 @@ class ModelOptions:
     layers: str = "admittance_but_facades"
     internal_mass: str = "one_face"
     inside_convection: str = "constant"
+    roof_inside: str = "fitted"
 
     def __post_init__(self):
+        if self.roof_inside not in ROOF_INSIDES:
+            raise ModelDefinitionError("roof_inside must be one of "
+                                       + ", ".join(map(repr, ROOF_INSIDES)))
+        if self.roof_inside == "known" and self.interior_radiation != "star":
+            raise ModelDefinitionError(
+                "roof_inside='known' gives the roofs' inner faces a convective film, which "
+                "leaves their long-wave exchange to interior_radiation='star'; use the star "
+                "or roof_inside='fitted'")
         if self.inside_convection not in ("constant", "regime"):
             raise ModelDefinitionError("inside_convection must be 'constant' or 'regime'")
         if self.internal_mass not in ("both_faces", "one_face"):
@@ -796,15 +807,21 @@ def _add_element(
     area: float,
     inside_room: str,
     inside_gamma: int,
+    inside_film: float | None = None,
 ) -> list[int]:
-    """Element nodes with conduction links; the inside face convects to its room."""
+    """Element nodes with conduction links; the inside face convects to its room with the
+    fitted film ``inside_gamma`` (a parameter index) or, given, the known ``inside_film``
+    [W/(m2 K)]."""
     nodes = [
         asm.add_state(StateLabel(kind, inside_room, name, k), layout.capacities[k] * area)
         for k in range(layout.n)
     ]
     for k, r in enumerate(layout.resistances):
         asm.link(nodes[k], nodes[k + 1], area / r)
-    asm.link(nodes[-1], room_state[inside_room], area, inside_gamma)
+    if inside_film is None:
+        asm.link(nodes[-1], room_state[inside_room], area, inside_gamma)
+    else:
+        asm.link(nodes[-1], room_state[inside_room], inside_film * area, -1)
     return nodes
 
 
@@ -1020,6 +1037,11 @@ def build_structure(
                                                     for n, (c, r) in climate.items())
                          + " W/(m2 K)" + ("; the long-wave's sky share to the sky"
                                           if roof_sky != "none" else ""))
+    roof_film = None  # the roofs' known inside film (roof_inside="known")
+    if opts.roof_inside == "known":
+        from zonecast.estimator.priors import convective_films  # priors imports this module
+        roof_film, _, source = convective_films(building)["gamma_ceil"]
+        notes.append(f"roofs' inside film known, {roof_film:.2f} W/(m2 K): {source}")
     if rotation:
         notes.append(f"facades rotated {rotation:+.1f} deg from E/S/W/N: the solar columns are "
                      "the irradiances on the building's own facades")
@@ -1111,7 +1133,9 @@ def build_structure(
             face(s, s.zone, nodes[-1])
             other_faces.setdefault(other_zone, []).append((nodes[0], s.area))  # mirrored face
         elif s.boundary == "Outdoors":
-            nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g)
+            film = roof_film if s.surface_type == "Roof" else None
+            nodes = _add_element(asm, kind, name, room_state, layout, s.area, s.zone, inside_g,
+                                 film)
             face(s, s.zone, nodes[-1])
             envelope.append((s.zone, nodes[-1], s.area))
             roof = s.surface_type == "Roof"

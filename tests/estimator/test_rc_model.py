@@ -888,6 +888,49 @@ def test_roofs_keep_their_own_known_exterior_with_roof_exterior_idf(five_zone):
         ModelOptions(roof_exterior="known")
 
 
+def test_roof_inside_known_holds_the_roofs_inside_film_and_leaves_gamma_ceil_the_ceilings(
+        five_zone):
+    """``roof_inside="known"``: the inner face of a roof open to the outdoors (the 5-zone's,
+    over its plenum) convects to its room with the convective film of the file's inside
+    algorithm, whatever gamma_ceil; the ceilings between the spaces and the plenum keep
+    gamma_ceil. "fitted" (the default) puts gamma_ceil on the roof too. It needs the star,
+    which carries the face's long-wave exchange."""
+    from zonecast.estimator.priors import convective_films
+
+    film = convective_films(five_zone)["gamma_ceil"][0]
+
+    def build(mode, gamma_ceil):
+        m = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, options=dataclasses.replace(
+            NO_LEAK, roof_inside=mode)).with_params({"gamma_ceil": gamma_ceil})
+        st = m.structure
+        roof = [i for i, lab in enumerate(st.labels) if lab.kind == "roof"]
+        ceil = [i for i, lab in enumerate(st.labels) if lab.kind == "floor_ceiling"]
+        # heat [W/K] each face sends to its room air per kelvin, from the continuous A
+        conductance = (m.structure.A(m.params.physical).toarray()
+                       * st.capacity[:, None])
+        rooms = [i for i, lab in enumerate(st.labels) if "air" in lab.kind]
+        return conductance[np.ix_(roof, rooms)].sum(), conductance[np.ix_(ceil, rooms)].sum()
+
+    roof_area = sum(s.area for s in five_zone.surfaces.values()
+                    if s.boundary == "Outdoors" and s.surface_type == "Roof")
+    known_lo, known_hi = build("known", 2.0), build("known", 20.0)
+    # the roof's inner face: the known film, whatever gamma_ceil (the outer face's film to
+    # the plenum air is zero: the plenum air meets only the inner face)
+    assert known_lo[0] == pytest.approx(film * roof_area, rel=1e-9)
+    assert known_hi[0] == pytest.approx(film * roof_area, rel=1e-9)
+    assert known_hi[1] > known_lo[1] > 0  # the ceilings below the plenum: gamma_ceil
+    fitted_lo, fitted_hi = build("fitted", 2.0), build("fitted", 20.0)
+    assert fitted_hi[0] == pytest.approx(20.0 * roof_area, rel=1e-9)
+    assert fitted_lo[0] == pytest.approx(2.0 * roof_area, rel=1e-9)
+    assert (fitted_lo[1], fitted_hi[1]) == (pytest.approx(known_lo[1], rel=1e-9),
+                                            pytest.approx(known_hi[1], rel=1e-9))
+    with pytest.raises(ModelDefinitionError, match="roof_inside must be one of 'fitted', "
+                                                   "'known'"):
+        ModelOptions(roof_inside="idf")
+    with pytest.raises(ModelDefinitionError, match="use the star or roof_inside='fitted'"):
+        ModelOptions(roof_inside="known", interior_radiation="none")
+
+
 def test_roofs_get_their_own_fitted_film_with_roof_exterior_own(five_zone, tmp_path):
     """``roof_exterior="own"``: the roof's film is an eighth matrix parameter, gamma_roof,
     and gamma_EW is the walls' alone; absorptance as with "absorptance". The parameter set

@@ -91,6 +91,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   solar_enclosure: str = ModelOptions.solar_enclosure, adiabatic: str = ModelOptions.adiabatic,
                   layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
         inside_convection: str = ModelOptions.inside_convection,
+                  roof_inside: str = ModelOptions.roof_inside,
                   progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
                   x0_offset_sd: float | None = None,
@@ -103,7 +104,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
     ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``,
-    ``internal_mass``, ``inside_convection``: as
+    ``internal_mass``, ``inside_convection``, ``roof_inside``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``,
     ``positive_priors``: as :meth:`~zonecast.estimator.pipeline.Pipeline.identify`;
@@ -126,7 +127,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                                                          adiabatic=adiabatic,
                                                          layers=layers,
                                                          internal_mass=internal_mass,
-                                                   inside_convection=inside_convection))
+                                                   inside_convection=inside_convection,
+                                                   roof_inside=roof_inside))
     d = pipe.data(data)
     res = pipe.identify(d, train, validate, n_starts=starts, seed=seed, priors=priors,
                         sigma_e=sigma_e, window=window, weekend_gains=weekend_gains,

@@ -503,6 +503,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         solar_enclosure: str = ModelOptions.solar_enclosure, adiabatic: str = ModelOptions.adiabatic,
         layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
         inside_convection: str = ModelOptions.inside_convection,
+        roof_inside: str = ModelOptions.roof_inside,
         positive_priors: str = "log", operating_films: str = OPERATING_FILMS_MODE,
         reheat_leak: str = REHEAT_LEAK) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
@@ -514,8 +515,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     ``x0_offset_sd``, ``day_scale_sd``: as :meth:`Pipeline.identify`;
     ``infiltration``, ``ground``, ``shading``, ``return_air``, ``roof_solar``, ``sky``,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
-    ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``, ``internal_mass``, ``inside_convection``:
-    :class:`~zonecast.estimator.rc.network.ModelOptions`;
+    ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``, ``internal_mass``, ``inside_convection``,
+    ``roof_inside``: :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``reheat_leak``: as ``zonecast identify`` (:meth:`Pipeline.fit_reheat_leak` on the
     training weeks of the gains split);
     ``films``, ``positive_priors``: as :meth:`Pipeline.identify`; ``operating_films``:
@@ -546,7 +547,8 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                                                    solar_enclosure=solar_enclosure,
                                                    adiabatic=adiabatic, layers=layers,
                                                    internal_mass=internal_mass,
-                                                   inside_convection=inside_convection))
+                                                   inside_convection=inside_convection,
+                                                   roof_inside=roof_inside))
     site = pipe.site
     data = pipe.data(campaign / "telemetry.csv")
     t = time.perf_counter()

@@ -105,7 +105,8 @@ def compare(campaign: Path, wide: pd.DataFrame, model_file: Path) -> None:
             hour = stamp.hour
             day = (hour >= 10) & (hour < 16)
 
-            def face(var: str, k: int) -> tuple[np.ndarray, np.ndarray]:
+            def face(var: str, k: int, stamp=stamp, sim=sim, n=n
+                     ) -> tuple[np.ndarray, np.ndarray]:
                 ep = sum(roofs[r] * w15[f"{r.upper()}|{var}"].reindex(stamp).to_numpy()
                          for r in roofs) / sum(roofs.values())
                 mod = sum(roofs[r] * sim.x[:n, node[r][k]] for r in roofs) / sum(roofs.values())

@@ -245,8 +245,10 @@ def weekend_metered_ratio(data: ModelData) -> float | None:
     return weekends / working
 
 
-def weekend_metered_gains(data: ModelData, zone_area) -> np.ndarray:
-    """(N, n_zones) [W/m2]: on Saturday and Sunday rows, each zone's metered electric power
+def weekend_metered_gains(data: ModelData, zone_area, *, every_day: bool = False
+                          ) -> np.ndarray:
+    """(N, n_zones) [W/m2]: on Saturday and Sunday rows (``every_day``: on every row), each
+    zone's metered electric power
     of lights and plug loads (``data.power``) above its base load, per m2 of the zone's
     floor (``zone_area`` [m2], zones in ``data.zones`` order); 0 on working days, for zones
     without a meter and on rows where a zone's meters left it unknown (a gap longer than
@@ -262,12 +264,13 @@ def weekend_metered_gains(data: ModelData, zone_area) -> np.ndarray:
     night = weekend & np.asarray((local.hour >= METERED_BASE_HOURS[0])
                                  & (local.hour < METERED_BASE_HOURS[1]))
     area = np.asarray(zone_area, float)
+    rows = np.ones(len(data.times), bool) if every_day else weekend
     for j in range(len(data.zones)):
         p = data.power[:, j]
         base = p[night & np.isfinite(p)]
         if not len(base) or not area[j] > 0:
             continue
-        ok = weekend & np.isfinite(p)
+        ok = rows & np.isfinite(p)
         out[ok, j] = np.maximum(p[ok] - np.median(base), 0.0) / area[j]
     return out
 
@@ -437,7 +440,8 @@ class Pipeline:
                  x0_offset_sd: float | None = None,
                  day_scale_sd: float | None = None,
                  positive_priors: str = "log",
-                 operating_films: str = "none") -> IdentificationResult:
+                 operating_films: str = "none",
+                 x0_meters: bool = False) -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -509,6 +513,14 @@ class Pipeline:
         weekends keep the mode's own gains); :attr:`x0_gains` keeps them for
         :func:`~.identify.weekend_simulations`.
 
+        ``x0_meters`` (an option, default off): the x(0) filter before each weekend knows
+        each zone's metered lights and plug loads above their base, on every day
+        (:func:`weekend_metered_gains` with ``every_day``): the working day before a
+        weekend heats the rooms' faces, which a filter with f_IG = 0 leaves about a kelvin
+        too cold (docs/identification.md "The x(0) filter's bias in the slow states").
+        Needs the site's ``points.power``; kept in :attr:`x0_gains` as
+        ``x0_profile_days``'s profile is (not both).
+
         ``day_scale_sd`` (an option, default off; with ``"daytime"``): each training
         weekend day also fits its own deviation of every zone's daytime scale, prior 0 ±
         this value (:func:`~.identify.identify`): a building whose people come in on some
@@ -564,6 +576,15 @@ class Pipeline:
                                      positive=positive_priors)
         # the identification sees the reheat as measured (fit_reheat_leak comes after it)
         self.reheat_scale, self.reheat_leak, self.reheat_from_faces = None, None, False
+        metered_x0 = None
+        if x0_meters:
+            if x0_profile_days is not None:
+                raise PipelineError("x0_meters and x0_profile_days both tell the x(0) filter "
+                                    "the working days' gains; choose one")
+            self._need_meters(data)
+            metered_x0 = weekend_metered_gains(data, self.zone_floor_areas(), every_day=True)
+            # the working days' only: the weekends' gains are the weekend mode's
+            metered_x0[np.asarray(data.local_times().day_of_week >= 5)] = 0.0
         res = identify(self.model(start), data, train, validation, n_starts=n_starts,
                        seed=seed, progress=progress, priors=priors or None, sigma_e=sigma_e,
                        window=window, agree_rtol=agree_rtol, x0_offset_sd=x0_offset_sd,
@@ -572,7 +593,7 @@ class Pipeline:
                        start=start.values if convective or own_roof else None,
                        f_ig=self.weekend_known_gains(data, weekend_gains),
                        gain_shape=self.weekend_shape(data, weekend_gains),
-                       shape_prior=self._shape_prior(weekend_gains))
+                       shape_prior=self._shape_prior(weekend_gains), x0_gains=metered_x0)
         if weekend_gains in ("known", "scaled"):
             self.params = res.model.params
             progress("weekly internal-gains profile for the weekends' gains")
@@ -582,8 +603,9 @@ class Pipeline:
                 res = identify(self.model(res.model.params), data, train, validation,
                                seed=seed, progress=progress, priors=priors or None,
                                sigma_e=sigma_e, window=window, f_ig=known, gain_shape=shape,
-                               start=res.model.params.values, x0_offset_sd=x0_offset_sd)
-        self.x0_gains = None
+                               start=res.model.params.values, x0_offset_sd=x0_offset_sd,
+                               x0_gains=metered_x0)
+        self.x0_gains = metered_x0
         if x0_profile_days is not None:
             if x0_profile_days < 1:
                 raise PipelineError(f"x0_profile_days={x0_profile_days}: give 1 or more days")

@@ -266,6 +266,10 @@ InternalGains = Annotated[str, typer.Option(
          "'idf' (split as the IDF's People, Lights and equipment: convective on the air, "
          "radiant on the inside faces, return-air share in the plenum; docs/model.md "
          "\"Internal gains\")")]
+X0Meters = Annotated[bool, typer.Option(
+    help="the x(0) filter before each weekend knows each zone's metered lights and plug "
+         "loads on the working days (the site's points.power; docs/identification.md "
+         "\"The x(0) filter's bias in the slow states\"); off by default")]
 X0ProfileDays = Annotated[int | None, typer.Option(
     min=1, help="an option, off by default: refit with the x(0) filter running this many "
                 "days before each weekend and knowing the weekly internal-gains profile "
@@ -470,6 +474,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "with each zone's metered lights and plug loads (points.power) as "
                           "known weekend gains")] = "auto",
                  x0_profile_days: X0ProfileDays = None,
+                 x0_meters: X0Meters = False,
                  x0_offset_sd: X0OffsetSd = None,
                  day_scale_sd: DayScaleSd = None,
                  seed: Seed = 0) -> None:
@@ -493,7 +498,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  layers=layers, internal_mass=internal_mass,
                                  inside_convection=inside_convection,
                                  roof_inside=roof_inside,
-                                 x0_profile_days=x0_profile_days,
+                                 x0_profile_days=x0_profile_days, x0_meters=x0_meters,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  positive_priors=positive_priors,
                                  operating_films=operating_films,
@@ -596,6 +601,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                            "rows; most of the time on buildings that reheat); "
                            "--no-service leaves it out")] = True,
                   x0_profile_days: X0ProfileDays = None,
+                  x0_meters: X0Meters = False,
                   x0_offset_sd: X0OffsetSd = None,
                   day_scale_sd: DayScaleSd = None,
                   infiltration: Annotated[str, typer.Option(
@@ -658,7 +664,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                  layers=layers, internal_mass=internal_mass,
                                  inside_convection=inside_convection,
                                  roof_inside=roof_inside,
-                                x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
+                                x0_profile_days=x0_profile_days, x0_meters=x0_meters,
+                                x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd, positive_priors=positive_priors,
                                 operating_films=operating_films, reheat_leak=reheat_leak)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:

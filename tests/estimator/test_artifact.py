@@ -263,6 +263,40 @@ def _capture_identify(monkeypatch, module) -> list[dict]:
     return seen
 
 
+def test_x0_meters_tells_the_x0_filter_the_working_days_metered_gains(vb, monkeypatch):
+    """Pipeline.identify(x0_meters=True) hands identify, as the x(0) filter's gains, each
+    zone's metered rise above its weekend night base on the working days
+    (weekend_metered_gains(every_day=True)) and nothing on the weekends, whose gains are
+    the weekend mode's; without it none. Refused without meters and with
+    x0_profile_days, which tells the filter the same days' gains another way."""
+    import dataclasses
+
+    import zonecast.estimator.pipeline as pl
+    from zonecast.estimator.pipeline import weekend_metered_gains
+
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    data = pipe.data(pipe.telemetry(vb))
+    area = pipe.zone_floor_areas()
+    every = weekend_metered_gains(data, area, every_day=True)
+    weekend = np.asarray(data.local_times().day_of_week >= 5)
+    np.testing.assert_array_equal(every[weekend], weekend_metered_gains(data, area)[weekend])
+    assert every[~weekend].max() > 2.0  # the working days' lights and plugs
+    seen = _capture_identify(monkeypatch, pl)
+    for x0_meters in (True, False):
+        with pytest.raises(_Stop):
+            pipe.identify(data, train=["2015-04-18"], validation=[], x0_meters=x0_meters)
+    told, untold = seen
+    assert untold["x0_gains"] is None
+    np.testing.assert_array_equal(told["x0_gains"][~weekend], every[~weekend])
+    assert np.all(told["x0_gains"][weekend] == 0)
+    with pytest.raises(PipelineError, match="needs electricity meters"):
+        pipe.identify(dataclasses.replace(data, power=None), train=["2015-04-18"],
+                      validation=[], weekend_gains="daytime", x0_meters=True)
+    with pytest.raises(PipelineError, match="x0_meters and x0_profile_days .* choose one"):
+        pipe.identify(data, train=["2015-04-18"], validation=[], x0_meters=True,
+                      x0_profile_days=2)
+
+
 def test_metered_mode_fits_the_daytime_scale_with_the_metered_gains_known(vb, monkeypatch):
     """Pipeline.identify(weekend_gains="metered") hands identify the metered gains as known
     f_IG and the daytime shape to scale with a prior centred on 0 (the shape stands for the

@@ -94,6 +94,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   roof_inside: str = ModelOptions.roof_inside,
                   progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
+                  x0_meters: bool = False,
                   x0_offset_sd: float | None = None,
                   day_scale_sd: float | None = None,
                   positive_priors: str = "log",
@@ -106,7 +107,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``,
     ``internal_mass``, ``inside_convection``, ``roof_inside``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
-    ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_offset_sd``, ``day_scale_sd``,
+    ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_meters``, ``x0_offset_sd``,
+    ``day_scale_sd``,
     ``positive_priors``: as :meth:`~zonecast.estimator.pipeline.Pipeline.identify`;
     ``operating_films``: ``"none"`` or ``"natural"`` as ``Pipeline.identify``, ``"auto"`` (the
     default) :meth:`~zonecast.estimator.pipeline.Pipeline.fit_operating_films` on the
@@ -135,7 +137,8 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                         films=films, progress=lambda m: progress(f"identification: {m}"),
                         x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                         day_scale_sd=day_scale_sd, positive_priors=positive_priors,
-                        operating_films=identify_operating_films(operating_films))
+                        operating_films=identify_operating_films(operating_films),
+                        x0_meters=x0_meters)
     check_reheat_leak(reheat_leak)
     if profile_weeks:
         if operating_films == "auto":

@@ -263,6 +263,10 @@ class IdentificationResult:
         Rows of the x(0) filter before each weekend.
     x0_gains : bool
         Whether the x(0) filter knew internal gains on those rows (``identify(x0_gains=)``).
+    x0_gains_source : str or None
+        What those gains were (``Pipeline.identify`` sets it): ``"meters"`` (the zones'
+        metered lights and plug loads, ``x0_meters``), ``"profile"`` (the weekly profile,
+        ``x0_profile_days``), None without.
     x0_offsets : dict or None
         With ``identify(x0_offset_sd=)``: zone -> {"value", "se", "prior_sd"}, the fitted
         offset [K] of the zone's slow states at every weekend's start (not a model
@@ -295,6 +299,7 @@ class IdentificationResult:
     gain_day_scale: dict | None = None
     x0_window: int = X0_WINDOW
     x0_gains: bool = False
+    x0_gains_source: str | None = None
     x0_offsets: dict | None = None
     #: the weekend-gains mode the fit used (``Pipeline.identify`` resolves ``"auto"``) and
     #: the meters' weekend / working-day daytime rise that chose it (None without meters)
@@ -384,6 +389,12 @@ class IdentificationResult:
                 lines.append(f"{label}: " + ", ".join(f"{k} {v:.3f}" for k, v in row.items()))
         if self.x0_offsets:
             lines.append(self.x0_offsets_line())
+        if self.x0_gains_source == "meters":
+            lines.append("x(0) filter: the working day before each weekend with each zone's "
+                         "metered lights and plug loads above their base as known gains")
+        elif self.x0_gains_source == "profile":
+            lines.append(f"x(0) filter: {self.x0_window} rows before each weekend with the "
+                         "weekly internal-gains profile as known gains")
         if self.rank is not None:
             lines.append(f"Jacobian rank {self.rank} of {len(self.params)}, condition number "
                          f"{self.condition:.3g}")
@@ -420,7 +431,8 @@ class IdentificationResult:
                 "map_sigma_e": self.sigma_e, "window": self.window, "spans": self.spans,
                 "gain_scale": self.gain_scale, "gain_day_scale": self.gain_day_scale,
                 "x0_window": self.x0_window,
-                "x0_gains": self.x0_gains, "x0_offsets": self.x0_offsets,
+                "x0_gains": self.x0_gains, "x0_gains_source": self.x0_gains_source,
+                "x0_offsets": self.x0_offsets,
                 "weekend_gains": self.weekend_gains,
                 "weekend_metered_ratio": self.weekend_metered_ratio,
                 "operating_films": self.operating_films,

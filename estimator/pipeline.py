@@ -441,7 +441,7 @@ class Pipeline:
                  day_scale_sd: float | None = None,
                  positive_priors: str = "log",
                  operating_films: str = "none",
-                 x0_meters: bool = False) -> IdentificationResult:
+                 x0_meters: bool | str = "auto") -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -513,13 +513,15 @@ class Pipeline:
         weekends keep the mode's own gains); :attr:`x0_gains` keeps them for
         :func:`~.identify.weekend_simulations`.
 
-        ``x0_meters`` (an option, default off): the x(0) filter before each weekend knows
-        each zone's metered lights and plug loads above their base, on every day
+        ``x0_meters``: the x(0) filter before each weekend knows each zone's metered
+        lights and plug loads above their base on the working days
         (:func:`weekend_metered_gains` with ``every_day``): the working day before a
         weekend heats the rooms' faces, which a filter with f_IG = 0 leaves about a kelvin
-        too cold (docs/identification.md "The x(0) filter's bias in the slow states").
-        Needs the site's ``points.power``; kept in :attr:`x0_gains` as
-        ``x0_profile_days``'s profile is (not both).
+        too cold (docs/identification.md "The x(0) filter told the meters"). ``"auto"``
+        (the default since 2026-12-07, chosen on the family's training members): on where
+        the site maps meters (``points.power``) and ``x0_profile_days`` is not given;
+        True: on (needs the meters; not with ``x0_profile_days``); False: off. Kept in
+        :attr:`x0_gains` as ``x0_profile_days``'s profile is.
 
         ``day_scale_sd`` (an option, default off; with ``"daytime"``): each training
         weekend day also fits its own deviation of every zone's daytime scale, prior 0 ±
@@ -577,6 +579,10 @@ class Pipeline:
         # the identification sees the reheat as measured (fit_reheat_leak comes after it)
         self.reheat_scale, self.reheat_leak, self.reheat_from_faces = None, None, False
         metered_x0 = None
+        if x0_meters not in (True, False, "auto"):
+            raise PipelineError(f"x0_meters={x0_meters!r}: use True, False or 'auto'")
+        if x0_meters == "auto":
+            x0_meters = data.power is not None and x0_profile_days is None
         if x0_meters:
             if x0_profile_days is not None:
                 raise PipelineError("x0_meters and x0_profile_days both tell the x(0) filter "
@@ -629,6 +635,8 @@ class Pipeline:
             self.x0_gains = x0_gains
         res.weekend_gains = weekend_gains or "none"
         res.weekend_metered_ratio = ratio
+        res.x0_gains_source = ("profile" if x0_profile_days is not None
+                               else "meters" if metered_x0 is not None else None)
         self.identification = res
         self.params = res.model.params
         factors = operating_film_ratios(self._building_or_none(), operating_films)

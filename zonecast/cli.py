@@ -266,10 +266,19 @@ InternalGains = Annotated[str, typer.Option(
          "'idf' (split as the IDF's People, Lights and equipment: convective on the air, "
          "radiant on the inside faces, return-air share in the plenum; docs/model.md "
          "\"Internal gains\")")]
-X0Meters = Annotated[bool, typer.Option(
+X0Meters = Annotated[str, typer.Option(
     help="the x(0) filter before each weekend knows each zone's metered lights and plug "
-         "loads on the working days (the site's points.power; docs/identification.md "
-         "\"The x(0) filter's bias in the slow states\"); off by default")]
+         "loads on the working days: 'auto' (the default since 2026-12-07: where the site "
+         "maps meters under points.power), 'on' or 'off' (docs/identification.md "
+         "\"The x(0) filter told the meters\")")]
+
+
+def _x0_meters(value: str) -> bool | str:
+    """--x0-meters' value for Pipeline.identify."""
+    modes = {"auto": "auto", "on": True, "off": False}
+    if value not in modes:
+        raise typer.BadParameter(f"{value!r}: use 'auto', 'on' or 'off'", param_hint="--x0-meters")
+    return modes[value]
 X0ProfileDays = Annotated[int | None, typer.Option(
     min=1, help="an option, off by default: refit with the x(0) filter running this many "
                 "days before each weekend and knowing the weekly internal-gains profile "
@@ -474,7 +483,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "with each zone's metered lights and plug loads (points.power) as "
                           "known weekend gains")] = "auto",
                  x0_profile_days: X0ProfileDays = None,
-                 x0_meters: X0Meters = False,
+                 x0_meters: X0Meters = "auto",
                  x0_offset_sd: X0OffsetSd = None,
                  day_scale_sd: DayScaleSd = None,
                  seed: Seed = 0) -> None:
@@ -498,7 +507,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  layers=layers, internal_mass=internal_mass,
                                  inside_convection=inside_convection,
                                  roof_inside=roof_inside,
-                                 x0_profile_days=x0_profile_days, x0_meters=x0_meters,
+                                 x0_profile_days=x0_profile_days, x0_meters=_x0_meters(x0_meters),
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  positive_priors=positive_priors,
                                  operating_films=operating_films,
@@ -601,7 +610,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                            "rows; most of the time on buildings that reheat); "
                            "--no-service leaves it out")] = True,
                   x0_profile_days: X0ProfileDays = None,
-                  x0_meters: X0Meters = False,
+                  x0_meters: X0Meters = "auto",
                   x0_offset_sd: X0OffsetSd = None,
                   day_scale_sd: DayScaleSd = None,
                   infiltration: Annotated[str, typer.Option(
@@ -664,7 +673,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                  layers=layers, internal_mass=internal_mass,
                                  inside_convection=inside_convection,
                                  roof_inside=roof_inside,
-                                x0_profile_days=x0_profile_days, x0_meters=x0_meters,
+                                x0_profile_days=x0_profile_days, x0_meters=_x0_meters(x0_meters),
                                 x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd, positive_priors=positive_priors,
                                 operating_films=operating_films, reheat_leak=reheat_leak)

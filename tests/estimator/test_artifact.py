@@ -267,8 +267,9 @@ def test_x0_meters_tells_the_x0_filter_the_working_days_metered_gains(vb, monkey
     """Pipeline.identify(x0_meters=True) hands identify, as the x(0) filter's gains, each
     zone's metered rise above its weekend night base on the working days
     (weekend_metered_gains(every_day=True)) and nothing on the weekends, whose gains are
-    the weekend mode's; without it none. Refused without meters and with
-    x0_profile_days, which tells the filter the same days' gains another way."""
+    the weekend mode's; False none; "auto" (the default) the same as True where the site
+    has meters, none without. True is refused without meters and with x0_profile_days,
+    which tells the filter the same days' gains another way."""
     import dataclasses
 
     import zonecast.estimator.pipeline as pl
@@ -282,13 +283,19 @@ def test_x0_meters_tells_the_x0_filter_the_working_days_metered_gains(vb, monkey
     np.testing.assert_array_equal(every[weekend], weekend_metered_gains(data, area)[weekend])
     assert every[~weekend].max() > 2.0  # the working days' lights and plugs
     seen = _capture_identify(monkeypatch, pl)
-    for x0_meters in (True, False):
+    for x0_meters in (True, False, "auto"):
         with pytest.raises(_Stop):
             pipe.identify(data, train=["2015-04-18"], validation=[], x0_meters=x0_meters)
-    told, untold = seen
-    assert untold["x0_gains"] is None
+    with pytest.raises(_Stop):  # "auto" without meters: off
+        pipe.identify(dataclasses.replace(data, power=None), train=["2015-04-18"],
+                      validation=[], weekend_gains="daytime")
+    told, untold, auto, no_meters = seen
+    assert untold["x0_gains"] is None and no_meters["x0_gains"] is None
     np.testing.assert_array_equal(told["x0_gains"][~weekend], every[~weekend])
     assert np.all(told["x0_gains"][weekend] == 0)
+    np.testing.assert_array_equal(auto["x0_gains"], told["x0_gains"])
+    with pytest.raises(PipelineError, match="x0_meters='yes': use True, False or 'auto'"):
+        pipe.identify(data, train=["2015-04-18"], validation=[], x0_meters="yes")
     with pytest.raises(PipelineError, match="needs electricity meters"):
         pipe.identify(dataclasses.replace(data, power=None), train=["2015-04-18"],
                       validation=[], weekend_gains="daytime", x0_meters=True)

@@ -94,7 +94,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   roof_inside: str = ModelOptions.roof_inside,
                   progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
-                  x0_meters: bool = False,
+                  x0_meters: bool | str = "auto",
                   x0_offset_sd: float | None = None,
                   day_scale_sd: float | None = None,
                   positive_priors: str = "log",

@@ -504,7 +504,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
         inside_convection: str = ModelOptions.inside_convection,
         roof_inside: str = ModelOptions.roof_inside,
-        x0_meters: bool = False,
+        x0_meters: bool | str = "auto",
         positive_priors: str = "log", operating_films: str = OPERATING_FILMS_MODE,
         reheat_leak: str = REHEAT_LEAK) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as

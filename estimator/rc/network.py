@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 from zonecast.estimator import outside_films
+from zonecast.estimator.films import convective_films
 from zonecast.estimator.idf import DEFAULT_SOLAR_ABSORPTANCE, Building, Construction, Surface
 from zonecast.estimator.rc.elements import (
     ADMITTANCE_TOLERANCE,
@@ -1039,7 +1040,6 @@ def build_structure(
                                           if roof_sky != "none" else ""))
     roof_film = None  # the roofs' known inside film (roof_inside="known")
     if opts.roof_inside == "known":
-        from zonecast.estimator.priors import convective_films  # priors imports this module
         roof_film, _, source = convective_films(building)["gamma_ceil"]
         notes.append(f"roofs' inside film known, {roof_film:.2f} W/(m2 K): {source}")
     if rotation:

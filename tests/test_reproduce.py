@@ -127,6 +127,9 @@ def test_reproduce_end_to_end_without_the_service_check(tmp_path, paper_campaign
     assert ident["weekend_gains_asked"] == "auto" and ident["weekend_gains"] == "daytime"
     assert 0.0 < ident["weekend_metered_ratio"] < 0.15
     assert "the weekends are not occupied and the weekend daytime rise" in report
+    # and its x(0) filter knows the working days' metered lights and plugs (x0_meters auto)
+    assert ident["x0_gains"] is True and ident["x0_gains_source"] == "meters"
+    assert "x(0) filter: the working day before each weekend with each zone's metered" in report
 
 
 def test_report_says_which_weekend_gains_the_meters_chose(tmp_path):

@@ -147,6 +147,15 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
                      f"(`--operating-films auto`: {why}below {test['min_t']:g} standard "
                      "errors, so operation does not ask for weaker films; "
                      "docs/identification.md \"Operating films\").")
+    source = ident.get("x0_gains_source")
+    if source == "meters":
+        lines.append("x(0) filter: the working day before each weekend with each zone's "
+                     "metered lights and plug loads above their base as known gains "
+                     "(`--x0-meters`, on where the site has meters; docs/identification.md "
+                     "\"The x(0) filter told the meters\").")
+    elif source == "profile":
+        lines.append("x(0) filter: the days before each weekend with the weekly internal-gains "
+                     "profile as known gains (`--x0-profile-days`).")
     leak = ident.get("reheat_leak")
     if leak:
         lines.append("Reheat heat in regular operation (internal gains, Table 3, the model "

@@ -247,10 +247,10 @@ def weekend_metered_ratio(data: ModelData) -> float | None:
 
 def weekend_metered_gains(data: ModelData, zone_area, *, every_day: bool = False
                           ) -> np.ndarray:
-    """(N, n_zones) [W/m2]: on Saturday and Sunday rows (``every_day``: on every row), each
-    zone's metered electric power
+    """(N, n_zones) [W/m2]: on Saturday and Sunday rows, each zone's metered electric power
     of lights and plug loads (``data.power``) above its base load, per m2 of the zone's
-    floor (``zone_area`` [m2], zones in ``data.zones`` order); 0 on working days, for zones
+    floor (``zone_area`` [m2], zones in ``data.zones`` order); 0 on working days (with
+    ``every_day`` the same on them too: the x(0) filter's ``x0_meters``), for zones
     without a meter and on rows where a zone's meters left it unknown (a gap longer than
     :meth:`~.telemetry.Telemetry.power` fills). The base load is the
     median of the zone's weekend readings between :data:`METERED_BASE_HOURS` local time

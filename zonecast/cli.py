@@ -326,7 +326,9 @@ WindowAngle = Annotated[str, typer.Option(
          "facade; 'glass': each part weighed by what the windows' panes let through at its "
          "angle of incidence (docs/model.md \"Windows' angular transmission\")")]
 RoofExterior = Annotated[str, typer.Option(
-    help="'absorptance' (the default since 2026-12-04): roofs' outer faces take the IDF's "
+    help="'auto' (the default since 2026-12-07): 'balance' where the building has roofs "
+         "and their climate films can be computed (a weather file is known), else "
+         "'absorptance'; 'absorptance': roofs' outer faces take the IDF's "
          "solar absorptance of their outer material and the fitted gamma_EW; 'fitted': the "
          "walls' fitted gamma_EW and gamma_absorp (the paper); 'idf': a known film "
          "(25 W/m2K) as well; 'climate': the film of the site's wind climate, from the "

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -122,7 +122,7 @@ REGIME_CEILING = 2.0
 #: than its faces (``ModelOptions.inside_convection="regime"``)
 REGIME_RISE = 1.0
 #: ways to model a roof's outer face (``ModelOptions.roof_exterior``)
-ROOF_EXTERIORS = ("fitted", "idf", "absorptance", "climate", "own", "balance")
+ROOF_EXTERIORS = ("fitted", "idf", "absorptance", "climate", "own", "balance", "auto")
 #: ways to model a roof's inner face (``ModelOptions.roof_inside``)
 ROOF_INSIDES = ("fitted", "known")
 #: the sky model of roofs with ``roof_exterior="balance"`` when ``ModelOptions.sky`` is
@@ -337,11 +337,17 @@ class ModelOptions:
         which EnergyPlus makes one solar and radiant enclosure (with
         ``internal_gains="idf"`` the gains' radiant share too); a building without air
         boundaries is unchanged (docs/model.md "Air boundaries").
-    roof_exterior : {"fitted", "idf", "absorptance", "climate", "own", "balance"}
-        The outer faces of roofs (surfaces of type Roof open to the outdoors): with
+    roof_exterior : {"auto", "fitted", "idf", "absorptance", "climate", "own", "balance"}
+        The outer faces of roofs (surfaces of type Roof open to the outdoors). ``"auto"``
+        (the default since 2026-12-07, chosen on the family's training members by the
+        standing rule; docs/benchmarks.md "The roofs' exterior balance with the meters"):
+        ``"balance"`` where the building has such roofs and their climate films can be
+        computed (a weather file is known, :attr:`~zonecast.estimator.idf.Building.weather_file`),
+        else ``"absorptance"`` with a note saying why; :func:`build_model` stores the
+        resolved value in :attr:`RCStructure.options`, so a model file names it. With
         the IDF's solar absorptance of the roof's outer material (EnergyPlus's 0.7 where
-        it gives none) and the fitted γ_EW (``"absorptance"``, the default since
-        2026-12-04, chosen on the family's training members), with the walls' fitted γ_EW
+        it gives none) and the fitted γ_EW (``"absorptance"``, the default from 2026-12-04
+        to 2026-12-07), with the walls' fitted γ_EW
         and γ_absorp (``"fitted"``: the paper's one exterior balance; what model files
         without the option were built with), or with a known film as well (``"idf"``:
         :data:`ROOF_FILM`, the handbook's combined film and γ_EW's prior), or with the film
@@ -381,7 +387,7 @@ class ModelOptions:
     interior_radiation: str = "star"
     internal_gains: str = "air"
     window_angle: str = "none"
-    roof_exterior: str = "absorptance"
+    roof_exterior: str = "auto"
     envelope_radiation: str = "none"
     solar_enclosure: str = "air_boundaries"
     adiabatic: str = "mirror"
@@ -967,6 +973,25 @@ def _gain_targets(building: Building, room: str, room_state: Mapping[str, int],
     return list(merged.items())
 
 
+def _auto_roof_exterior(building: Building, notes: list[str]
+                        ) -> tuple[str, dict[str, tuple[float, float]] | None]:
+    """``ModelOptions(roof_exterior="auto")`` resolved for ``building``: ``"balance"`` with
+    the roofs' film parts (:func:`~zonecast.estimator.outside_films.climate_film_parts`,
+    weighted by the sun) where it has roofs open to the outdoors and those can be computed,
+    else ``"absorptance"`` and None (a note says why when there are roofs)."""
+    roofs = [n for n, f in building.surfaces.items()
+             if f.boundary == "Outdoors" and f.surface_type == "Roof"]
+    if not roofs:
+        return "absorptance", None
+    try:
+        parts = outside_films.climate_film_parts(building, roofs, weight="sun")
+    except ValueError as err:
+        notes.append("roofs' outer faces with the fitted film (roof_exterior 'absorptance'), "
+                     f"not the exterior balance: {err}")
+        return "absorptance", None
+    return "balance", parts
+
+
 def build_structure(
     building: Building,
     zones: Mapping[str, Sequence[str]],
@@ -1014,16 +1039,19 @@ def build_structure(
                 f"box {b!r} serves {room!r}, which is in no model zone; add the room to a zone"
             )
 
+    notes: list[str] = []
+    climate: dict[str, tuple[float, float]] | None = None
+    if opts.roof_exterior == "auto":
+        resolved, climate = _auto_roof_exterior(building, notes)
+        opts = replace(opts, roof_exterior=resolved)
     own_roof = opts.roof_exterior == "own" and any(
         f.boundary == "Outdoors" and f.surface_type == "Roof" for f in building.surfaces.values())
     asm = _Assembler(8 if own_roof else 7)
-    notes: list[str] = []
     rotation = facade_rotation(building) if opts.facades == "building" else 0.0
-    climate: dict[str, tuple[float, float]] = {}
     # the roofs' sky model: the walls' (opts.sky), or with "balance" at least the cloud's
     roof_sky = (BALANCE_SKY if opts.roof_exterior == "balance" and opts.sky == "none"
                 else opts.sky)
-    if opts.roof_exterior in ("climate", "balance"):
+    if opts.roof_exterior in ("climate", "balance") and climate is None:
         roofs = [n for n, f in building.surfaces.items()
                  if f.boundary == "Outdoors" and f.surface_type == "Roof"]
         try:
@@ -1032,12 +1060,13 @@ def build_structure(
                 weight="sun" if opts.roof_exterior == "balance" else "hours")
         except ValueError as err:
             raise ModelDefinitionError(f"roof_exterior={opts.roof_exterior!r}: {err}") from None
-        if climate:
-            notes.append("roofs' outside films of the site's wind climate (convection + "
-                         "long-wave): " + ", ".join(f"{n} {c:.1f} + {r:.1f}"
-                                                    for n, (c, r) in climate.items())
-                         + " W/(m2 K)" + ("; the long-wave's sky share to the sky"
-                                          if roof_sky != "none" else ""))
+    climate = climate or {}
+    if climate:
+        notes.append("roofs' outside films of the site's wind climate (convection + "
+                     "long-wave): " + ", ".join(f"{n} {c:.1f} + {r:.1f}"
+                                                for n, (c, r) in climate.items())
+                     + " W/(m2 K)" + ("; the long-wave's sky share to the sky"
+                                      if roof_sky != "none" else ""))
     roof_film = None  # the roofs' known inside film (roof_inside="known")
     if opts.roof_inside == "known":
         roof_film, _, source = convective_films(building)["gamma_ceil"]

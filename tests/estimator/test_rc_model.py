@@ -544,7 +544,7 @@ def test_small_office_builds(small_office):
     model = build_model(small_office, zones, {f"PSZ {z}": z for z in zones}, options=NO_LEAK)
     counts = model.structure.state_counts()
     assert counts["unmeasured_air"] == 1 and counts["internal_mass"] > 0
-    assert np.linalg.eigvals(model.system_matrix(np.ones(5))).real.max() < 0
+    assert np.linalg.eigvals(model.system_matrix(np.ones(model.n_boxes))).real.max() < 0
 
 
 def test_internal_mass_one_face_as_energyplus(small_office):
@@ -1071,6 +1071,39 @@ def test_roof_exterior_balance_sends_the_long_wave_to_the_sky(small_office, five
     assert a.scheduled == b.scheduled and (a.Bv0 != b.Bv0).nnz == 0
 
 
+def test_roof_exterior_auto_is_the_balance_where_the_films_can_be_computed(small_office):
+    """``roof_exterior="auto"`` (the default): "balance" for a building with roofs open to
+    the outdoors and a known weather file, stored resolved in the structure's options (so a
+    model file names it) and built as "balance" is; "absorptance" with a note saying why
+    when no weather file is known, and for a building without such roofs."""
+    zones = {z: [z] for z in small_office.zones if z != "Attic"}
+    boxes = {f"PSZ {z}": z for z in zones}
+    assert ModelOptions().roof_exterior == "auto"
+    assert small_office.weather_file is not None
+
+    def build(building, mode):
+        return build_model(building, zones, boxes, options=dataclasses.replace(
+            NO_LEAK, roof_exterior=mode)).structure
+
+    auto, balance = build(small_office, "auto"), build(small_office, "balance")
+    assert auto.options.roof_exterior == "balance"
+    assert auto.scheduled == balance.scheduled and (auto.Bv0 != balance.Bv0).nnz == 0
+    assert (auto.A(ParameterSet(list(zones)).physical)
+            != balance.A(ParameterSet(list(zones)).physical)).nnz == 0
+    blind = dataclasses.replace(small_office, weather_file=None)
+    none = build(blind, "auto")
+    assert none.options.roof_exterior == "absorptance"
+    assert any("not the exterior balance" in n and "weather file" in n for n in none.notes)
+    assert none.scheduled == build(blind, "absorptance").scheduled
+    with pytest.raises(ModelDefinitionError, match="roof_exterior='balance'.*weather_file"):
+        build(blind, "balance")
+    flat = dataclasses.replace(small_office, surfaces={
+        n: (dataclasses.replace(f, boundary="Adiabatic")
+            if f.boundary == "Outdoors" and f.surface_type == "Roof" else f)
+        for n, f in small_office.surfaces.items()})
+    assert build(flat, "auto").options.roof_exterior == "absorptance"
+
+
 def test_envelope_faces_draw_long_wave_heat_from_their_rooms(five_zone):
     """``envelope_radiation="room"``: every opaque face open to the outdoors or on the ground
     gets one
@@ -1121,7 +1154,8 @@ def test_envelope_faces_draw_long_wave_heat_from_their_rooms(five_zone):
 def test_sky_exchange_is_a_scheduled_input_at_each_exterior_face(five_zone):
     """``sky="clear"``: every opaque exterior face of the 5-zone gets a scheduled input of
     conductance SKY_RADIATION F_sky beta A at its outer face, whose supply is the clear-sky
-    temperature."""
+    temperature (the roof with the fitted film, ``roof_exterior="absorptance"``; the
+    balance's roofs take their own long-wave coefficient, tested below)."""
     from zonecast.estimator.dataset import scheduled_rise
     from zonecast.estimator.rc.network import SKY_RADIATION, sky_share
     from zonecast.estimator.solar import clear_sky_temperature
@@ -1129,7 +1163,7 @@ def test_sky_exchange_is_a_scheduled_input_at_each_exterior_face(five_zone):
     assert sky_share(0.0) == 1.0 and sky_share(180.0) == 0.0
     assert sky_share(90.0) == pytest.approx(0.5 ** 1.5)
     opts = ModelOptions(infiltration="none", ground="adiabatic", shading="none",
-                        return_air="none", sky="clear")
+                        return_air="none", sky="clear", roof_exterior="absorptance")
     m = build_model(five_zone, FIVE_ZONES, FIVE_BOXES, options=opts)
     st = m.structure
     outdoors = {s.name: s for s in five_zone.surfaces.values() if s.boundary == "Outdoors"}
@@ -1153,7 +1187,8 @@ def test_sky_exchange_is_a_scheduled_input_at_each_exterior_face(five_zone):
     np.testing.assert_allclose(iso[:, 0], ta - 11.0 - ts)
     m_iso = build_model(five_zone, FIVE_ZONES, FIVE_BOXES,
                         options=ModelOptions(infiltration="none", ground="adiabatic",
-                                             shading="none", return_air="none", sky="iso"))
+                                             shading="none", return_air="none", sky="iso",
+                                             roof_exterior="absorptance"))
     assert {b: sp["flow"] for b, sp in m_iso.structure.scheduled.items()} == \
         {b: sp["flow"] for b, sp in sky.items()}
     assert {sp["sky"] for sp in m_iso.structure.scheduled.values()} == {"iso"}

@@ -1,5 +1,7 @@
 """Identification recovers known parameters from data simulated by the model itself."""
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -21,14 +23,15 @@ from zonecast.estimator.telemetry import segments_of
 NO_LEAK = _Options(infiltration="none", ground="adiabatic", shading="none", return_air="none")
 
 
-def _model_and_inputs(five_zone, seed):
-    """The five-zone model and three days of inputs (2-h airflow blocks, a sunny day)."""
+def _model_and_inputs(five_zone, seed, options=NO_LEAK):
+    """The five-zone model (``options``) and three days of inputs (2-h airflow blocks, a
+    sunny day)."""
     from zonecast.estimator.model import build_model
 
     zones = {"South": ["SPACE1-1"], "East": ["SPACE2-1"], "North": ["SPACE3-1"],
              "West": ["SPACE4-1"], "Core": ["SPACE5-1"]}
     boxes = {f"VAV-{i}": f"SPACE{i}-1" for i in range(1, 6)}
-    model = build_model(five_zone, zones, boxes, options=NO_LEAK)
+    model = build_model(five_zone, zones, boxes, options=options)
     rng = np.random.default_rng(seed)
     times = pd.date_range("2015-04-17 00:00", periods=3 * 96, freq="15min",
                           tz="America/Los_Angeles").tz_convert("UTC")
@@ -366,10 +369,11 @@ def _weekend_gains_case(five_zone, scale, level):
     return _gains_case(five_zone, 7, occupied, level, scale)
 
 
-def _gains_case(five_zone, seed, when, level, scale=1.0):
-    """Model, parameter names, true parameters (gamma_IW x 1.6), per-zone gains (``level``
-    W/m2 x a zone factor where ``when(day)``) and the data simulated with them x ``scale``."""
-    model, zones, boxes, rng, times, u, v, day = _model_and_inputs(five_zone, seed)
+def _gains_case(five_zone, seed, when, level, scale=1.0, options=NO_LEAK):
+    """Model (``options``), parameter names, true parameters (gamma_IW x 1.6), per-zone
+    gains (``level`` W/m2 x a zone factor where ``when(day)``) and the data simulated with
+    them x ``scale``."""
+    model, zones, boxes, rng, times, u, v, day = _model_and_inputs(five_zone, seed, options)
     n = len(times)
     true = model.params.start_params.copy()
     names = model.params.param_names
@@ -611,7 +615,12 @@ def test_the_x0_filters_bias_in_the_slow_states_is_fitted(five_zone):
     walls cooler than they are. With the zones' slow-state offsets fitted (``x0_offset_sd``)
     they come out positive, the fit is closer to the noise and gamma_IW nearer its truth;
     Table 2 and the plotted simulations start from x_KF(0) plus the offsets; the model's
-    parameters stay the 13; a fit without priors is refused, saying why."""
+    parameters stay the 13; a fit without priors is refused, saying why.
+
+    The case is built with the roof's film fitted as gamma_EW (``roof_exterior=
+    "absorptance"``, the default when it was written). With the balance's known roof film
+    (the default since 2026-12-07) the blind fit still misses by more than 0.09 K, but its
+    gamma_IW lands within 2 % of the truth, so that case no longer shows the bias."""
     from zonecast.estimator.evaluate import rms_by_zone
     from zonecast.estimator.identify import weekend_simulations
     from zonecast.estimator.priors import building_priors
@@ -619,7 +628,9 @@ def test_the_x0_filters_bias_in_the_slow_states_is_fitted(five_zone):
     def friday(day):
         return (day < 1) & ((day % 1) > 1 / 3) & ((day % 1) < 0.75)
 
-    model, names, true, _, data = _gains_case(five_zone, 9, friday, 25.0)
+    model, names, true, _, data = _gains_case(
+        five_zone, 9, friday, 25.0,
+        options=dataclasses.replace(NO_LEAK, roof_exterior="absorptance"))
     priors = building_priors(model.params, five_zone)
     blind = identify(model, data, train=["2015-04-18"], max_nfev=40, priors=priors,
                      sigma_e=0.05)

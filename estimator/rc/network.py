@@ -973,14 +973,13 @@ def _gain_targets(building: Building, room: str, room_state: Mapping[str, int],
     return list(merged.items())
 
 
-def _auto_roof_exterior(building: Building, notes: list[str]
+def _auto_roof_exterior(building: Building, roofs: Sequence[str], notes: list[str]
                         ) -> tuple[str, dict[str, tuple[float, float]] | None]:
-    """``ModelOptions(roof_exterior="auto")`` resolved for ``building``: ``"balance"`` with
-    the roofs' film parts (:func:`~zonecast.estimator.outside_films.climate_film_parts`,
-    weighted by the sun) where it has roofs open to the outdoors and those can be computed,
-    else ``"absorptance"`` and None (a note says why when there are roofs)."""
-    roofs = [n for n, f in building.surfaces.items()
-             if f.boundary == "Outdoors" and f.surface_type == "Roof"]
+    """``ModelOptions(roof_exterior="auto")`` resolved for ``building`` and its ``roofs``
+    (surfaces of type Roof open to the outdoors): ``"balance"`` with the roofs' film parts
+    (:func:`~zonecast.estimator.outside_films.climate_film_parts`, weighted by the sun) where
+    there are roofs and those can be computed, else ``"absorptance"`` and None (a note says
+    why when there are roofs)."""
     if not roofs:
         return "absorptance", None
     try:
@@ -1040,20 +1039,19 @@ def build_structure(
             )
 
     notes: list[str] = []
+    roofs = [n for n, f in building.surfaces.items()
+             if f.boundary == "Outdoors" and f.surface_type == "Roof"]
     climate: dict[str, tuple[float, float]] | None = None
     if opts.roof_exterior == "auto":
-        resolved, climate = _auto_roof_exterior(building, notes)
+        resolved, climate = _auto_roof_exterior(building, roofs, notes)
         opts = replace(opts, roof_exterior=resolved)
-    own_roof = opts.roof_exterior == "own" and any(
-        f.boundary == "Outdoors" and f.surface_type == "Roof" for f in building.surfaces.values())
+    own_roof = opts.roof_exterior == "own" and bool(roofs)
     asm = _Assembler(8 if own_roof else 7)
     rotation = facade_rotation(building) if opts.facades == "building" else 0.0
     # the roofs' sky model: the walls' (opts.sky), or with "balance" at least the cloud's
     roof_sky = (BALANCE_SKY if opts.roof_exterior == "balance" and opts.sky == "none"
                 else opts.sky)
     if opts.roof_exterior in ("climate", "balance") and climate is None:
-        roofs = [n for n, f in building.surfaces.items()
-                 if f.boundary == "Outdoors" and f.surface_type == "Roof"]
         try:
             climate = outside_films.climate_film_parts(
                 building, roofs,

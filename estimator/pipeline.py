@@ -207,6 +207,45 @@ METERED_SHAPE_PRIOR = (0.0, 1.0)
 METERED_BASE_HOURS = (0, 6)
 
 
+#: ``constant_gains="meters"``: the sd of each metered zone's c_IG prior is the meters' own
+#: uncertainty, this fraction of the base [-] (the testbed's meters: 0.5 % noise), but at
+#: least :data:`METERED_BASE_SD_MIN` [W/m2] (a meter's 1 W resolution on a floor of a few
+#: hundred m2, and the median of a few nights)
+METERED_BASE_SD_REL = 0.005
+METERED_BASE_SD_MIN = 0.05
+CONSTANT_GAINS = ("fitted", "meters")
+
+
+def metered_base_gains(data: ModelData, zone_area) -> np.ndarray:
+    """(n_zones,) [W/m2]: each zone's metered base load, the median of its weekend
+    readings between :data:`METERED_BASE_HOURS` local time (``data.power``, lights and plug
+    loads) per m2 of the zone's floor (``zone_area`` [m2], zones in ``data.zones`` order);
+    NaN for a zone without a meter or without such a reading. Electricity used in a room
+    is heat in it, so on an empty weekend night this is the zone's whole internal gain:
+    the paper's constant c_IG, known (:meth:`Pipeline.identify`'s ``constant_gains``)."""
+    area = np.asarray(zone_area, float)
+    base = _metered_base(data)
+    return np.where(area > 0, base / np.where(area > 0, area, 1.0), np.nan)
+
+
+def _metered_base(data: ModelData) -> np.ndarray:
+    """(n_zones,) [W]: the median of each zone's weekend readings between
+    :data:`METERED_BASE_HOURS` local time; NaN without a meter or such a reading."""
+    out = np.full(len(data.zones), np.nan)
+    if data.power is None:
+        return out
+    local = data.local_times()
+    night = (np.asarray(local.day_of_week >= 5)
+             & np.asarray((local.hour >= METERED_BASE_HOURS[0])
+                          & (local.hour < METERED_BASE_HOURS[1])))
+    for j in range(len(data.zones)):
+        p = data.power[:, j]
+        base = p[night & np.isfinite(p)]
+        if len(base):
+            out[j] = np.median(base)
+    return out
+
+
 #: the building's weekend daytime rise of metered lights and plug loads, as a fraction of the
 #: working days' (:func:`weekend_metered_ratio`), from which ``weekend_gains="auto"`` takes the
 #: meters' rise as known weekend gains: chosen on the seed-0 family's training members, whose
@@ -259,19 +298,16 @@ def weekend_metered_gains(data: ModelData, zone_area, *, every_day: bool = False
     out = np.zeros((len(data.times), len(data.zones)))
     if data.power is None:
         return out
-    local = data.local_times()
-    weekend = np.asarray(local.day_of_week >= 5)
-    night = weekend & np.asarray((local.hour >= METERED_BASE_HOURS[0])
-                                 & (local.hour < METERED_BASE_HOURS[1]))
+    weekend = np.asarray(data.local_times().day_of_week >= 5)
     area = np.asarray(zone_area, float)
+    base = _metered_base(data)
     rows = np.ones(len(data.times), bool) if every_day else weekend
     for j in range(len(data.zones)):
-        p = data.power[:, j]
-        base = p[night & np.isfinite(p)]
-        if not len(base) or not area[j] > 0:
+        if not np.isfinite(base[j]) or not area[j] > 0:
             continue
+        p = data.power[:, j]
         ok = rows & np.isfinite(p)
-        out[ok, j] = np.maximum(p[ok] - np.median(base), 0.0) / area[j]
+        out[ok, j] = np.maximum(p[ok] - base[j], 0.0) / area[j]
     return out
 
 
@@ -441,7 +477,8 @@ class Pipeline:
                  day_scale_sd: float | None = None,
                  positive_priors: str = "log",
                  operating_films: str = "none",
-                 x0_meters: bool | str = "auto") -> IdentificationResult:
+                 x0_meters: bool | str = "auto",
+                 constant_gains: str = "fitted") -> IdentificationResult:
         """Identify the 13 parameters (paper section 4-A) from excitation weekends.
 
         Defaults follow the paper's split of the site's excitation weekends (its
@@ -523,6 +560,14 @@ class Pipeline:
         True: on (needs the meters; not with ``x0_profile_days``); False: off. Kept in
         :attr:`x0_gains` as ``x0_profile_days``'s profile is.
 
+        ``constant_gains``: ``"fitted"`` (the default, the paper's c_IG with the
+        handbook's weak prior) or ``"meters"`` (an option): each metered zone's c_IG is its
+        metered weekend night base (:func:`metered_base_gains`), its prior's sd the meters'
+        uncertainty (:data:`METERED_BASE_SD_REL`, at least :data:`METERED_BASE_SD_MIN`), so
+        it is known rather than fitted and the fit cannot lower it to pay for heat the
+        structure puts elsewhere (docs/identification.md "The constant gains from the
+        meters"); needs the meters and ``priors`` True.
+
         ``day_scale_sd`` (an option, default off; with ``"daytime"``): each training
         weekend day also fits its own deviation of every zone's daytime scale, prior 0 ±
         this value (:func:`~.identify.identify`): a building whose people come in on some
@@ -572,10 +617,30 @@ class Pipeline:
         own_roof = "gamma_roof" in start.param_names
         if own_roof:  # the roofs' own film starts at its prior's mean (the climate's film)
             start = start.copy({"gamma_roof": roof_film_prior(self._building_or_none())[0]})
+        if constant_gains not in CONSTANT_GAINS:
+            raise PipelineError(f"constant_gains={constant_gains!r}: use "
+                                f"{' or '.join(repr(v) for v in CONSTANT_GAINS)}")
+        metered_cig: dict[str, float] = {}
+        if constant_gains == "meters":
+            if priors is not True:
+                raise PipelineError("constant_gains='meters' sets c_IG's priors from the "
+                                    "meters: keep priors=True (the building's priors)")
+            if data.power is None:
+                raise PipelineError("constant_gains='meters' needs electricity meters: map "
+                                    "each zone's lights and plug-load meters under "
+                                    "points.power in the site description (docs/data.md)")
+            base = metered_base_gains(data, self.zone_floor_areas())
+            metered_cig = {f"c_IG[{z}]": float(b) for z, b in zip(data.zones, base)
+                           if np.isfinite(b)}
+            start = start.copy(metered_cig)  # start where they are known
         if priors is True:
             priors = building_priors(start, self._building_or_none(),
                                      convective="idf" if films == "idf" else convective,
                                      positive=positive_priors)
+            for name, b in metered_cig.items():
+                priors[name] = Prior(b, max(METERED_BASE_SD_REL * b, METERED_BASE_SD_MIN),
+                                     "metered weekend night base of the zone's lights and "
+                                     "plug loads")
         # the identification sees the reheat as measured (fit_reheat_leak comes after it)
         self.reheat_scale, self.reheat_leak, self.reheat_from_faces = None, None, False
         metered_x0 = None
@@ -596,7 +661,8 @@ class Pipeline:
                        window=window, agree_rtol=agree_rtol, x0_offset_sd=x0_offset_sd,
                        day_scale_sd=(day_scale_sd if weekend_gains in ("daytime", "metered")
                                      else None),
-                       start=start.values if convective or own_roof else None,
+                       start=(start.values if convective or own_roof or metered_cig
+                              else None),
                        f_ig=self.weekend_known_gains(data, weekend_gains),
                        gain_shape=self.weekend_shape(data, weekend_gains),
                        shape_prior=self._shape_prior(weekend_gains), x0_gains=metered_x0)

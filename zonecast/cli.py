@@ -273,6 +273,13 @@ X0Meters = Annotated[str, typer.Option(
          "\"The x(0) filter told the meters\")")]
 
 
+ConstantGains = Annotated[str, typer.Option(
+    help="each zone's constant internal gains c_IG: 'fitted' (the default, the paper's, "
+         "with a weak handbook prior) or 'meters' (an option: the zone's metered weekend "
+         "night base of lights and plug loads, points.power, known to the meters' accuracy; "
+         "docs/identification.md \"The constant gains from the meters\")")]
+
+
 def _x0_meters(value: str) -> bool | str:
     """--x0-meters' value for Pipeline.identify."""
     modes = {"auto": "auto", "on": True, "off": False}
@@ -486,6 +493,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                           "known weekend gains")] = "auto",
                  x0_profile_days: X0ProfileDays = None,
                  x0_meters: X0Meters = "auto",
+                 constant_gains: ConstantGains = "fitted",
                  x0_offset_sd: X0OffsetSd = None,
                  day_scale_sd: DayScaleSd = None,
                  seed: Seed = 0) -> None:
@@ -510,6 +518,7 @@ def identify_cmd(site: Annotated[Path, typer.Option(help="site.yaml of the build
                                  inside_convection=inside_convection,
                                  roof_inside=roof_inside,
                                  x0_profile_days=x0_profile_days, x0_meters=_x0_meters(x0_meters),
+                                 constant_gains=constant_gains,
                                  x0_offset_sd=x0_offset_sd, day_scale_sd=day_scale_sd,
                                  positive_priors=positive_priors,
                                  operating_films=operating_films,
@@ -613,6 +622,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                            "--no-service leaves it out")] = True,
                   x0_profile_days: X0ProfileDays = None,
                   x0_meters: X0Meters = "auto",
+                 constant_gains: ConstantGains = "fitted",
                   x0_offset_sd: X0OffsetSd = None,
                   day_scale_sd: DayScaleSd = None,
                   infiltration: Annotated[str, typer.Option(
@@ -676,6 +686,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                  inside_convection=inside_convection,
                                  roof_inside=roof_inside,
                                 x0_profile_days=x0_profile_days, x0_meters=_x0_meters(x0_meters),
+                                 constant_gains=constant_gains,
                                 x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd, positive_priors=positive_priors,
                                 operating_films=operating_films, reheat_leak=reheat_leak)

@@ -304,6 +304,69 @@ def test_x0_meters_tells_the_x0_filter_the_working_days_metered_gains(vb, monkey
                       x0_profile_days=2)
 
 
+def test_constant_gains_from_the_meters_are_each_zones_night_base(vb, monkeypatch):
+    """Pipeline.identify(constant_gains="meters") starts each metered zone's c_IG at its
+    weekend night base per m2 of floor (metered_base_gains: the median of its Saturday and
+    Sunday readings between 00 and 06 h local) and holds it there with a prior whose sd is
+    the meters' accuracy; a zone whose meter never reported keeps the handbook prior;
+    "fitted" (the default) keeps every handbook prior; without meters, without the
+    building's priors or with an unknown mode it says what to give."""
+    import dataclasses
+
+    import zonecast.estimator.pipeline as pl
+    from zonecast.estimator.pipeline import (
+        METERED_BASE_SD_MIN,
+        METERED_BASE_SD_REL,
+        metered_base_gains,
+    )
+
+    pipe = Pipeline.from_site(vb / "site.yaml")
+    data = pipe.data(pipe.telemetry(vb))
+    area = pipe.zone_floor_areas()
+    local = data.local_times()
+    night = np.asarray(local.day_of_week >= 5) & np.asarray(local.hour < 6)
+    base = metered_base_gains(data, area)
+    for j in range(len(data.zones)):
+        assert base[j] == pytest.approx(np.median(data.power[night, j]) / area[j], rel=1e-12)
+    assert np.all(base > 0.5)  # night lighting and standby plug loads
+    power = data.power.copy()
+    power[:, 1] = np.nan
+    partial = dataclasses.replace(data, power=power)
+    assert np.isnan(metered_base_gains(partial, area)[1])
+    seen = _capture_identify(monkeypatch, pl)
+    for d, mode in ((data, "fitted"), (data, "meters"), (partial, "meters")):
+        with pytest.raises(_Stop):
+            pipe.identify(d, train=["2015-04-18"], validation=[], constant_gains=mode)
+    fitted, metered, part = seen
+    names = [f"c_IG[{z}]" for z in data.zones]
+    handbook = fitted["priors"][names[0]]
+    assert all(fitted["priors"][n] == handbook for n in names)
+    assert handbook.sd >= 5.0  # the paper's c_IG: weakly held
+    for j, n in enumerate(names):
+        prior = metered["priors"][n]
+        assert prior.mean == pytest.approx(base[j])
+        assert prior.sd == pytest.approx(max(METERED_BASE_SD_REL * base[j],
+                                             METERED_BASE_SD_MIN))
+        assert "metered" in prior.source
+    start = dict(zip(pl.ParameterSet(list(pipe.site.zones),
+                                     extra=pipe.structure().extra_params).param_names,
+                     metered["start"]))
+    assert [start[n] for n in names] == pytest.approx(list(base))
+    assert part["priors"][names[1]] == handbook
+    assert part["priors"][names[0]].mean == pytest.approx(base[0])
+    # the other parameters' priors are the same in both modes
+    assert {k: v for k, v in metered["priors"].items() if k not in names} == \
+        {k: v for k, v in fitted["priors"].items() if k not in names}
+    with pytest.raises(PipelineError, match="constant_gains='meters' needs electricity meters"):
+        pipe.identify(dataclasses.replace(data, power=None), train=["2015-04-18"],
+                      validation=[], weekend_gains="daytime", constant_gains="meters")
+    with pytest.raises(PipelineError, match="keep priors=True"):
+        pipe.identify(data, train=["2015-04-18"], validation=[], priors=False,
+                      constant_gains="meters")
+    with pytest.raises(PipelineError, match="constant_gains='known': use 'fitted' or 'meters'"):
+        pipe.identify(data, train=["2015-04-18"], validation=[], constant_gains="known")
+
+
 def test_metered_mode_fits_the_daytime_scale_with_the_metered_gains_known(vb, monkeypatch):
     """Pipeline.identify(weekend_gains="metered") hands identify the metered gains as known
     f_IG and the daytime shape to scale with a prior centred on 0 (the shape stands for the

@@ -95,6 +95,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                   progress: Progress = _quiet,
                   x0_profile_days: int | None = None,
                   x0_meters: bool | str = "auto",
+                  constant_gains: str = "fitted",
                   x0_offset_sd: float | None = None,
                   day_scale_sd: float | None = None,
                   positive_priors: str = "log",
@@ -108,7 +109,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
     ``internal_mass``, ``inside_convection``, ``roof_inside``: as
     :class:`~zonecast.estimator.rc.network.ModelOptions`;
     ``weekend_gains``, ``films``, ``x0_profile_days``, ``x0_meters``, ``x0_offset_sd``,
-    ``day_scale_sd``,
+    ``day_scale_sd``, ``constant_gains``,
     ``positive_priors``: as :meth:`~zonecast.estimator.pipeline.Pipeline.identify`;
     ``operating_films``: ``"none"`` or ``"natural"`` as ``Pipeline.identify``, ``"auto"`` (the
     default) :meth:`~zonecast.estimator.pipeline.Pipeline.fit_operating_films` on the
@@ -138,7 +139,7 @@ def identify_site(site: Path, data: Path, out: Path, *, train: list[str] | None 
                         x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                         day_scale_sd=day_scale_sd, positive_priors=positive_priors,
                         operating_films=identify_operating_films(operating_films),
-                        x0_meters=x0_meters)
+                        x0_meters=x0_meters, constant_gains=constant_gains)
     check_reheat_leak(reheat_leak)
     if profile_weeks:
         if operating_films == "auto":

@@ -513,7 +513,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         layers: str = ModelOptions.layers, internal_mass: str = ModelOptions.internal_mass,
         inside_convection: str = ModelOptions.inside_convection,
         roof_inside: str = ModelOptions.roof_inside,
-        x0_meters: bool | str = "auto",
+        x0_meters: bool | str = "auto", constant_gains: str = "fitted",
         positive_priors: str = "log", operating_films: str = OPERATING_FILMS_MODE,
         reheat_leak: str = REHEAT_LEAK) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
@@ -527,7 +527,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     ``interior_radiation``, ``internal_gains``, ``window_angle``, ``roof_exterior``,
     ``envelope_radiation``, ``solar_enclosure``, ``adiabatic``, ``layers``, ``internal_mass``, ``inside_convection``,
     ``roof_inside``: :class:`~zonecast.estimator.rc.network.ModelOptions`;
-    ``x0_meters``: as :meth:`Pipeline.identify`;
+    ``x0_meters``, ``constant_gains``: as :meth:`Pipeline.identify`;
     ``reheat_leak``: as ``zonecast identify`` (:meth:`Pipeline.fit_reheat_leak` on the
     training weeks of the gains split);
     ``films``, ``positive_priors``: as :meth:`Pipeline.identify`; ``operating_films``:
@@ -573,7 +573,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                           x0_profile_days=x0_profile_days, x0_offset_sd=x0_offset_sd,
                           day_scale_sd=day_scale_sd, positive_priors=positive_priors,
                           operating_films=identify_operating_films(operating_films),
-                          x0_meters=x0_meters)
+                          x0_meters=x0_meters, constant_gains=constant_gains)
     timings["identification"] = time.perf_counter() - t
     # sensitivity: the paper's placement of window solar (room air), one start
     progress("identification with window solar on the room air (paper's placement)")

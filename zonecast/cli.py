@@ -622,7 +622,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                            "--no-service leaves it out")] = True,
                   x0_profile_days: X0ProfileDays = None,
                   x0_meters: X0Meters = "auto",
-                 constant_gains: ConstantGains = "fitted",
+                  constant_gains: ConstantGains = "fitted",
                   x0_offset_sd: X0OffsetSd = None,
                   day_scale_sd: DayScaleSd = None,
                   infiltration: Annotated[str, typer.Option(
@@ -686,7 +686,7 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                  inside_convection=inside_convection,
                                  roof_inside=roof_inside,
                                 x0_profile_days=x0_profile_days, x0_meters=_x0_meters(x0_meters),
-                                 constant_gains=constant_gains,
+                                constant_gains=constant_gains,
                                 x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd, positive_priors=positive_priors,
                                 operating_films=operating_films, reheat_leak=reheat_leak)

@@ -216,6 +216,15 @@ METERED_BASE_SD_MIN = 0.05
 CONSTANT_GAINS = ("fitted", "meters")
 
 
+def check_constant_gains(mode: str) -> str:
+    """``mode`` if it is one of :data:`CONSTANT_GAINS`, else a :class:`PipelineError` saying
+    which are."""
+    if mode not in CONSTANT_GAINS:
+        raise PipelineError(f"constant_gains={mode!r}: use "
+                            f"{' or '.join(repr(v) for v in CONSTANT_GAINS)}")
+    return mode
+
+
 def metered_base_gains(data: ModelData, zone_area) -> np.ndarray:
     """(n_zones,) [W/m2]: each zone's metered base load, the median of its weekend
     readings between :data:`METERED_BASE_HOURS` local time (``data.power``, lights and plug
@@ -592,6 +601,14 @@ class Pipeline:
                              else "daytime")
         if weekend_gains == "metered":
             self._need_meters(data)
+        if check_constant_gains(constant_gains) == "meters":
+            if priors is not True:
+                raise PipelineError("constant_gains='meters' sets c_IG's priors from the "
+                                    "meters: keep priors=True (the building's priors)")
+            if data.power is None:
+                raise PipelineError("constant_gains='meters' needs electricity meters: map "
+                                    "each zone's lights and plug-load meters under "
+                                    "points.power in the site description (docs/data.md)")
         if films is None:
             films = "convective" if self.options.interior_radiation == "star" else "combined"
         if films not in ("combined", "convective", "idf"):
@@ -617,18 +634,8 @@ class Pipeline:
         own_roof = "gamma_roof" in start.param_names
         if own_roof:  # the roofs' own film starts at its prior's mean (the climate's film)
             start = start.copy({"gamma_roof": roof_film_prior(self._building_or_none())[0]})
-        if constant_gains not in CONSTANT_GAINS:
-            raise PipelineError(f"constant_gains={constant_gains!r}: use "
-                                f"{' or '.join(repr(v) for v in CONSTANT_GAINS)}")
         metered_cig: dict[str, float] = {}
         if constant_gains == "meters":
-            if priors is not True:
-                raise PipelineError("constant_gains='meters' sets c_IG's priors from the "
-                                    "meters: keep priors=True (the building's priors)")
-            if data.power is None:
-                raise PipelineError("constant_gains='meters' needs electricity meters: map "
-                                    "each zone's lights and plug-load meters under "
-                                    "points.power in the site description (docs/data.md)")
             base = metered_base_gains(data, self.zone_floor_areas())
             metered_cig = {f"c_IG[{z}]": float(b) for z, b in zip(data.zones, base)
                            if np.isfinite(b)}

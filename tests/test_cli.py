@@ -194,3 +194,16 @@ def test_operating_films_reach_the_pipeline(tmp_path, monkeypatch, command):
     res = runner.invoke(app, [*args, "--operating-films", "always"])
     assert res.exit_code == 2
     assert "operating_films='always': use 'none' or 'natural' or 'auto'" in res.output
+
+
+@pytest.mark.parametrize("command", ["identify", "reproduce"])
+def test_constant_gains_reaches_the_identification(vb, tmp_path, command):
+    """--constant-gains reaches Pipeline.identify through both commands: a wrong value
+    fails with the identification's message before any fit."""
+    args = (["identify", "--site", str(vb / "site.yaml"), "--data", str(vb), "--out",
+             str(tmp_path / "m.json")] if command == "identify" else
+            ["reproduce", "--out", str(tmp_path / "r"), "--campaign", str(vb), "--no-service",
+             "--no-sensitivity"])
+    res = runner.invoke(app, [*args, "--constant-gains", "known"])
+    assert res.exit_code == 2, res.output
+    assert "constant_gains='known': use 'fitted' or 'meters'" in res.output

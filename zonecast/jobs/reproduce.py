@@ -33,6 +33,7 @@ from zonecast.estimator.pipeline import (
     WEEKEND_DAY_GAIN,
     WEEKEND_DAY_HOURS,
     Pipeline,
+    check_constant_gains,
     check_reheat_leak,
     identify_operating_films,
     weekend_daytime_shape,
@@ -537,6 +538,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     the identified ones);
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
     the forecast study's split (never its validation weeks)."""
+    check_constant_gains(constant_gains)  # before the campaign and the weeks' split
     out.mkdir(parents=True, exist_ok=True)
     timings = {}
     t0 = time.perf_counter()

@@ -5,8 +5,10 @@ synthetic weather forecasts (:mod:`zonecast.testbed.forecasts`: the weather plus
 error growing with lead time). This benchmark issues the same served forecasts, at the same
 validation midnights, with four error models built from the same random draws:
 
-- ``as designed``: the testbed's error model (temperature 0.3 -> 2.0 K, irradiance factor
-  0.10 -> 0.35 between lead 0 and 24 h);
+- ``as designed``: the testbed's error model (temperature 0.3 -> 2.0 K between lead 0 and
+  24 h; irradiance by ``--irradiance-error``: ``cloud``, the default, in the clear-sky index,
+  0.03 -> 0.07 on clear hours and 0.10 -> 0.35 on cloudy ones, or ``factor``, one factor
+  0.10 -> 0.35 on every hour's irradiance);
 - ``no error``: the weather itself (still hourly, interpolated by the service);
 - ``temperature only`` and ``irradiance only``: one part of the error switched off;
 
@@ -42,16 +44,19 @@ from zonecast.estimator.site import load_site
 from zonecast.estimator.streaming import OnlineEstimator, has_discharge, model_rows, telemetry_frame
 from zonecast.estimator.telemetry import load_telemetry
 from zonecast.estimator.weather_forecast import parse_weather_forecast
-from zonecast.testbed.forecasts import ERROR_MODEL, weather_forecasts
+from zonecast.testbed.forecasts import ERROR_MODEL, IRRADIANCE_ERRORS, weather_forecasts
 
 from zonecast.jobs.reproduce import measured_inputs, service_check, validation_issues
 
 DESIGNED_T = tuple(ERROR_MODEL["temperature_sigma_k"])
 DESIGNED_I = tuple(ERROR_MODEL["irradiance_sigma"])
+DESIGNED_C = tuple(ERROR_MODEL["clear_sigma"])
 THERMOSTAT = "thermostat's reheat"
-CASES = {"as designed": (DESIGNED_T, DESIGNED_I), "no error": ((0.0, 0.0), (0.0, 0.0)),
-         "temperature only": (DESIGNED_T, (0.0, 0.0)),
-         "irradiance only": ((0.0, 0.0), DESIGNED_I)}
+NONE = (0.0, 0.0)
+#: (temperature, irradiance (the factor's or the cloudy hours'), clear hours') sigmas
+CASES = {"as designed": (DESIGNED_T, DESIGNED_I, DESIGNED_C), "no error": (NONE, NONE, NONE),
+         "temperature only": (DESIGNED_T, NONE, NONE),
+         "irradiance only": (NONE, DESIGNED_I, DESIGNED_C)}
 
 
 def hvac_attribution(model: Path, campaign: Path, data, weather) -> dict:
@@ -111,6 +116,9 @@ def main() -> None:
     ap.add_argument("--report", type=Path, required=True,
                     help="zonecast reproduce output folder (model.json)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the forecast errors")
+    ap.add_argument("--irradiance-error", choices=IRRADIANCE_ERRORS,
+                    default=ERROR_MODEL["irradiance_error"],
+                    help="the testbed's irradiance error form (docs/testbed.md)")
     args = ap.parse_args()
     model = args.report / "model.json"
     if not model.is_file():
@@ -120,13 +128,14 @@ def main() -> None:
     frame = load_telemetry(args.campaign / "telemetry.csv", site).frame
     data = Pipeline.from_site(args.campaign / "site.yaml").data(args.campaign / "telemetry.csv")
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; {args.campaign.name}, "
-          f"forecast seed {args.seed}", flush=True)
+          f"forecast seed {args.seed}, irradiance error {args.irradiance_error!r}", flush=True)
     rows = {}
     known = None
-    for name, (sig_t, sig_i) in CASES.items():
+    for name, (sig_t, sig_i, sig_c) in CASES.items():
         t = time.perf_counter()
         bodies = weather_forecasts(site, frame, seed=args.seed, temperature_sigma=sig_t,
-                                   irradiance_sigma=sig_i)
+                                   irradiance_sigma=sig_i, clear_sigma=sig_c,
+                                   irradiance_error=args.irradiance_error)
         out = service_check(model, args.campaign / "telemetry.csv", data, 0,
                             weather=[parse_weather_forecast(b) for b in bodies])
         rows[name] = (out["table3"]["service"], out["coverage_90"]["service"])
@@ -147,7 +156,8 @@ def main() -> None:
           + " | ".join(f"{known[z]:.3f}" for z in zones) + f" | {known['mean']:.3f} | 1 | |")
     t = time.perf_counter()
     perfect = [parse_weather_forecast(b) for b in weather_forecasts(
-        site, frame, seed=args.seed, temperature_sigma=(0.0, 0.0), irradiance_sigma=(0.0, 0.0))]
+        site, frame, seed=args.seed, temperature_sigma=NONE, irradiance_sigma=NONE,
+        clear_sigma=NONE, irradiance_error=args.irradiance_error)]
     attr = hvac_attribution(model, args.campaign, data, perfect)
     print(f"\nmeasured inputs with one learned HVAC group, error-free weather forecasts "
           f"({time.perf_counter() - t:.0f} s):\n")

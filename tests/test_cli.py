@@ -207,3 +207,12 @@ def test_constant_gains_reaches_the_identification(vb, tmp_path, command):
     res = runner.invoke(app, [*args, "--constant-gains", "known"])
     assert res.exit_code == 2, res.output
     assert "constant_gains='known': use 'fitted' or 'meters'" in res.output
+
+
+def test_weather_error_is_checked_before_the_campaign_is_read(vb, tmp_path):
+    """--weather-error names the testbed's irradiance-error form of the service check; a
+    wrong one fails at once with the forms there are."""
+    res = runner.invoke(app, ["reproduce", "--out", str(tmp_path / "r"), "--campaign", str(vb),
+                              "--no-sensitivity", "--weather-error", "clouds"])
+    assert res.exit_code == 2, res.output
+    assert "weather_error must be one of cloud, factor, not 'clouds'" in res.output

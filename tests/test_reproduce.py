@@ -177,3 +177,38 @@ def test_report_says_why_the_operating_films_were_or_were_not_taken(tmp_path):
     assert "k -0.108 ± 0.011, below 3 standard errors" in kept
     plain = write_report(results(identification={}), tmp_path, [], ZONES).read_text()
     assert "Inside films in regular operation" not in plain
+
+
+def test_service_check_forecasts_are_written_again_only_when_the_testbed_wrote_others(
+        vb, tmp_path):
+    """The campaign's weather forecasts: written with the asked error form when absent, used
+    as they are when they came from elsewhere (no error model recorded), written again
+    when the testbed wrote them with another form or seed; the forms are the testbed's."""
+    from zonecast.testbed.forecasts import IRRADIANCE_ERRORS, error_model
+
+    from zonecast.jobs.reproduce import WEATHER_ERRORS, _weather_forecasts
+
+    assert set(WEATHER_ERRORS) == set(IRRADIANCE_ERRORS)
+    assert WEATHER_ERRORS[0] == error_model()["irradiance_error"]
+    for name in ("site.yaml", "telemetry.csv"):
+        (tmp_path / name).symlink_to(vb / name)
+    said = []
+    cloud = _weather_forecasts(tmp_path, 1, "cloud", said.append)
+    doc = json.loads((tmp_path / "weather_forecasts.json").read_text())
+    assert doc["error_model"] == error_model() and doc["seed"] == 1 and not said
+    factor = _weather_forecasts(tmp_path, 1, "factor", said.append)
+    assert json.loads((tmp_path / "weather_forecasts-factor.json").read_text())[
+        "error_model"]["irradiance_error"] == "factor"
+    assert len(factor) == len(cloud) and not said
+    assert any(not np.array_equal(a.ghi, b.ghi) for a, b in zip(cloud, factor))
+    # another seed: written again, and said so
+    again = _weather_forecasts(tmp_path, 2, "cloud", said.append)
+    assert said and "written with another seed or error model" in said[0]
+    assert json.loads((tmp_path / "weather_forecasts.json").read_text())["seed"] == 2
+    assert any(not np.array_equal(a.ghi, b.ghi) for a, b in zip(cloud, again))
+    # forecasts from elsewhere (no error model recorded) are used as they are
+    doc = json.loads((tmp_path / "weather_forecasts.json").read_text())
+    del doc["error_model"]
+    doc["forecasts"] = doc["forecasts"][:3]
+    (tmp_path / "weather_forecasts.json").write_text(json.dumps(doc))
+    assert len(_weather_forecasts(tmp_path, 1, "cloud")) == 3

@@ -663,7 +663,13 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                            "training weeks as known f_IG), 'scaled' (the profile's per-zone "
                            "scale fitted with the parameters) or 'metered' (the daytime fit "
                            "with the zones' metered lights and plug loads as known weekend "
-                           "gains)")] = "auto"
+                           "gains)")] = "auto",
+                  weather_error: Annotated[str, typer.Option(
+                      help="the testbed's weather-forecast irradiance error in the service "
+                           "check: 'cloud' (the default since 2026-12-07: in the clear-sky "
+                           "index, small on clear hours, large on cloudy ones) or 'factor' "
+                           "(the earlier form: one factor on every hour's irradiance); "
+                           "docs/testbed.md")] = "cloud"
                   ) -> None:
     """The paper's tables and figures on the virtual building: campaign, identification,
     internal gains, forecasts; writes results.json, figures and report.md."""
@@ -689,7 +695,8 @@ def reproduce_cmd(out: Annotated[Path, typer.Option(help="report folder")] = Pat
                                 constant_gains=constant_gains,
                                 x0_offset_sd=x0_offset_sd,
                                 day_scale_sd=day_scale_sd, positive_priors=positive_priors,
-                                operating_films=operating_films, reheat_leak=reheat_leak)
+                                operating_films=operating_films, reheat_leak=reheat_leak,
+                                weather_error=weather_error)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         _fail(exc)
     t2, t3 = res.table2, res.table3

@@ -91,6 +91,9 @@ class Results(BaseModel):
     gains_truth: dict[str, Any] = Field(description="zone -> correlation with the true gains")
     coverage_90: Any = Field(description="empirical coverage of the 90 % forecast intervals")
     split: dict[str, Any] = Field(description="identification weekends and gains/forecast weeks")
+    service_weather_error: str | None = Field(
+        None, description="the testbed's weather-forecast irradiance error form of the "
+                          "service check (WEATHER_ERRORS), None without the service check")
     timings_s: dict[str, float] = Field(default_factory=dict)
 
 
@@ -253,6 +256,10 @@ def write_report(results: Results, out: Path, figures: list[str], zones: list[st
         lines += ["", ("The service check (the served forecast, its input forecasts and "
                        "calibrated intervals) was left out (`zonecast reproduce "
                        "--no-service`).")]
+    if getattr(results, "service_weather_error", None):
+        lines += ["", (f"The served forecast's weather forecasts: the testbed's "
+                       f"`{results.service_weather_error}` irradiance error "
+                       "(docs/testbed.md).")]
     attribution = getattr(results, "service_input_attribution", None)
     if attribution:
         lines += ["", ("Served forecast, which input's persistence costs most (known inputs "
@@ -394,15 +401,35 @@ def _interval_coverage(lower: np.ndarray, upper: np.ndarray, meas: np.ndarray,
     return out
 
 
-def _weather_forecasts(campaign: Path, seed: int) -> list:
-    """The campaign's weather forecasts (``weather_forecasts.json``; written by the
-    testbed's error model when absent: the weather file plus seeded error growing with
-    lead time, docs/testbed.md), validated like those the service receives."""
-    path = campaign / "weather_forecasts.json"
-    if not path.is_file():
-        from zonecast.testbed.forecasts import write_weather_forecasts  # testbed extra
-        write_weather_forecasts(campaign, seed=seed)
-    return [parse_weather_forecast(b) for b in json.loads(path.read_text())["forecasts"]]
+#: the testbed's irradiance-error forms (``zonecast.testbed.forecasts.IRRADIANCE_ERRORS``;
+#: the first the default)
+WEATHER_ERRORS = ("cloud", "factor")
+
+
+def _weather_forecasts(campaign: Path, seed: int, weather_error: str = WEATHER_ERRORS[0],
+                       progress=lambda s: None) -> list:
+    """The campaign's weather forecasts, validated like those the service receives.
+
+    ``weather_forecasts.json`` (``weather_forecasts-factor.json`` for the earlier
+    ``factor`` error form) is used as it is when it holds forecasts from elsewhere (no
+    ``error_model`` recorded); written by the testbed's error model (the weather file plus
+    seeded error growing with lead time, docs/testbed.md) when absent, or again when the
+    testbed wrote it with another seed or error model than asked for."""
+    from zonecast.testbed.forecasts import error_model, write_weather_forecasts  # testbed extra
+
+    name = "weather_forecasts.json" if weather_error == WEATHER_ERRORS[0] else \
+        f"weather_forecasts-{weather_error}.json"
+    path = campaign / name
+    want = error_model(irradiance_error=weather_error)
+    doc = json.loads(path.read_text()) if path.is_file() else None
+    if doc is not None and "error_model" in doc and (
+            doc.get("error_model") != want or doc.get("seed") != seed):
+        progress(f"{name} was written with another seed or error model: writing it again")
+        doc = None
+    if doc is None:
+        write_weather_forecasts(campaign, seed=seed, out=path, irradiance_error=weather_error)
+        doc = json.loads(path.read_text())
+    return [parse_weather_forecast(b) for b in doc["forecasts"]]
 
 
 def validation_issues(data: ModelData, seed: int) -> list[tuple[int, int]]:
@@ -516,7 +543,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         roof_inside: str = ModelOptions.roof_inside,
         x0_meters: bool | str = "auto", constant_gains: str = "fitted",
         positive_priors: str = "log", operating_films: str = OPERATING_FILMS_MODE,
-        reheat_leak: str = REHEAT_LEAK) -> Results:
+        reheat_leak: str = REHEAT_LEAK, weather_error: str = WEATHER_ERRORS[0]) -> Results:
     """The main job; see the module docstring. ``priors``, ``sigma_e``, ``window``: as
     :meth:`Pipeline.identify <zonecast.estimator.pipeline.Pipeline.identify>`;
     ``sensitivity``: also identify the paper's window-solar placement (one start);
@@ -537,8 +564,13 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     (the forecasts and gains use the pipeline's operating parameters, Table 2 and Fig. 1
     the identified ones);
     ``weekend_gains``: as :meth:`Pipeline.identify`, the profile from the training weeks of
-    the forecast study's split (never its validation weeks)."""
+    the forecast study's split (never its validation weeks); ``weather_error``: the form of
+    the testbed's weather-forecast irradiance error the service check uses, one of
+    :data:`WEATHER_ERRORS` (``zonecast.testbed.forecasts``)."""
     check_constant_gains(constant_gains)  # before the campaign and the weeks' split
+    if weather_error not in WEATHER_ERRORS:
+        raise ValueError(f"weather_error must be one of {', '.join(WEATHER_ERRORS)}, "
+                         f"not {weather_error!r}")
     out.mkdir(parents=True, exist_ok=True)
     timings = {}
     t0 = time.perf_counter()
@@ -609,7 +641,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
     if service:
         t = time.perf_counter()
         progress("service check: the online estimator's day-ahead forecasts")
-        weather = _weather_forecasts(campaign, seed)
+        weather = _weather_forecasts(campaign, seed, weather_error, progress)
         svc = service_check(model_file, campaign / "telemetry.csv", data, seed,
                             weather=weather)
         study["table3"].update(svc["table3"])
@@ -617,6 +649,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
         study.setdefault("coverage_90", {}).update(
             {f"{k}_calibrated": v for k, v in svc["coverage_90"].items()})
         study["service_input_attribution"] = svc["attribution"]
+        study["service_weather_error"] = weather_error
         timings["service_check"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     pinned = set(ident.at_bounds())
@@ -641,6 +674,7 @@ def run(out: Path, campaign: Path | None = None, seed: int = 0, starts: int = 1,
                   gains_truth=study.get("gains_truth") or {},
                   coverage_90=study.get("coverage_90"),
                   service_input_attribution=study.get("service_input_attribution"),
+                  service_weather_error=study.get("service_weather_error"),
                   split={"identification": {"train": ident.train_weekends,
                                             "validation": ident.validation_weekends},
                          "gains": study.get("split")},

@@ -32,6 +32,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads only contend
 
 import argparse
+import json
 import platform
 import time
 from pathlib import Path
@@ -119,7 +120,16 @@ def main() -> None:
     ap.add_argument("--irradiance-error", choices=IRRADIANCE_ERRORS,
                     default=ERROR_MODEL["irradiance_error"],
                     help="the testbed's irradiance error form (docs/testbed.md)")
+    ap.add_argument("--cases", default=",".join(CASES),
+                    help=f"comma-separated weather error cases, of: {', '.join(CASES)}")
+    ap.add_argument("--no-attribution", action="store_true",
+                    help="leave out the learned HVAC inputs' table (the slowest part)")
+    ap.add_argument("--json", type=Path, default=None,
+                    help="also write the cases' RMS and coverage here")
     args = ap.parse_args()
+    cases = [c.strip() for c in args.cases.split(",") if c.strip()]
+    if not cases or any(c not in CASES for c in cases):
+        raise SystemExit(f"--cases: use some of {', '.join(CASES)} (got {args.cases!r})")
     model = args.report / "model.json"
     if not model.is_file():
         raise SystemExit(f"{model} not found: run zonecast reproduce --campaign "
@@ -131,7 +141,8 @@ def main() -> None:
           f"forecast seed {args.seed}, irradiance error {args.irradiance_error!r}", flush=True)
     rows = {}
     known = None
-    for name, (sig_t, sig_i, sig_c) in CASES.items():
+    for name in cases:
+        sig_t, sig_i, sig_c = CASES[name]
         t = time.perf_counter()
         bodies = weather_forecasts(site, frame, seed=args.seed, temperature_sigma=sig_t,
                                    irradiance_sigma=sig_i, clear_sigma=sig_c,
@@ -154,6 +165,13 @@ def main() -> None:
               f"{cov.get('all', float('nan')):.3f} ({min(zc):.3f}-{max(zc):.3f}) |")
     print("| known inputs (measured weather and HVAC) | "
           + " | ".join(f"{known[z]:.3f}" for z in zones) + f" | {known['mean']:.3f} | 1 | |")
+    if args.json is not None:
+        args.json.write_text(json.dumps({
+            "campaign": args.campaign.name, "irradiance_error": args.irradiance_error,
+            "seed": args.seed, "known_inputs": known,
+            "cases": {n: {"rms": r, "coverage": c} for n, (r, c) in rows.items()}}, indent=1))
+    if args.no_attribution:
+        return
     t = time.perf_counter()
     perfect = [parse_weather_forecast(b) for b in weather_forecasts(
         site, frame, seed=args.seed, temperature_sigma=NONE, irradiance_sigma=NONE,

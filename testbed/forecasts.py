@@ -45,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pvlib
 from zonecast.estimator.site import Site, load_site
 from zonecast.estimator.telemetry import load_telemetry
 
@@ -70,8 +71,6 @@ def _cloud_irradiance(site: Site, times: pd.DatetimeIndex, truth: np.ndarray,
                       xi: np.ndarray) -> np.ndarray:
     """GHI, DNI, DHI forecasts [W/m2] (n x 3) of the ``cloud`` error form: truth (n x 3)
     moved by an error ``sigma(k) xi`` in the clear-sky index k (module docstring)."""
-    import pvlib
-
     loc = pvlib.location.Location(site.location.latitude, site.location.longitude,
                                   altitude=site.location.elevation)
     pos = loc.get_solarposition(times)

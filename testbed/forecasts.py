@@ -105,10 +105,13 @@ def _ar1(rng: np.random.Generator, n: int, rho: float) -> np.ndarray:
 
 def weather_forecasts(site: Site, frame: pd.DataFrame, *, seed: int = 0, every: str = "6h",
                       hours: int = 36, min_hours: int = 24,
-                      temperature_sigma: tuple[float, float] = (0.3, 2.0),
-                      irradiance_sigma: tuple[float, float] = (0.10, 0.35),
-                      irradiance_error: str = "cloud",
-                      clear_sigma: tuple[float, float] = (0.03, 0.07)) -> list[dict]:
+                      temperature_sigma: tuple[float, float] = tuple(
+                          ERROR_MODEL["temperature_sigma_k"]),
+                      irradiance_sigma: tuple[float, float] = tuple(
+                          ERROR_MODEL["irradiance_sigma"]),
+                      irradiance_error: str = ERROR_MODEL["irradiance_error"],
+                      clear_sigma: tuple[float, float] = tuple(
+                          CLOUD_MODEL["clear_sigma"])) -> list[dict]:
     """Synthetic forecasts over the span of ``frame`` (SI telemetry indexed by UTC time).
 
     Parameters

@@ -148,6 +148,13 @@ HOLD_RECOVERY_H = 0.25
 #: family's training members, docs/forecasts.md "Reheat as the thermostat's answer"); the
 #: default of :attr:`OnlineEstimator.reheat_control`
 REHEAT_CONTROL = True
+#: the thermostat controller of the forecast (reheat, cooling, dead band) holds each step's
+#: room air at the set point in effect during that step (the schedule at the step's start),
+#: not at the output band's, which keeps the previous set point for HOLD_RECOVERY_H after
+#: each step and so ended the reheat one step before an evening set-back (docs/forecasts.md
+#: "The controller's set points by step"); the default of
+#: :attr:`OnlineEstimator.step_setpoints`
+STEP_SETPOINTS = True
 #: steps after a start that use the time-varying gains of the filter from its initial
 #: covariance (two days: on office6 two days and a week gave the same served forecasts;
 #: docs/forecasts.md "The filter after a restart"); the default of
@@ -414,7 +421,7 @@ def _solve_square(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 #: e.g. the runner's ``thermostat_forecast``, not state)
 _SETTINGS_KEPT_ON_LOAD = ("profile_learn", "weather_max_age", "weather_obs_tau_h",
                           "hold_setpoints", "reheat_control", "cooling_control",
-                          "deadband_control")
+                          "deadband_control", "step_setpoints")
 
 
 class OnlineEstimator:
@@ -759,8 +766,9 @@ class OnlineEstimator:
         if control and band is not None and (cooling or (self._rh and self._coil.any())):
             floor = (self.airflow_floor.floor() if cooling and self.deadband_control
                      else None)
-            xs = self._controlled_run(stepper, u, forcing, v[:, 1], ins[:, nb + NV:], band[0],
-                                      band[1] if cooling else None, floor,
+            heat, cool = self._setpoint_band(steps=True) if self.step_setpoints else band
+            xs = self._controlled_run(stepper, u, forcing, v[:, 1], ins[:, nb + NV:], heat,
+                                      cool if cooling else None, floor,
                                       keep_responses=keep_responses)
         else:
             if self._rh:  # the boxes' discharge-air rise (docs/model.md "Discharge air")
@@ -937,24 +945,34 @@ class OnlineEstimator:
         G[:, self._air_slot[rows]] = stepper.columns(u, E)
         known[self._air_slot[rows]] = True
 
-    def _setpoint_band(self) -> tuple[np.ndarray, np.ndarray]:
+    def _setpoint_band(self, steps: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """(HORIZON,) heating and cooling set points over the forecast intervals [degC]
-        (the site's thermostat; open inside the site's experiments). Cached per issue."""
+        (the site's thermostat; open inside the site's experiments). Cached per issue.
+
+        ``steps`` False: the output band, at each interval's end, keeping the previous set
+        point for :data:`HOLD_RECOVERY_H` after a set-point step (the lower heating and the
+        higher cooling set point of the two). ``steps`` True: the set points in effect
+        during each interval (the schedule at its start), which the forecast's thermostat
+        controller holds the room air at (:data:`STEP_SETPOINTS`)."""
         t = self.time.value
         if self._band_at != t:
             times = t + STEP.value * np.arange(1, HORIZON + 1, dtype=np.int64)
-            exp = np.zeros(HORIZON, dtype=bool)
-            for a, b in self._experiments:
-                exp |= (times >= a) & (times < b)
-            tz = self.bundle.site.timezone
-            heat, cool = self._band.band(pd.DatetimeIndex(times, tz="UTC"), tz, exp)
+
+            def at(when):
+                exp = np.zeros(HORIZON, dtype=bool)
+                for a, b in self._experiments:
+                    exp |= (when >= a) & (when < b)
+                return self._band.band(pd.DatetimeIndex(when, tz="UTC"),
+                                       self.bundle.site.timezone, exp)
+
+            heat, cool = at(times)
+            start = at(times - STEP.value)
             if HOLD_RECOVERY_H > 0:  # after a set-point step the room needs time to follow
-                back = times - int(HOLD_RECOVERY_H * 3.6e12)
-                h0, c0 = self._band.band(pd.DatetimeIndex(back, tz="UTC"), tz, exp)
-                heat, cool = np.minimum(heat, h0), np.maximum(cool, c0)
-            self._band_cache = heat, cool
+                back = at(times - int(HOLD_RECOVERY_H * 3.6e12))
+                heat, cool = np.minimum(heat, back[0]), np.maximum(cool, back[1])
+            self._band_cache = (heat, cool), start
             self._band_at = t
-        return self._band_cache
+        return self._band_cache[1 if steps else 0]
 
     # --- input forecasts (docs/forecasts.md "Served forecast") ---------------------------
     def _interval_classes(self) -> dict:
@@ -1026,6 +1044,7 @@ class OnlineEstimator:
         # the boxes whose reheat the thermostat model sets: those with a discharge-air
         # point (they have a coil and measure what it does)
         self.reheat_control = REHEAT_CONTROL
+        self.step_setpoints = STEP_SETPOINTS
         self._coil = np.array([b in site.boxes and site.boxes[b].discharge_temperature
                                is not None for b in self.bundle.model.structure.boxes])
         # each such room's air state and its coil boxes (n_boxes, rooms): every room has
@@ -1062,7 +1081,7 @@ class OnlineEstimator:
         self._air_resp = (np.zeros((self.bundle.model.n, len(air))),
                           np.zeros(len(air), dtype=bool))
         self._band_at: int | None = None
-        self._band_cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._band_cache: tuple | None = None  # (output band, step set points)
 
     def _learn_inputs(self, t: pd.Timestamp, inputs: np.ndarray, y: np.ndarray) -> None:
         """Online learning of row t (after the filter step): HVAC-input and weather
@@ -1133,7 +1152,7 @@ class OnlineEstimator:
         """What the calibration forecast kept at a due step (:meth:`_learn_inputs`) depends
         on besides the state: a served forecast with the same key at the same step is it."""
         return (self.time, self.steps, bool(control), self.hold_setpoints,
-                self.cooling_control, self.deadband_control, self.young_std,
+                self.step_setpoints, self.cooling_control, self.deadband_control, self.young_std,
                 self.spread_two_sided,
                 self.closed_loop_std, id(self.weather))
 

@@ -275,7 +275,7 @@ REHEAT_ITER = 8
 REHEAT_RATE = 0.05
 
 __all__ = ["HORIZON", "MAX_GAP", "STEP", "Z90", "Forecast", "OnlineEstimator", "RowConverter",
-           "StepReport", "checkpoint_header", "has_discharge", "model_rows",
+           "StepReport", "checkpoint_header", "forecast_setpoints", "has_discharge", "model_rows",
            "offline_forecast_variants", "offline_forecasts",
            "rows_from_frame", "telemetry_frame"]
 
@@ -414,6 +414,53 @@ def _solve_square(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.linalg.solve(a, b)
     except np.linalg.LinAlgError:
         return np.linalg.lstsq(a, b, rcond=None)[0]
+
+
+def forecast_setpoints(thermostat, issued_ns: int, timezone: str,
+                       experiments=(), *, steps: bool = False,
+                       recovery_h: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Heating and cooling set points [degC], two (HORIZON,) arrays, over the intervals of
+    a forecast issued at ``issued_ns`` [ns, UTC]; interval h runs from issued + h STEP to
+    issued + (h + 1) STEP and is stamped with its end, as the telemetry's rows are.
+
+    Parameters
+    ----------
+    thermostat : Thermostat
+        The site's schedule (:meth:`Thermostat.band <zonecast.estimator.site.Thermostat.band>`;
+        open, -inf / +inf, where a set point is not declared).
+    issued_ns : int
+        The forecast's issue time [ns since the epoch, UTC].
+    timezone : str
+        The site's IANA time zone (the schedule's hours are local).
+    experiments : sequence of (start_ns, end_ns)
+        The site's experiments [ns, UTC]: the band is open inside them.
+    steps : bool
+        False (the forecast's output band, docs/forecasts.md "Set points"): the schedule at
+        each interval's end, keeping the previous set point for ``recovery_h`` after each
+        set-point step (the lower heating and the higher cooling set point of the two).
+        True (the forecast's thermostat controller, :data:`STEP_SETPOINTS`): the set points
+        in effect during each interval, i.e. the schedule at its start; the interval that
+        ends at an evening set-back is still an occupied one.
+    recovery_h : float, optional
+        [h]; default :data:`HOLD_RECOVERY_H`.
+    """
+    recovery_h = HOLD_RECOVERY_H if recovery_h is None else recovery_h
+    ends = issued_ns + STEP.value * np.arange(1, HORIZON + 1, dtype=np.int64)
+
+    def at(when, inside):
+        exp = np.zeros(len(when), dtype=bool)
+        for a, b in experiments:
+            exp |= (inside >= a) & (inside < b)
+        return thermostat.band(pd.DatetimeIndex(when, tz="UTC"), timezone, exp)
+
+    if steps:
+        return at(ends - STEP.value, ends - STEP.value)
+    heat, cool = at(ends, ends)
+    if recovery_h > 0:  # after a set-point step the room needs time to follow (the band
+        # stays open while the interval's end is inside an experiment)
+        h0, c0 = at(ends - int(recovery_h * 3.6e12), ends)
+        heat, cool = np.minimum(heat, h0), np.maximum(cool, c0)
+    return heat, cool
 
 
 #: settings of :class:`OnlineEstimator` that :meth:`~OnlineEstimator._init_input_forecasts`
@@ -946,31 +993,14 @@ class OnlineEstimator:
         known[self._air_slot[rows]] = True
 
     def _setpoint_band(self, steps: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """(HORIZON,) heating and cooling set points over the forecast intervals [degC]
-        (the site's thermostat; open inside the site's experiments). Cached per issue.
-
-        ``steps`` False: the output band, at each interval's end, keeping the previous set
-        point for :data:`HOLD_RECOVERY_H` after a set-point step (the lower heating and the
-        higher cooling set point of the two). ``steps`` True: the set points in effect
-        during each interval (the schedule at its start), which the forecast's thermostat
-        controller holds the room air at (:data:`STEP_SETPOINTS`)."""
+        """(HORIZON,) heating and cooling set points over the forecast intervals [degC]:
+        :func:`forecast_setpoints` of the site's thermostat at the current time (``steps``
+        False: the output band; True: the controller's set points). Cached per issue."""
         t = self.time.value
         if self._band_at != t:
-            times = t + STEP.value * np.arange(1, HORIZON + 1, dtype=np.int64)
-
-            def at(when):
-                exp = np.zeros(HORIZON, dtype=bool)
-                for a, b in self._experiments:
-                    exp |= (when >= a) & (when < b)
-                return self._band.band(pd.DatetimeIndex(when, tz="UTC"),
-                                       self.bundle.site.timezone, exp)
-
-            heat, cool = at(times)
-            start = at(times - STEP.value)
-            if HOLD_RECOVERY_H > 0:  # after a set-point step the room needs time to follow
-                back = at(times - int(HOLD_RECOVERY_H * 3.6e12))
-                heat, cool = np.minimum(heat, back[0]), np.maximum(cool, back[1])
-            self._band_cache = (heat, cool), start
+            args = (self._band, t, self.bundle.site.timezone, self._experiments)
+            self._band_cache = (forecast_setpoints(*args),
+                                forecast_setpoints(*args, steps=True))
             self._band_at = t
         return self._band_cache[1 if steps else 0]
 

@@ -88,8 +88,9 @@ def test_served_forecast_uses_the_controller_and_known_inputs_do_not(est):
     u = ins[:, :nb]
     forcing = ins[:, nb:nb + nv] @ m.Bv.T + (est.dayahead_gains() + m.params.c_ig) @ m.B_ig.T
     lo, hi = est._setpoint_band()
+    heat, cool = est._setpoint_band(steps=True)  # the controller's: in effect per step
     xs = est._controlled_run(est._ladder.for_airflows(u), u, forcing, ins[:, nb + 1],
-                             ins[:, -nb:], lo, hi,
+                             ins[:, -nb:], heat, cool,
                              est.airflow_floor.floor() if est.deadband_control else None)
     np.testing.assert_allclose(served_on, np.clip(xs[1:] @ m.C.T, lo[:, None], hi[:, None]),
                                rtol=0, atol=1e-12)
@@ -270,3 +271,61 @@ def test_served_forecast_throttles_with_the_learned_floors(est):
     # r is not solved again; mK per clipped step, 3.8 mK after 24 steps here)
     assert (eased >= plain - 0.01).all()
     assert (eased - plain).max() > 0.05
+
+
+def test_controller_set_points_are_those_in_effect_during_each_step():
+    """The forecast's output band keeps the previous set point for HOLD_RECOVERY_H after a
+    set-point step; the controller's set points are the schedule at each interval's start,
+    so the interval that ends at the evening set-back (19:00) is still held at the occupied
+    set points, and the one that ends at 07:00 is not yet."""
+    from zonecast.estimator import streaming
+    from zonecast.estimator.site import Thermostat
+
+    th = Thermostat(heating_occupied=21, heating_unoccupied=17, cooling_occupied=24,
+                    cooling_unoccupied=27, occupied_hours=(7, 19))
+    tz = "America/Chicago"
+    issued = pd.Timestamp("2015-01-12T00:00", tz=tz).tz_convert("UTC").value  # a Monday
+    ends = pd.DatetimeIndex(issued + streaming.STEP.value
+                            * np.arange(1, streaming.HORIZON + 1), tz="UTC").tz_convert(tz)
+    at = {t.strftime("%H:%M"): h for h, t in enumerate(ends)}
+    heat, cool = streaming.forecast_setpoints(th, issued, tz, steps=True)
+    lo, hi = streaming.forecast_setpoints(th, issued, tz, recovery_h=0.25)
+    # the interval 18:45-19:00 is occupied: the controller holds 21 / 24; the band opens
+    assert (heat[at["19:00"]], cool[at["19:00"]]) == (21, 24)
+    assert (lo[at["19:00"]], hi[at["19:00"]]) == (17, 27)
+    assert (heat[at["19:15"]], cool[at["19:15"]]) == (17, 27)
+    # 06:45-07:00 is not: both keep the unoccupied set points; from 07:00 on both step
+    assert (heat[at["07:00"]], lo[at["07:00"]]) == (17, 17)
+    assert (heat[at["07:15"]], lo[at["07:15"]], cool[at["07:15"]]) == (21, 21, 24)
+    # the controller's set points are the schedule one interval earlier
+    np.testing.assert_array_equal(heat, th.band(ends - streaming.STEP, tz)[0])
+    # an experiment opens the controller's band on the intervals that start inside it
+    a = pd.Timestamp("2015-01-12T18:00", tz=tz).value
+    b = pd.Timestamp("2015-01-12T20:00", tz=tz).value
+    heat_x, cool_x = streaming.forecast_setpoints(th, issued, tz, [(a, b)], steps=True)
+    open_ = np.isneginf(heat_x)
+    assert open_.sum() == 8 and np.isposinf(cool_x[open_]).all()
+    assert open_[at["18:15"]] and not open_[at["18:00"]] and open_[at["20:00"]]
+    assert not open_[at["20:15"]]
+
+
+def test_served_forecast_reheats_through_the_step_that_ends_at_the_set_back(est):
+    """With a heating set point that falls after step k, the controller holds every room
+    with a running coil box at the higher set point through step k (the step's set point),
+    while a controller given the output band (one step earlier) lets it fall at step k."""
+    m, nb, ins, u, v, forcing, stepper = _parts(est)
+    rise = ins[:, -nb:]
+    rooms = est._coil_rooms
+    free = stepper.run(est._x, u, forcing + m.reheat_forcing(u, np.zeros_like(rise)), v[:, 1])
+    can = (u * est._coil) @ est._coil_room_box > 0
+    high = float(np.percentile(free[1:, rooms], 80))
+    # a step k where some running room would end below the high set point without reheat
+    k = next(h for h in range(40, len(u)) if (can[h] & (free[h + 1, rooms] < high - 0.2)).any())
+    step_sp = np.where(np.arange(len(u)) <= k, high, -np.inf)   # in effect during each step
+    band_sp = np.where(np.arange(len(u)) < k, high, -np.inf)    # the band: one step earlier
+    xs = est._controlled_run(stepper, u, forcing, v[:, 1], rise, step_sp)
+    xb = est._controlled_run(stepper, u, forcing, v[:, 1], rise, band_sp)
+    held = can[k]
+    assert (xs[k + 1, rooms][held] >= high - 1e-6).all()
+    assert (xb[k + 1, rooms][held] < high - 0.1).any()
+    np.testing.assert_array_equal(xs[:k + 1], xb[:k + 1])  # same run up to that step
